@@ -1,0 +1,9 @@
+//! host-sim: the paper's steering actuator (plant of eqs. 1-8) under the firmware's own control
+//! core, with the scenarios, the analysis and the pictures around it.
+pub mod analysis;
+pub mod logfmt;
+pub mod plant;
+pub mod plot;
+pub mod report;
+pub mod scenario;
+pub mod sim;

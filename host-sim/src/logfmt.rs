@@ -1,0 +1,982 @@
+//! The one log format of the project: simulated runs, recordings from the car and the input of
+//! the sim-to-real comparison are all written and read here, so they can be compared column by
+//! column.
+//!
+//! # The format
+//!
+//! A log is a UTF-8 CSV file, plain (`.csv`) or gzip-compressed (`.csv.gz`):
+//!
+//! ```text
+//! # source: host-sim, scenario step_10deg        <- optional comments, only before the header
+//! t,ref_sw_deg,sw_deg,motor_rad,current_a,voltage_v
+//! 0.000000,0.0000,0.0000,0.00000,0.0000,0
+//! 0.000500,10.0000,0.0031,0.00212,19.9871,23.91
+//! 0.001000,10.0000,nan,0.00845,20.0000,24
+//! ```
+//!
+//! * **Header.** The first non-comment line names the columns. The first five are required, with
+//!   exactly these names and in exactly this order ([`REQUIRED_COLUMNS`]):
+//!
+//!   | column      | quantity                                        | unit |
+//!   |-------------|-------------------------------------------------|------|
+//!   | `t`         | time since the start of the log                 | s    |
+//!   | `ref_sw_deg`| position reference, as an angle at the steering wheel | deg  |
+//!   | `sw_deg`    | steering column encoder, as an angle at the wheel | deg  |
+//!   | `motor_rad` | motor shaft angle                               | rad  |
+//!   | `current_a` | motor current                                   | A    |
+//!
+//!   Any number of further columns may follow; put the unit in the name (`voltage_v`). Names are
+//!   case-sensitive, unique and non-empty, and contain no comma, quote or control character
+//!   (there is no quoting).
+//! * **Rows.** One line per sample with as many comma-separated fields as the header. A field is
+//!   a decimal number as Rust's `f64` parser reads it (`12`, `-0.5`, `1e-3`).
+//! * **Time.** `t` is finite and strictly increasing from row to row; it need not start at 0 nor
+//!   be evenly spaced.
+//! * **Missing samples.** Any column but `t` may hold `nan` (any letter case) for a sensor
+//!   dropout; it is read as `f64::NAN`. Infinities are refused everywhere: no sensor reports one,
+//!   so one in a file means a bug upstream.
+//! * **Leniency.** Lines whose first non-blank character is `#` are comments if they come before
+//!   the header; they are skipped and not kept (after the header, `#` is an error, so a stray
+//!   line in the data is not silently dropped). Blank lines are ignored anywhere (trailing ones
+//!   in particular), spaces and tabs around fields are ignored, LF and CRLF line ends are both
+//!   read, and a leading UTF-8 byte-order mark (spreadsheet exports) is skipped.
+//! * **Compression.** [`Log::save`] gzips when the file name ends in `.gz`; [`Log::load`]
+//!   recognises gzip by its magic bytes whatever the name.
+//! * **Precision.** The writer rounds the required columns to fixed decimals well below what is
+//!   measured (see the constants below); extra columns are written losslessly. A file with the
+//!   header and no rows is a valid, empty log.
+use std::fmt;
+use std::fs::{self, File};
+use std::io::{self, BufRead, BufReader, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use flate2::Compression;
+use flate2::read::MultiGzDecoder;
+use flate2::write::GzEncoder;
+
+/// The columns every log starts with, in this order.
+pub const REQUIRED_COLUMNS: [&str; 5] = ["t", "ref_sw_deg", "sw_deg", "motor_rad", "current_a"];
+
+// Decimals written for the required columns. Each is at least ten times finer than what is
+// logged, so rounding loses nothing that was measured, yet it drops the noise digits of a
+// simulation, which would otherwise triple the file and defeat gzip.
+/// 1 µs: the fastest loop on the car (EPOS4 current loop, 25 kHz) has a 40 µs period.
+const T_DECIMALS: usize = 6;
+/// 1e-4 deg: a 14-bit column encoder resolves 0.022 deg.
+const DEG_DECIMALS: usize = 4;
+/// 1e-5 rad: a 4096-count quadrature motor encoder resolves 3.8e-4 rad.
+const RAD_DECIMALS: usize = 5;
+/// 0.1 mA: the EPOS4 reports current in mA.
+const AMP_DECIMALS: usize = 4;
+
+const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
+
+/// One sample of the five required columns.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Row {
+    /// Time, s.
+    pub t: f64,
+    /// Position reference as a steering-wheel angle, deg.
+    pub ref_sw_deg: f64,
+    /// Column encoder as a steering-wheel angle, deg.
+    pub sw_deg: f64,
+    /// Motor shaft angle, rad.
+    pub motor_rad: f64,
+    /// Motor current, A.
+    pub current_a: f64,
+}
+
+/// A log held column by column, the way the analysis uses it.
+///
+/// All columns have the same length; [`Log::write_to`] checks it, together with everything else
+/// the reader would refuse, so a log that saves also loads.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Log {
+    pub t: Vec<f64>,
+    pub ref_sw_deg: Vec<f64>,
+    pub sw_deg: Vec<f64>,
+    pub motor_rad: Vec<f64>,
+    pub current_a: Vec<f64>,
+    /// Further columns, by name, in file order.
+    pub extra: Vec<(String, Vec<f64>)>,
+}
+
+/// Everything that can go wrong reading or writing a log. Line numbers count every line of the
+/// file from 1, comments and blank lines included, so they match what an editor shows.
+#[derive(Debug)]
+pub enum LogError {
+    /// The file (or stream, `path: None`) could not be opened, read or written.
+    Io {
+        path: Option<PathBuf>,
+        source: io::Error,
+    },
+    /// An error inside the named file; `source` says what and where.
+    InFile {
+        path: PathBuf,
+        source: Box<LogError>,
+    },
+    /// The input holds no header: it is empty or only comments and blank lines.
+    Empty,
+    /// A required column is not in the header at all.
+    MissingColumn {
+        expected: &'static str,
+        found_header: String,
+    },
+    /// The required columns are all there but not first or not in the required order.
+    WrongColumnOrder { found: Vec<String> },
+    /// A column name that is empty, repeated or not writable without quoting.
+    BadColumnName { name: String, reason: &'static str },
+    /// A data line with more or fewer fields than the header.
+    WrongFieldCount {
+        line: usize,
+        expected: usize,
+        found: usize,
+    },
+    /// A field that is not a number, or is infinite.
+    BadNumber {
+        line: usize,
+        column: String,
+        text: String,
+    },
+    /// A time stamp that is `nan`.
+    NonFiniteTime { line: usize },
+    /// A time stamp not after the one before it.
+    NonMonotonicTime {
+        line: usize,
+        previous: f64,
+        current: f64,
+    },
+    /// Writing: a column whose length differs from `t`.
+    ColumnLength {
+        column: String,
+        expected: usize,
+        found: usize,
+    },
+    /// Writing: a non-finite time, or two samples that round to the same microsecond (rows
+    /// count from 0).
+    TimeNotWritable { row: usize, reason: &'static str },
+    /// Writing: an infinite value, which the reader would refuse (rows count from 0).
+    InfiniteValue { row: usize, column: String },
+}
+
+impl fmt::Display for LogError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Io {
+                path: Some(path),
+                source,
+            } => write!(f, "{}: {source}", path.display()),
+            Self::Io { path: None, source } => write!(f, "input/output error: {source}"),
+            Self::InFile { path, source } => write!(f, "{}: {source}", path.display()),
+            Self::Empty => write!(
+                f,
+                "no header line found (the log is empty or only comments); expected `{}`",
+                REQUIRED_COLUMNS.join(",")
+            ),
+            Self::MissingColumn {
+                expected,
+                found_header,
+            } => write!(
+                f,
+                "the header lacks the required column `{expected}`: found `{found_header}`, \
+                 expected it to start with `{}`",
+                REQUIRED_COLUMNS.join(",")
+            ),
+            Self::WrongColumnOrder { found } => write!(
+                f,
+                "the header must start with `{}` in this order, found `{}`",
+                REQUIRED_COLUMNS.join(","),
+                found.join(",")
+            ),
+            Self::BadColumnName { name, reason } => {
+                write!(f, "bad column name `{name}`: {reason}")
+            }
+            Self::WrongFieldCount {
+                line,
+                expected,
+                found,
+            } => write!(
+                f,
+                "line {line}: {found} fields, but the header names {expected} columns"
+            ),
+            Self::BadNumber { line, column, text } => write!(
+                f,
+                "line {line}, column `{column}`: cannot read `{text}` as a value; expected a \
+                 finite number, or `nan` for a missing sample"
+            ),
+            Self::NonFiniteTime { line } => {
+                write!(f, "line {line}: time `t` must be a finite number")
+            }
+            Self::NonMonotonicTime {
+                line,
+                previous,
+                current,
+            } => write!(
+                f,
+                "line {line}: time goes from {previous} s to {current} s; `t` must strictly \
+                 increase"
+            ),
+            Self::ColumnLength {
+                column,
+                expected,
+                found,
+            } => write!(
+                f,
+                "column `{column}` has {found} samples but `t` has {expected}"
+            ),
+            Self::TimeNotWritable { row, reason } => write!(f, "row {row}: {reason}"),
+            Self::InfiniteValue { row, column } => write!(
+                f,
+                "row {row}, column `{column}`: infinite value (use NaN for a missing sample)"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for LogError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Io { source, .. } => Some(source),
+            Self::InFile { source, .. } => Some(source.as_ref()),
+            _ => None,
+        }
+    }
+}
+
+impl LogError {
+    /// The error without the file context that [`Log::load`] and [`Log::save`] wrap around it,
+    /// for matching on what went wrong.
+    pub fn root(&self) -> &LogError {
+        match self {
+            Self::InFile { source, .. } => source.root(),
+            other => other,
+        }
+    }
+
+    fn io(source: io::Error) -> Self {
+        Self::Io { path: None, source }
+    }
+
+    fn in_file(self, path: &Path) -> Self {
+        match self {
+            // An I/O error on a stream is about this file; say so in the error itself rather
+            // than wrapping it.
+            Self::Io { path: None, source } => Self::Io {
+                path: Some(path.to_path_buf()),
+                source,
+            },
+            e @ (Self::Io { .. } | Self::InFile { .. }) => e,
+            e => Self::InFile {
+                path: path.to_path_buf(),
+                source: Box::new(e),
+            },
+        }
+    }
+}
+
+impl Log {
+    /// An empty log with only the required columns.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// An empty log with these further columns after the required ones. Names are checked when
+    /// the log is written (see the module doc for the rules).
+    pub fn with_extra_columns(names: &[&str]) -> Self {
+        Self {
+            extra: names.iter().map(|n| (n.to_string(), Vec::new())).collect(),
+            ..Self::default()
+        }
+    }
+
+    /// Appends one sample: the required values and one value per extra column, in column order.
+    ///
+    /// # Panics
+    /// If `extra` does not hold exactly one value per extra column: that is a bug in the
+    /// caller, and padding or dropping values would misalign every later row.
+    pub fn push(&mut self, row: Row, extra: &[f64]) {
+        assert_eq!(
+            extra.len(),
+            self.extra.len(),
+            "Log::push: {} extra values for {} extra columns",
+            extra.len(),
+            self.extra.len()
+        );
+        self.t.push(row.t);
+        self.ref_sw_deg.push(row.ref_sw_deg);
+        self.sw_deg.push(row.sw_deg);
+        self.motor_rad.push(row.motor_rad);
+        self.current_a.push(row.current_a);
+        for ((_, column), &v) in self.extra.iter_mut().zip(extra) {
+            column.push(v);
+        }
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// The required values of sample `i`, if there is one.
+    pub fn row(&self, i: usize) -> Option<Row> {
+        Some(Row {
+            t: *self.t.get(i)?,
+            ref_sw_deg: *self.ref_sw_deg.get(i)?,
+            sw_deg: *self.sw_deg.get(i)?,
+            motor_rad: *self.motor_rad.get(i)?,
+            current_a: *self.current_a.get(i)?,
+        })
+    }
+
+    /// The extra column of this name.
+    pub fn extra(&self, name: &str) -> Option<&[f64]> {
+        self.extra
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_slice())
+    }
+
+    /// Names of the extra columns, in file order.
+    pub fn extra_names(&self) -> impl Iterator<Item = &str> {
+        self.extra.iter().map(|(n, _)| n.as_str())
+    }
+
+    /// Writes the log as CSV. Refuses (before writing anything) what [`Log::read_from`] would
+    /// refuse: bad column names, unequal columns, time that is not finite and increasing at
+    /// microsecond resolution, infinite values.
+    pub fn write_to(&self, w: impl Write) -> Result<(), LogError> {
+        self.check_writable()?;
+        let mut w = BufWriter::new(w);
+        let mut header: Vec<&str> = REQUIRED_COLUMNS.to_vec();
+        header.extend(self.extra_names());
+        writeln!(w, "{}", header.join(",")).map_err(LogError::io)?;
+
+        let mut line = String::new();
+        for i in 0..self.len() {
+            line.clear();
+            push_fixed(&mut line, self.t[i], T_DECIMALS);
+            for (column, decimals) in [
+                (&self.ref_sw_deg, DEG_DECIMALS),
+                (&self.sw_deg, DEG_DECIMALS),
+                (&self.motor_rad, RAD_DECIMALS),
+                (&self.current_a, AMP_DECIMALS),
+            ] {
+                line.push(',');
+                push_fixed(&mut line, column[i], decimals);
+            }
+            for (_, column) in &self.extra {
+                line.push(',');
+                push_exact(&mut line, column[i]);
+            }
+            line.push('\n');
+            w.write_all(line.as_bytes()).map_err(LogError::io)?;
+        }
+        w.flush().map_err(LogError::io)
+    }
+
+    /// Reads a log in the format of the module doc from plain (not compressed) CSV text.
+    pub fn read_from(mut r: impl BufRead) -> Result<Log, LogError> {
+        let mut text = String::new();
+        let mut line_no = 0;
+
+        // Header: the first line that is neither blank nor a comment.
+        let header = loop {
+            text.clear();
+            if r.read_line(&mut text).map_err(LogError::io)? == 0 {
+                return Err(LogError::Empty);
+            }
+            line_no += 1;
+            let line = if line_no == 1 {
+                text.trim_start_matches('\u{feff}')
+            } else {
+                &text
+            };
+            let line = line.trim();
+            if !line.is_empty() && !line.starts_with('#') {
+                break parse_header(line)?;
+            }
+        };
+
+        let extra_names: Vec<&str> = header[REQUIRED_COLUMNS.len()..]
+            .iter()
+            .map(String::as_str)
+            .collect();
+        let mut log = Log::with_extra_columns(&extra_names);
+        let mut values = vec![0.0; header.len()];
+        loop {
+            text.clear();
+            if r.read_line(&mut text).map_err(LogError::io)? == 0 {
+                break;
+            }
+            line_no += 1;
+            let line = text.trim();
+            if line.is_empty() {
+                continue;
+            }
+            let found = line.split(',').count();
+            if found != header.len() {
+                return Err(LogError::WrongFieldCount {
+                    line: line_no,
+                    expected: header.len(),
+                    found,
+                });
+            }
+            for ((field, value), name) in line.split(',').zip(&mut values).zip(&header) {
+                *value = parse_value(field.trim(), line_no, name)?;
+            }
+            let t = values[0];
+            if t.is_nan() {
+                return Err(LogError::NonFiniteTime { line: line_no });
+            }
+            if let Some(&previous) = log.t.last()
+                && t <= previous
+            {
+                return Err(LogError::NonMonotonicTime {
+                    line: line_no,
+                    previous,
+                    current: t,
+                });
+            }
+            let row = Row {
+                t,
+                ref_sw_deg: values[1],
+                sw_deg: values[2],
+                motor_rad: values[3],
+                current_a: values[4],
+            };
+            log.push(row, &values[REQUIRED_COLUMNS.len()..]);
+        }
+        Ok(log)
+    }
+
+    /// Writes the log to `path`, gzip-compressed if the name ends in `.gz`, creating missing
+    /// parent directories. The file is written under a temporary name and renamed when
+    /// complete, so a failed save never leaves a truncated log behind.
+    pub fn save(&self, path: &Path) -> Result<(), LogError> {
+        self.check_writable().map_err(|e| e.in_file(path))?;
+        let io_err = |source| LogError::Io {
+            path: Some(path.to_path_buf()),
+            source,
+        };
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            fs::create_dir_all(dir).map_err(io_err)?;
+        }
+        let mut tmp_name = path.as_os_str().to_owned();
+        tmp_name.push(".partial");
+        let tmp = PathBuf::from(tmp_name);
+
+        let written = File::create(&tmp).map_err(io_err).and_then(|file| {
+            if is_gz_name(path) {
+                let mut gz = GzEncoder::new(BufWriter::new(file), Compression::default());
+                self.write_to(&mut gz)?;
+                let mut inner = gz.finish().map_err(LogError::io)?;
+                inner.flush().map_err(LogError::io)
+            } else {
+                self.write_to(file)
+            }
+        });
+        let result = written.and_then(|()| fs::rename(&tmp, path).map_err(io_err));
+        if result.is_err() {
+            // Best effort: the error to report is the one that made the save fail.
+            let _ = fs::remove_file(&tmp);
+        }
+        result.map_err(|e| e.in_file(path))
+    }
+
+    /// Reads a log from `path`, plain or gzip-compressed (recognised by content, not name).
+    pub fn load(path: &Path) -> Result<Log, LogError> {
+        let file = File::open(path).map_err(|source| LogError::Io {
+            path: Some(path.to_path_buf()),
+            source,
+        })?;
+        let mut reader = BufReader::new(file);
+        let is_gzip = reader
+            .fill_buf()
+            .map_err(|e| LogError::io(e).in_file(path))?
+            .starts_with(&GZIP_MAGIC);
+        let result = if is_gzip {
+            // Multi-member, so logs appended gzip chunk by gzip chunk read whole.
+            Log::read_from(BufReader::new(MultiGzDecoder::new(reader)))
+        } else {
+            Log::read_from(reader)
+        };
+        result.map_err(|e| e.in_file(path))
+    }
+
+    fn check_writable(&self) -> Result<(), LogError> {
+        let n = self.len();
+        let required = [
+            (REQUIRED_COLUMNS[1], &self.ref_sw_deg),
+            (REQUIRED_COLUMNS[2], &self.sw_deg),
+            (REQUIRED_COLUMNS[3], &self.motor_rad),
+            (REQUIRED_COLUMNS[4], &self.current_a),
+        ];
+        let columns = required
+            .into_iter()
+            .chain(self.extra.iter().map(|(n, v)| (n.as_str(), v)));
+        for (name, values) in columns.clone() {
+            if values.len() != n {
+                return Err(LogError::ColumnLength {
+                    column: name.to_string(),
+                    expected: n,
+                    found: values.len(),
+                });
+            }
+        }
+        let mut seen: Vec<&str> = REQUIRED_COLUMNS.to_vec();
+        for name in self.extra_names() {
+            check_column_name(name, &seen)?;
+            seen.push(name);
+        }
+
+        let mut previous_us = None;
+        for (row, &t) in self.t.iter().enumerate() {
+            if !t.is_finite() {
+                return Err(LogError::TimeNotWritable {
+                    row,
+                    reason: "time is not finite",
+                });
+            }
+            // Compare what will be in the file, not the f64: two samples closer than the
+            // written resolution would read back as time standing still.
+            let us = (t * 10f64.powi(T_DECIMALS as i32)).round();
+            if previous_us.is_some_and(|p| us <= p) {
+                return Err(LogError::TimeNotWritable {
+                    row,
+                    reason: "time does not increase by at least the 1 µs the format resolves",
+                });
+            }
+            previous_us = Some(us);
+        }
+        for (name, values) in columns {
+            if let Some(row) = values.iter().position(|v| v.is_infinite()) {
+                return Err(LogError::InfiniteValue {
+                    row,
+                    column: name.to_string(),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+fn is_gz_name(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"))
+}
+
+/// Splits and checks a header line; returns the column names.
+fn parse_header(line: &str) -> Result<Vec<String>, LogError> {
+    let names: Vec<String> = line.split(',').map(|f| f.trim().to_string()).collect();
+    for expected in REQUIRED_COLUMNS {
+        if !names.iter().any(|n| n == expected) {
+            return Err(LogError::MissingColumn {
+                expected,
+                found_header: line.to_string(),
+            });
+        }
+    }
+    if names.iter().zip(REQUIRED_COLUMNS).any(|(n, r)| n != r) {
+        return Err(LogError::WrongColumnOrder { found: names });
+    }
+    let mut seen: Vec<&str> = REQUIRED_COLUMNS.to_vec();
+    for name in &names[REQUIRED_COLUMNS.len()..] {
+        check_column_name(name, &seen)?;
+        seen.push(name);
+    }
+    Ok(names)
+}
+
+fn check_column_name(name: &str, earlier: &[&str]) -> Result<(), LogError> {
+    let reason = if name.is_empty() {
+        Some("empty")
+    } else if earlier.contains(&name) {
+        Some("the column appears twice")
+    } else if name.contains([',', '"']) || name.chars().any(char::is_control) {
+        Some("names cannot contain commas, quotes or control characters")
+    } else if name.trim() != name {
+        Some("names cannot start or end with whitespace")
+    } else {
+        None
+    };
+    match reason {
+        Some(reason) => Err(LogError::BadColumnName {
+            name: name.to_string(),
+            reason,
+        }),
+        None => Ok(()),
+    }
+}
+
+fn parse_value(field: &str, line: usize, column: &str) -> Result<f64, LogError> {
+    match field.parse::<f64>() {
+        Ok(v) if !v.is_infinite() => Ok(v),
+        _ => Err(LogError::BadNumber {
+            line,
+            column: column.to_string(),
+            text: field.to_string(),
+        }),
+    }
+}
+
+/// Fixed decimals; `nan` for a missing sample; no `-0.0000` for tiny negative noise, so files of
+/// the same run diff cleanly.
+fn push_fixed(out: &mut String, v: f64, decimals: usize) {
+    use fmt::Write;
+    if v.is_nan() {
+        out.push_str("nan");
+        return;
+    }
+    let start = out.len();
+    // Writing to a String cannot fail.
+    let _ = write!(out, "{v:.decimals$}");
+    if out[start..].starts_with('-') && out[start + 1..].bytes().all(|b| b == b'0' || b == b'.') {
+        out.remove(start);
+    }
+}
+
+/// Shortest text that reads back to the same f64: extra columns carry any quantity, so there is
+/// no resolution to round to. Very large or small magnitudes use an exponent to stay short.
+fn push_exact(out: &mut String, v: f64) {
+    use fmt::Write;
+    if v.is_nan() {
+        out.push_str("nan");
+    } else if v == 0.0 || (1e-4..1e15).contains(&v.abs()) {
+        // Writing to a String cannot fail.
+        let _ = write!(out, "{v}");
+    } else {
+        let _ = write!(out, "{v:e}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample_log(extra: &[&str]) -> Log {
+        let mut log = Log::with_extra_columns(extra);
+        for i in 0..200 {
+            let t = i as f64 * 0.0005;
+            let row = Row {
+                t,
+                ref_sw_deg: 10.0 * (t * 7.0).sin(),
+                sw_deg: if i == 17 {
+                    f64::NAN
+                } else {
+                    9.9 * (t * 7.0 - 0.1).sin()
+                },
+                motor_rad: 141.371_669 * (t * 7.0 - 0.1).sin(),
+                current_a: 20.0 * (t * 30.0).cos() - 1e-9,
+            };
+            let extras: Vec<f64> = (0..extra.len())
+                .map(|k| (k as f64 + 1.0) * 1.234_567_890_123e-7 * i as f64)
+                .collect();
+            log.push(row, &extras);
+        }
+        log
+    }
+
+    fn read_str(text: &str) -> Result<Log, LogError> {
+        Log::read_from(text.as_bytes())
+    }
+
+    /// Equal up to the rounding of the writer; NaN equals NaN.
+    fn assert_close(a: &[f64], b: &[f64], tol: f64) {
+        assert_eq!(a.len(), b.len());
+        for (i, (x, y)) in a.iter().zip(b).enumerate() {
+            assert!(
+                (x.is_nan() && y.is_nan()) || (x - y).abs() <= tol,
+                "sample {i}: {x} vs {y}"
+            );
+        }
+    }
+
+    fn assert_round_trip(original: &Log, back: &Log) {
+        assert_close(&original.t, &back.t, 0.6e-6);
+        assert_close(&original.ref_sw_deg, &back.ref_sw_deg, 0.6e-4);
+        assert_close(&original.sw_deg, &back.sw_deg, 0.6e-4);
+        assert_close(&original.motor_rad, &back.motor_rad, 0.6e-5);
+        assert_close(&original.current_a, &back.current_a, 0.6e-4);
+        assert_eq!(original.extra.len(), back.extra.len());
+        for ((name_a, a), (name_b, b)) in original.extra.iter().zip(&back.extra) {
+            assert_eq!(name_a, name_b);
+            // Extra columns are lossless.
+            assert_close(a, b, 0.0);
+        }
+    }
+
+    #[test]
+    fn csv_file_round_trips() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("nested/dir/run.csv");
+        let log = sample_log(&["voltage_v"]);
+        log.save(&path).expect("save");
+        let text = fs::read_to_string(&path).expect("read back");
+        assert!(text.starts_with("t,ref_sw_deg,sw_deg,motor_rad,current_a,voltage_v\n"));
+        assert_round_trip(&log, &Log::load(&path).expect("load"));
+    }
+
+    #[test]
+    fn gzip_file_round_trips_and_is_detected_by_content() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("run.csv.gz");
+        let log = sample_log(&["voltage_v", "speed_rad_s"]);
+        log.save(&path).expect("save");
+        let bytes = fs::read(&path).expect("read back");
+        assert!(bytes.starts_with(&GZIP_MAGIC));
+        assert_round_trip(&log, &Log::load(&path).expect("load"));
+
+        let renamed = dir.path().join("run.csv");
+        fs::rename(&path, &renamed).expect("rename");
+        assert_round_trip(&log, &Log::load(&renamed).expect("load by content"));
+    }
+
+    #[test]
+    fn save_leaves_no_partial_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("run.csv");
+        sample_log(&[]).save(&path).expect("save");
+        let names: Vec<_> = fs::read_dir(dir.path()).expect("list").flatten().collect();
+        assert_eq!(names.len(), 1);
+    }
+
+    #[test]
+    fn extra_columns_are_kept_by_name_and_order() {
+        let text = "t,ref_sw_deg,sw_deg,motor_rad,current_a,voltage_v,temp_c\n\
+                    0,1,2,3,4,23.9,40\n\
+                    0.01,1,2,3,4,24.1,41\n";
+        let log = read_str(text).expect("valid log");
+        assert_eq!(
+            log.extra_names().collect::<Vec<_>>(),
+            ["voltage_v", "temp_c"]
+        );
+        assert_eq!(log.extra("temp_c"), Some(&[40.0, 41.0][..]));
+        assert_eq!(log.extra("voltage_v"), Some(&[23.9, 24.1][..]));
+        assert_eq!(log.extra("nope"), None);
+        let mut out = Vec::new();
+        log.write_to(&mut out).expect("write");
+        assert_eq!(
+            read_str(&String::from_utf8(out).expect("utf-8")).expect("re-read"),
+            log
+        );
+    }
+
+    #[test]
+    fn comments_blank_lines_crlf_whitespace_and_bom_are_accepted() {
+        let text = "\u{feff}# recorded on the car\r\n\r\n  # operator: test\r\n\
+                    t , ref_sw_deg,sw_deg ,motor_rad,current_a\r\n\
+                    0.0, 1.5 ,\t2,3,4\r\n\
+                    0.5,1,NaN,3,-4e-1\r\n\r\n\r\n";
+        let log = read_str(text).expect("valid log");
+        assert_eq!(log.len(), 2);
+        assert_eq!(
+            log.row(0),
+            Some(Row {
+                t: 0.0,
+                ref_sw_deg: 1.5,
+                sw_deg: 2.0,
+                motor_rad: 3.0,
+                current_a: 4.0
+            })
+        );
+        assert!(log.sw_deg[1].is_nan());
+        // Parsing is exact, so compare bits rather than within a tolerance.
+        assert_eq!(log.current_a[1].to_bits(), (-0.4f64).to_bits());
+    }
+
+    #[test]
+    fn missing_required_column_is_named() {
+        let err = read_str("t,ref_sw_deg,sw_deg,current_a\n0,1,2,3\n").expect_err("must fail");
+        assert!(
+            matches!(
+                err,
+                LogError::MissingColumn {
+                    expected: "motor_rad",
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("motor_rad"), "{err}");
+    }
+
+    #[test]
+    fn required_columns_out_of_order_are_refused() {
+        let err = read_str("t,sw_deg,ref_sw_deg,motor_rad,current_a\n").expect_err("must fail");
+        assert!(matches!(err, LogError::WrongColumnOrder { .. }), "{err:?}");
+        let err = read_str("x,t,ref_sw_deg,sw_deg,motor_rad,current_a\n").expect_err("must fail");
+        assert!(matches!(err, LogError::WrongColumnOrder { .. }), "{err:?}");
+    }
+
+    #[test]
+    fn duplicate_extra_column_is_refused() {
+        let err = read_str("t,ref_sw_deg,sw_deg,motor_rad,current_a,v,v\n").expect_err("must fail");
+        assert!(matches!(err, LogError::BadColumnName { .. }), "{err:?}");
+    }
+
+    #[test]
+    fn bad_number_reports_line_and_column() {
+        let text =
+            "# comment\nt,ref_sw_deg,sw_deg,motor_rad,current_a\n0,1,2,3,4\n\n0.1,1,2x,3,4\n";
+        let err = read_str(text).expect_err("must fail");
+        match &err {
+            LogError::BadNumber { line, column, text } => {
+                assert_eq!((*line, column.as_str(), text.as_str()), (5, "sw_deg", "2x"));
+            }
+            other => panic!("unexpected {other:?}"),
+        }
+        assert!(
+            err.to_string().starts_with("line 5, column `sw_deg`"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn infinity_in_data_is_refused() {
+        let text = "t,ref_sw_deg,sw_deg,motor_rad,current_a\n0,1,2,3,inf\n";
+        let err = read_str(text).expect_err("must fail");
+        assert!(
+            matches!(err, LogError::BadNumber { line: 2, .. }),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn wrong_field_count_is_reported() {
+        let text = "t,ref_sw_deg,sw_deg,motor_rad,current_a\n0,1,2,3\n";
+        let err = read_str(text).expect_err("must fail");
+        assert!(
+            matches!(
+                err,
+                LogError::WrongFieldCount {
+                    line: 2,
+                    expected: 5,
+                    found: 4
+                }
+            ),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn time_must_be_finite_and_strictly_increasing() {
+        let head = "t,ref_sw_deg,sw_deg,motor_rad,current_a\n";
+        let err = read_str(&format!("{head}0,1,2,3,4\n0,1,2,3,4\n")).expect_err("repeated t");
+        assert!(
+            matches!(err, LogError::NonMonotonicTime { line: 3, .. }),
+            "{err:?}"
+        );
+        let err = read_str(&format!("{head}nan,1,2,3,4\n")).expect_err("nan t");
+        assert!(
+            matches!(err, LogError::NonFiniteTime { line: 2 }),
+            "{err:?}"
+        );
+        let err = read_str(&format!("{head}inf,1,2,3,4\n")).expect_err("infinite t");
+        assert!(
+            matches!(err, LogError::BadNumber { line: 2, .. }),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn only_comments_is_empty_but_header_alone_is_an_empty_log() {
+        assert!(matches!(read_str("# nothing\n\n"), Err(LogError::Empty)));
+        assert!(matches!(read_str(""), Err(LogError::Empty)));
+        let log = read_str("t,ref_sw_deg,sw_deg,motor_rad,current_a\n").expect("header only");
+        assert!(log.is_empty());
+    }
+
+    #[test]
+    fn comment_after_header_is_an_error_not_skipped() {
+        let text = "t,ref_sw_deg,sw_deg,motor_rad,current_a\n# late\n";
+        assert!(matches!(
+            read_str(text),
+            Err(LogError::WrongFieldCount { line: 2, .. })
+        ));
+    }
+
+    #[test]
+    fn writer_refuses_what_the_reader_would_refuse() {
+        let mut log = sample_log(&[]);
+        log.t[5] = log.t[4] + 1e-7;
+        assert!(matches!(
+            log.write_to(Vec::new()),
+            Err(LogError::TimeNotWritable { row: 5, .. })
+        ));
+
+        let mut log = sample_log(&["v"]);
+        log.extra[0].1.pop();
+        assert!(matches!(
+            log.write_to(Vec::new()),
+            Err(LogError::ColumnLength { .. })
+        ));
+
+        let mut log = sample_log(&[]);
+        log.current_a[3] = f64::INFINITY;
+        assert!(matches!(
+            log.write_to(Vec::new()),
+            Err(LogError::InfiniteValue { row: 3, .. })
+        ));
+
+        let log = Log::with_extra_columns(&["a,b"]);
+        assert!(matches!(
+            log.write_to(Vec::new()),
+            Err(LogError::BadColumnName { .. })
+        ));
+    }
+
+    #[test]
+    fn load_errors_name_the_file_and_keep_the_cause() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("broken.csv");
+        fs::write(
+            &path,
+            "t,ref_sw_deg,sw_deg,motor_rad,current_a\n0,1,2,3,x\n",
+        )
+        .expect("write");
+        let err = Log::load(&path).expect_err("must fail");
+        assert!(
+            matches!(err.root(), LogError::BadNumber { line: 2, .. }),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("broken.csv: line 2"), "{err}");
+
+        let missing = Log::load(&dir.path().join("absent.csv")).expect_err("must fail");
+        assert!(
+            matches!(missing, LogError::Io { path: Some(_), .. }),
+            "{missing:?}"
+        );
+    }
+
+    #[test]
+    fn tiny_negative_values_are_written_without_minus_sign() {
+        let mut log = Log::new();
+        log.push(
+            Row {
+                t: 0.0,
+                ref_sw_deg: -1e-9,
+                sw_deg: -0.0,
+                motor_rad: -2e-7,
+                current_a: -0.00004,
+            },
+            &[],
+        );
+        let mut out = Vec::new();
+        log.write_to(&mut out).expect("write");
+        let text = String::from_utf8(out).expect("utf-8");
+        assert_eq!(
+            text.lines().nth(1),
+            Some("0.000000,0.0000,0.0000,0.00000,0.0000")
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "extra values")]
+    fn push_with_wrong_number_of_extra_values_panics() {
+        Log::with_extra_columns(&["a", "b"]).push(Row::default(), &[1.0]);
+    }
+}

@@ -1,0 +1,518 @@
+//! `host-sim`: the paper's steering actuator simulated under the firmware's control code.
+//!
+//! Subcommands: `poles`, `sweep`, `track`, `step`, `bench`. Each prints a readable summary;
+//! `--json PATH` writes its figures, `--log PATH` the run's log (CSV, `.csv.gz` compressed),
+//! `--plots DIR` its pictures (SVG).
+
+use clap::{Args, Parser, Subcommand};
+use host_sim::analysis::FrequencyResponse;
+use host_sim::logfmt::Log;
+use host_sim::plant::PlantParams;
+use host_sim::plot::{BodePlot, Panel, Style, TimePlot};
+use host_sim::report::{self, SweepReport, TrackReport};
+use host_sim::scenario::{self, Sweep};
+use host_sim::sim::{Run, RunConfig};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+use steering_ecu::control::AntiWindup;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "host-sim",
+    version,
+    about = "The paper's steering actuator (Manca et al. 2021) under the ECU's own control code"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Eigenvalues of the linear plant (eqs. 5-8, Tables 1, 2, 4) against the paper's.
+    Poles {
+        #[arg(long, value_name = "PATH")]
+        json: Option<PathBuf>,
+    },
+    /// Sine sweep at the wheel (section 4.2: 0-10 Hz, 10 s, 10 deg): frequency response and
+    /// -3 dB bandwidth.
+    Sweep {
+        #[arg(long, default_value_t = 10.0, value_name = "DEG")]
+        amplitude_deg: f64,
+        #[arg(long, default_value_t = 10.0, value_name = "HZ")]
+        f_end_hz: f64,
+        #[arg(long, default_value_t = 10.0, value_name = "S")]
+        duration_s: f64,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// A driverless track run (section 4.4): the built-in 120 s profile or a CSV `t,ref_sw_deg`.
+    Track {
+        #[arg(long, value_name = "CSV")]
+        csv: Option<PathBuf>,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// A step at the wheel.
+    Step {
+        #[arg(long, default_value_t = 20.0, value_name = "DEG")]
+        amplitude_deg: f64,
+        #[arg(long, default_value_t = 1.5, value_name = "S")]
+        duration_s: f64,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Realtime factor of the 120 s track at full rates (20 kHz / 2 kHz / 100 Hz), one thread.
+    Bench {
+        #[arg(long, default_value_t = 5)]
+        repeats: u32,
+        #[arg(long, value_name = "PATH")]
+        json: Option<PathBuf>,
+    },
+}
+
+#[derive(Args, Debug)]
+struct Common {
+    /// Write the figures as JSON.
+    #[arg(long, value_name = "PATH")]
+    json: Option<PathBuf>,
+    /// Write the run's log (project log format; `.csv.gz` compresses).
+    #[arg(long, value_name = "PATH")]
+    log: Option<PathBuf>,
+    /// Write the pictures (SVG) into this directory.
+    #[arg(long, value_name = "DIR")]
+    plots: Option<PathBuf>,
+    /// Log rate, Hz (a divisor of 2000).
+    #[arg(long, default_value_t = 1000, value_name = "HZ")]
+    log_rate_hz: u32,
+    /// Feed the position loop the exact motor angle instead of the 84-count Hall angle.
+    #[arg(long)]
+    ideal_sensors: bool,
+    /// Integrate regardless of saturation (to see what anti-windup prevents).
+    #[arg(long)]
+    no_anti_windup: bool,
+}
+
+impl Common {
+    fn config(&self) -> RunConfig {
+        RunConfig {
+            hall_feedback: !self.ideal_sensors,
+            anti_windup: if self.no_anti_windup {
+                AntiWindup::Disabled
+            } else {
+                AntiWindup::ConditionalIntegration
+            },
+            log_rate_hz: self.log_rate_hz,
+            ..RunConfig::default()
+        }
+    }
+}
+
+type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match dispatch(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("host-sim: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn dispatch(command: Command) -> Result<()> {
+    match command {
+        Command::Poles { json } => poles(json.as_deref()),
+        Command::Sweep {
+            amplitude_deg,
+            f_end_hz,
+            duration_s,
+            common,
+        } => {
+            let sweep = Sweep {
+                amplitude_deg,
+                f_start_hz: 0.0,
+                f_end_hz,
+                duration_s,
+            };
+            check_sweep(&sweep)?;
+            sweep_cmd(&sweep, &common)
+        }
+        Command::Track { csv, common } => {
+            let reference = match &csv {
+                Some(path) => scenario::track_from_csv(path)?,
+                None => scenario::builtin_track(),
+            };
+            let name = csv
+                .as_ref()
+                .map_or("built-in 120 s profile".to_string(), |p| {
+                    p.display().to_string()
+                });
+            track_cmd(&reference, &name, &common)
+        }
+        Command::Step {
+            amplitude_deg,
+            duration_s,
+            common,
+        } => {
+            if !(amplitude_deg.is_finite() && amplitude_deg.abs() <= 90.0) {
+                return Err(
+                    format!("--amplitude-deg {amplitude_deg}: must be within +-90 deg").into(),
+                );
+            }
+            if !(duration_s.is_finite() && duration_s > 0.1 && duration_s <= 600.0) {
+                return Err(format!("--duration-s {duration_s}: must be in (0.1, 600] s").into());
+            }
+            step_cmd(amplitude_deg, duration_s, &common)
+        }
+        Command::Bench { repeats, json } => bench(repeats.max(1), json.as_deref()),
+    }
+}
+
+fn check_sweep(s: &Sweep) -> Result<()> {
+    if !(s.amplitude_deg.is_finite() && s.amplitude_deg > 0.0 && s.amplitude_deg <= 90.0) {
+        return Err(format!(
+            "--amplitude-deg {}: must be in (0, 90] deg (the steering range)",
+            s.amplitude_deg
+        )
+        .into());
+    }
+    if !(s.f_end_hz.is_finite() && s.f_end_hz > 0.0 && s.f_end_hz <= 50.0) {
+        return Err(format!(
+            "--f-end-hz {}: must be in (0, 50] Hz (the 100 Hz reference's Nyquist limit)",
+            s.f_end_hz
+        )
+        .into());
+    }
+    if !(s.duration_s.is_finite() && s.duration_s >= 4.0 && s.duration_s <= 600.0) {
+        return Err(format!("--duration-s {}: must be in [4, 600] s", s.duration_s).into());
+    }
+    Ok(())
+}
+
+fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+    println!("figures written to {}", path.display());
+    Ok(())
+}
+
+fn save_log(log: &Log, common: &Common) -> Result<()> {
+    if let Some(path) = &common.log {
+        log.save(path)?;
+        println!("log written to {} ({} rows)", path.display(), log.len());
+    }
+    Ok(())
+}
+
+fn save_svg(
+    dir: &Path,
+    name: &str,
+    svg_save: impl FnOnce(&Path) -> std::io::Result<()>,
+) -> Result<()> {
+    let path = dir.join(name);
+    svg_save(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    println!("picture written to {}", path.display());
+    Ok(())
+}
+
+fn poles(json: Option<&Path>) -> Result<()> {
+    let params = PlantParams::PAPER;
+    let mech = params.mechanical_poles();
+    println!(
+        "Mechanical poles of eqs. 5-8 (Tables 2, 4; belt factor 1/2, eq. 6 with (tauBS/tauP)^2):"
+    );
+    println!(
+        "{:>12} {:>12} {:>10} {:>8} {:>7}",
+        "re rad/s", "im rad/s", "|p| rad/s", "Hz", "zeta"
+    );
+    for p in &mech {
+        let w = p.norm();
+        let zeta = if w > 0.0 { -p.re / w } else { f64::NAN };
+        println!(
+            "{:>12.2} {:>12.2} {:>10.2} {:>8.2} {:>7.3}",
+            p.re,
+            p.im,
+            w,
+            w / std::f64::consts::TAU,
+            zeta
+        );
+    }
+    println!(
+        "Paper (section 4.3): 0, -334 rad/s real, pairs at 30.9 rad/s (4.9 Hz) and 131 rad/s (20.9 Hz)."
+    );
+    let em = params.electromechanical_poles();
+    println!(
+        "With the winding (eq. 1) the fast pole is at {:.0} rad/s.",
+        em.last().map_or(f64::NAN, |p| p.norm())
+    );
+    if let Some(path) = json {
+        let poles: Vec<_> = mech
+            .iter()
+            .map(|p| serde_json::json!({"re": p.re, "im": p.im}))
+            .collect();
+        let em: Vec<_> = em
+            .iter()
+            .map(|p| serde_json::json!({"re": p.re, "im": p.im}))
+            .collect();
+        write_json(
+            path,
+            &serde_json::json!({"poles": poles, "electromechanical_poles": em, "unit": "rad/s"}),
+        )?;
+    }
+    Ok(())
+}
+
+fn print_limits(summary: &host_sim::sim::RunSummary) {
+    println!(
+        "  max |current|      {:6.2} A   (limit 20 A; set-point at the limit {:.0} % of position ticks)",
+        summary.max_current_a,
+        100.0 * summary.current_limited_share
+    );
+    println!(
+        "  max |voltage|      {:6.2} V   (limit 24 V; at the limit {:.0} % of current ticks)",
+        summary.max_voltage_v,
+        100.0 * summary.voltage_limited_share
+    );
+    if summary.rejected_references > 0 {
+        println!(
+            "  rejected reference samples: {}",
+            summary.rejected_references
+        );
+    }
+}
+
+fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
+    let cfg = common.config();
+    let (rep, run) = report::sweep(sweep, &cfg)?;
+    println!(
+        "Sine sweep 0-{} Hz in {} s, {} deg at the wheel ({})",
+        sweep.f_end_hz,
+        sweep.duration_s,
+        sweep.amplitude_deg,
+        sensors_label(common)
+    );
+    match rep.bandwidth_hz {
+        Some(bw) => println!(
+            "  -3 dB bandwidth    {bw:6.2} Hz  (paper, suspended: 5 Hz; on the ground: 4.8 Hz)"
+        ),
+        None => println!(
+            "  -3 dB bandwidth    above {} Hz (paper: 5 Hz)",
+            sweep.f_end_hz
+        ),
+    }
+    println!("  RMS error          {:6.2} deg", rep.tracking.rmse);
+    print_limits(&rep.summary);
+    // Small-signal response for comparison: the same loop where no limit is reached.
+    let small = Sweep {
+        amplitude_deg: 1.0,
+        ..*sweep
+    };
+    let (small_rep, _) = report::sweep(&small, &cfg)?;
+    if let Some(bw) = small_rep.bandwidth_hz {
+        println!("  (at 1 deg, below the speed limit: {bw:.2} Hz)");
+    }
+    if let Some(path) = &common.json {
+        let mut v = serde_json::to_value(&rep)?;
+        v["small_signal_bandwidth_hz"] = serde_json::json!(small_rep.bandwidth_hz);
+        v["paper_bandwidth_hz"] = serde_json::json!(5.0);
+        write_json(path, &v)?;
+    }
+    save_log(&run.log, common)?;
+    if let Some(dir) = &common.plots {
+        let bode = bode_plot(sweep, &rep, &small_rep);
+        save_svg(dir, "sweep_bode.svg", |p| bode.save(p))?;
+        let time = time_plot(
+            &format!(
+                "Sine sweep 0-{} Hz, {} deg at the wheel",
+                sweep.f_end_hz, sweep.amplitude_deg
+            ),
+            &run,
+        );
+        save_svg(dir, "sweep_time.svg", |p| time.save(p))?;
+    }
+    Ok(())
+}
+
+fn sensors_label(common: &Common) -> &'static str {
+    if common.ideal_sensors {
+        "exact motor angle fed back"
+    } else {
+        "paper mode: Hall feedback, 12-bit column encoder"
+    }
+}
+
+fn bode_plot(sweep: &Sweep, rep: &SweepReport, small: &SweepReport) -> BodePlot {
+    let main = format!("{} deg", sweep.amplitude_deg);
+    let add = |plot: BodePlot, name: &str, fr: &FrequencyResponse, style: Style| {
+        plot.series_styled(name, &fr.freq_hz, &fr.magnitude_db, &fr.phase_deg, style)
+    };
+    let mut plot = BodePlot::new("Column angle / reference at the wheel (H1 estimate, simulated)");
+    plot = add(plot, &main, &rep.response, Style::new());
+    plot = add(
+        plot,
+        "1 deg (small signal)",
+        &small.response,
+        Style::new().dashed(),
+    );
+    plot = plot.coherence(&main, &rep.response.freq_hz, &rep.response.coherence);
+    if let Some(bw) = rep.bandwidth_hz {
+        plot = plot.bandwidth_of(&main, bw);
+    }
+    if let Some(bw) = small.bandwidth_hz {
+        plot = plot.bandwidth_of("1 deg (small signal)", bw);
+    }
+    plot
+}
+
+fn time_plot(title: &str, run: &Run) -> TimePlot {
+    let log = &run.log;
+    let empty: Vec<f64> = Vec::new();
+    let setpoint = log.extra("current_setpoint_a").unwrap_or(&empty);
+    let voltage = log.extra("voltage_v").unwrap_or(&empty);
+    let error: Vec<f64> = log
+        .sw_deg
+        .iter()
+        .zip(&log.ref_sw_deg)
+        .map(|(y, r)| y - r)
+        .collect();
+    TimePlot::new(title)
+        .panel(
+            Panel::new("steering angle, deg")
+                .series("reference", &log.t, &log.ref_sw_deg)
+                .series("column encoder", &log.t, &log.sw_deg),
+        )
+        .panel(Panel::new("error, deg").series("encoder - reference", &log.t, &error))
+        .panel(
+            Panel::new("motor current, A")
+                .series_styled(
+                    "set-point",
+                    &log.t,
+                    setpoint,
+                    Style::new().color(host_sim::plot::Color::GRAY),
+                )
+                .series("measured", &log.t, &log.current_a)
+                .hline(20.0, "+20 A")
+                .hline(-20.0, "-20 A"),
+        )
+        .panel(
+            Panel::new("voltage, V")
+                .series("motor terminal", &log.t, voltage)
+                .hline(24.0, "+24 V")
+                .hline(-24.0, "-24 V"),
+        )
+        .x_label("time, s")
+}
+
+fn track_cmd(reference: &[f64], name: &str, common: &Common) -> Result<()> {
+    let cfg = common.config();
+    let (rep, run): (TrackReport, Run) = report::track(reference, &cfg)?;
+    println!(
+        "Track run, {} ({:.1} s, {})",
+        name,
+        rep.summary.duration_s,
+        sensors_label(common)
+    );
+    println!(
+        "  RMSE               {:6.2} deg (paper, section 4.4: 3 deg)",
+        rep.rmse_deg
+    );
+    println!(
+        "  max |error|        {:6.2} deg at {:.2} s (paper: 4.5 deg at 89.4 s; 15.7 deg in a burst above 4 Hz)",
+        rep.max_error_deg, rep.max_error_at_s
+    );
+    print_limits(&rep.summary);
+    if let Some(path) = &common.json {
+        write_json(path, &serde_json::to_value(&rep)?)?;
+    }
+    save_log(&run.log, common)?;
+    if let Some(dir) = &common.plots {
+        let plot = time_plot(&format!("Track run: {name}"), &run);
+        save_svg(dir, "track_time.svg", |p| plot.save(p))?;
+    }
+    Ok(())
+}
+
+fn step_cmd(amplitude_deg: f64, duration_s: f64, common: &Common) -> Result<()> {
+    let cfg = common.config();
+    let reference = scenario::step(amplitude_deg, 0.1, duration_s);
+    let (rep, run) = report::step(&reference, amplitude_deg, &cfg)?;
+    println!(
+        "Step of {amplitude_deg} deg at the wheel at 0.1 s ({})",
+        sensors_label(common)
+    );
+    match rep.rise_time_s {
+        Some(t) => println!("  10-90 % rise time  {:6.3} s", t),
+        None => println!("  10-90 % rise time  not reached"),
+    }
+    println!(
+        "  overshoot          {:6.2} deg ({:.1} %)",
+        rep.overshoot_deg, rep.overshoot_pct
+    );
+    println!("  final error        {:6.2} deg", rep.final_error_deg);
+    print_limits(&rep.summary);
+    if let Some(path) = &common.json {
+        write_json(path, &serde_json::to_value(&rep)?)?;
+    }
+    save_log(&run.log, common)?;
+    if let Some(dir) = &common.plots {
+        let plot = time_plot(&format!("Step of {amplitude_deg} deg at the wheel"), &run);
+        save_svg(dir, "step_time.svg", |p| plot.save(p))?;
+    }
+    Ok(())
+}
+
+fn bench(repeats: u32, json: Option<&Path>) -> Result<()> {
+    let reference = scenario::builtin_track();
+    let mut factors = Vec::new();
+    let mut factors_logged = Vec::new();
+    println!("Track run, 120 s at 20 kHz current / 2 kHz position / 100 Hz reference, one thread:");
+    let mut duration = 0.0;
+    for i in 0..repeats {
+        for (log_rate_hz, out) in [(0, &mut factors), (1000, &mut factors_logged)] {
+            let cfg = RunConfig {
+                log_rate_hz,
+                ..RunConfig::default()
+            };
+            let start = Instant::now();
+            let run = host_sim::sim::run(&reference, &cfg)?;
+            let wall = start.elapsed().as_secs_f64();
+            duration = run.summary.duration_s;
+            out.push(duration / wall);
+        }
+        println!(
+            "  run {}/{}: {:.0}x real time (no log), {:.0}x (1 kHz log)",
+            i + 1,
+            repeats,
+            factors[i as usize],
+            factors_logged[i as usize]
+        );
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let rf = median(&mut factors);
+    let rf_logged = median(&mut factors_logged);
+    println!(
+        "  median: {rf:.0}x real time ({:.1} ms per simulated 120 s); with the 1 kHz log {rf_logged:.0}x (target 1000x)",
+        1e3 * duration / rf
+    );
+    if let Some(path) = json {
+        write_json(
+            path,
+            &serde_json::json!({
+                "realtime_factor": rf,
+                "realtime_factor_with_log": rf_logged,
+                "simulated_s": duration,
+                "repeats": repeats,
+            }),
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,337 @@
+//! The references the actuator is run against, as 100 Hz samples at the steering wheel (deg):
+//! the paper's sine sweep (section 4.2), a driverless track run (section 4.4) and a step.
+
+use crate::sim::REFERENCE_RATE_HZ;
+use std::f64::consts::PI;
+use std::path::Path;
+
+/// Linear chirp `A sin(2 pi (f0 t + (f1 - f0) t^2 / (2 T)))`, sampled at 100 Hz over `[0, T]`.
+/// The paper's sweep is 0 -> 10 Hz in 10 s at 10 deg (section 4.2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sweep {
+    pub amplitude_deg: f64,
+    pub f_start_hz: f64,
+    pub f_end_hz: f64,
+    pub duration_s: f64,
+}
+
+impl Sweep {
+    pub const PAPER: Sweep = Sweep {
+        amplitude_deg: 10.0,
+        f_start_hz: 0.0,
+        f_end_hz: 10.0,
+        duration_s: 10.0,
+    };
+
+    pub fn samples(&self) -> Vec<f64> {
+        let n = (self.duration_s * REFERENCE_RATE_HZ).round() as usize + 1;
+        let rate = (self.f_end_hz - self.f_start_hz) / self.duration_s;
+        (0..n)
+            .map(|k| {
+                let t = k as f64 / REFERENCE_RATE_HZ;
+                self.amplitude_deg * (2.0 * PI * (self.f_start_hz * t + 0.5 * rate * t * t)).sin()
+            })
+            .collect()
+    }
+}
+
+/// A step of `amplitude_deg` at `at_s`, held until `duration_s`.
+pub fn step(amplitude_deg: f64, at_s: f64, duration_s: f64) -> Vec<f64> {
+    let n = (duration_s * REFERENCE_RATE_HZ).round() as usize + 1;
+    (0..n)
+        .map(|k| {
+            if k as f64 / REFERENCE_RATE_HZ >= at_s {
+                amplitude_deg
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// A built-in driverless run of about 120 s at 5 km/h, shaped like the paper's MPC output
+/// (Figure 10): straights with small corrections, corners of 20-75 deg at the wheel, a slalom,
+/// a hairpin, a sharp correction near 89 s and a burst of content above 4 Hz near 111 s.
+/// Deterministic: the same samples on every machine.
+pub fn builtin_track() -> Vec<f64> {
+    // (start s, end s, shape)
+    enum Shape {
+        Hold(f64),
+        Ramp(f64, f64),
+        Sine { amp: f64, hz: f64, offset: f64 },
+    }
+    use Shape::*;
+    let segments: &[(f64, f64, Shape)] = &[
+        (0.0, 4.0, Hold(0.0)),
+        (4.0, 6.0, Ramp(0.0, 35.0)),
+        (6.0, 12.0, Hold(35.0)),
+        (12.0, 14.0, Ramp(35.0, 0.0)),
+        (14.0, 20.0, Hold(0.0)),
+        (20.0, 21.5, Ramp(0.0, -50.0)),
+        (21.5, 27.0, Hold(-50.0)),
+        (27.0, 29.0, Ramp(-50.0, 0.0)),
+        (
+            29.0,
+            45.0,
+            Sine {
+                amp: 30.0,
+                hz: 0.25,
+                offset: 0.0,
+            },
+        ),
+        (45.0, 50.0, Hold(0.0)),
+        (50.0, 51.5, Ramp(0.0, 75.0)),
+        (51.5, 57.0, Hold(75.0)),
+        (57.0, 59.0, Ramp(75.0, 10.0)),
+        (59.0, 64.0, Ramp(10.0, -20.0)),
+        (64.0, 70.0, Hold(-20.0)),
+        (70.0, 72.0, Ramp(-20.0, 0.0)),
+        (
+            72.0,
+            86.0,
+            Sine {
+                amp: 40.0,
+                hz: 0.4,
+                offset: 0.0,
+            },
+        ),
+        (86.0, 88.8, Hold(0.0)),
+        (88.8, 89.2, Ramp(0.0, 25.0)),
+        (89.2, 89.6, Ramp(25.0, 5.0)),
+        (89.6, 95.0, Ramp(5.0, -30.0)),
+        (95.0, 100.0, Hold(-30.0)),
+        (100.0, 102.0, Ramp(-30.0, 0.0)),
+        (
+            102.0,
+            110.0,
+            Sine {
+                amp: 15.0,
+                hz: 0.6,
+                offset: 0.0,
+            },
+        ),
+        (
+            110.0,
+            112.0,
+            Sine {
+                amp: 10.0,
+                hz: 4.5,
+                offset: 0.0,
+            },
+        ),
+        (112.0, 115.0, Ramp(0.0, 20.0)),
+        (115.0, 118.0, Ramp(20.0, 0.0)),
+        (118.0, 120.0, Hold(0.0)),
+    ];
+    let n = (120.0 * REFERENCE_RATE_HZ) as usize + 1;
+    // Small, smooth MPC corrections: a deterministic sum of slow sines (0.5 deg).
+    let jitter = |t: f64| 0.3 * (2.0 * PI * 0.9 * t).sin() + 0.2 * (2.0 * PI * 1.7 * t + 1.0).sin();
+    (0..n)
+        .map(|k| {
+            let t = k as f64 / REFERENCE_RATE_HZ;
+            let base = segments
+                .iter()
+                .find(|(a, b, _)| t >= *a && t < *b)
+                .map(|(a, b, shape)| match shape {
+                    Hold(v) => *v,
+                    Ramp(from, to) => {
+                        // cosine ramp: smooth in position and velocity, as a planner outputs
+                        let s = (t - a) / (b - a);
+                        from + (to - from) * 0.5 * (1.0 - (PI * s).cos())
+                    }
+                    Sine { amp, hz, offset } => offset + amp * (2.0 * PI * hz * (t - a)).sin(),
+                })
+                .unwrap_or(0.0);
+            base + jitter(t)
+        })
+        .collect()
+}
+
+/// Why a reference file could not be used.
+#[derive(Debug)]
+pub enum ReferenceFileError {
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    Header {
+        path: String,
+        found: String,
+    },
+    BadLine {
+        path: String,
+        line: usize,
+        text: String,
+    },
+    TimeNotIncreasing {
+        path: String,
+        line: usize,
+    },
+    TooShort {
+        path: String,
+    },
+}
+
+impl std::fmt::Display for ReferenceFileError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReferenceFileError::Io { path, source } => write!(f, "{path}: {source}"),
+            ReferenceFileError::Header { path, found } => write!(
+                f,
+                "{path}: expected a header starting with `t,ref_sw_deg`, found `{found}`"
+            ),
+            ReferenceFileError::BadLine { path, line, text } => {
+                write!(
+                    f,
+                    "{path}:{line}: expected two finite numbers, found `{text}`"
+                )
+            }
+            ReferenceFileError::TimeNotIncreasing { path, line } => {
+                write!(f, "{path}:{line}: time must increase strictly")
+            }
+            ReferenceFileError::TooShort { path } => {
+                write!(f, "{path}: needs at least two samples")
+            }
+        }
+    }
+}
+
+impl std::error::Error for ReferenceFileError {}
+
+/// A track profile from a CSV with columns `t,ref_sw_deg` (any sampling, further columns
+/// ignored, `#` comments skipped; a full project log works too), resampled to 100 Hz by linear
+/// interpolation from `t = 0` (the first sample is held before its time).
+pub fn track_from_csv(path: &Path) -> Result<Vec<f64>, ReferenceFileError> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| ReferenceFileError::Io {
+        path: name.clone(),
+        source,
+    })?;
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
+    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
+    if cols.len() < 2 || cols[0] != "t" || cols[1] != "ref_sw_deg" {
+        return Err(ReferenceFileError::Header {
+            path: name,
+            found: header.to_string(),
+        });
+    }
+    let mut t = Vec::new();
+    let mut r = Vec::new();
+    for (i, line) in lines {
+        let mut fields = line.split(',').map(str::trim);
+        let parse = |s: Option<&str>| {
+            s.and_then(|s| s.parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+        };
+        match (parse(fields.next()), parse(fields.next())) {
+            (Some(ti), Some(ri)) => {
+                if t.last().is_some_and(|&last| ti <= last) {
+                    return Err(ReferenceFileError::TimeNotIncreasing {
+                        path: name,
+                        line: i + 1,
+                    });
+                }
+                t.push(ti);
+                r.push(ri);
+            }
+            _ => {
+                return Err(ReferenceFileError::BadLine {
+                    path: name,
+                    line: i + 1,
+                    text: line.to_string(),
+                });
+            }
+        }
+    }
+    if t.len() < 2 {
+        return Err(ReferenceFileError::TooShort { path: name });
+    }
+    Ok(resample_to_reference_rate(&t, &r))
+}
+
+/// Linear interpolation of `(t, y)` onto the 100 Hz grid from 0 to the last time.
+pub fn resample_to_reference_rate(t: &[f64], y: &[f64]) -> Vec<f64> {
+    let end = t.last().copied().unwrap_or(0.0);
+    let n = (end * REFERENCE_RATE_HZ).floor().max(0.0) as usize + 1;
+    let mut j = 0;
+    (0..n)
+        .map(|k| {
+            let tk = k as f64 / REFERENCE_RATE_HZ;
+            while j + 1 < t.len() && t[j + 1] < tk {
+                j += 1;
+            }
+            if tk <= t[0] {
+                y[0]
+            } else if j + 1 >= t.len() {
+                y[t.len() - 1]
+            } else {
+                let s = (tk - t[j]) / (t[j + 1] - t[j]);
+                y[j] + s * (y[j + 1] - y[j])
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_sweep_has_1001_samples_and_the_right_amplitude() {
+        let s = Sweep::PAPER.samples();
+        assert_eq!(s.len(), 1001);
+        let max = s.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(max > 9.9 && max <= 10.0);
+        assert_eq!(s[0], 0.0);
+    }
+
+    #[test]
+    fn builtin_track_is_120_s_within_the_steering_range() {
+        let tr = builtin_track();
+        assert_eq!(tr.len(), 12_001);
+        assert!(tr.iter().all(|v| v.abs() < 90.0));
+        let burst = &tr[11_000..11_200];
+        let reversals = burst
+            .windows(3)
+            .filter(|w| (w[1] - w[0]) * (w[2] - w[1]) < 0.0)
+            .count();
+        assert!(
+            reversals >= 16,
+            "a burst above 4 Hz near 111 s: {reversals} reversals"
+        );
+    }
+
+    #[test]
+    fn resampling_interpolates_and_holds_the_ends() {
+        let r = resample_to_reference_rate(&[0.005, 0.025], &[0.0, 2.0]);
+        assert_eq!(r.len(), 3);
+        assert_eq!(r[0], 0.0);
+        assert!((r[1] - 0.5).abs() < 1e-12);
+        assert!((r[2] - 1.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn track_csv_errors_name_the_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("bad.csv");
+        std::fs::write(&p, "t,ref_sw_deg\n0,1\n0.01,oops\n").unwrap();
+        let e = track_from_csv(&p).unwrap_err().to_string();
+        assert!(e.contains(":3:") && e.contains("oops"), "{e}");
+        std::fs::write(&p, "time,angle\n0,1\n").unwrap();
+        assert!(matches!(
+            track_from_csv(&p),
+            Err(ReferenceFileError::Header { .. })
+        ));
+        std::fs::write(&p, "t,ref_sw_deg\n0,1\n0,2\n").unwrap();
+        assert!(matches!(
+            track_from_csv(&p),
+            Err(ReferenceFileError::TimeNotIncreasing { line: 3, .. })
+        ));
+        std::fs::write(&p, "# from the MPC\nt,ref_sw_deg,extra\n0,1,9\n0.02,3,9\n").unwrap();
+        assert_eq!(track_from_csv(&p).unwrap(), vec![1.0, 2.0, 3.0]);
+    }
+}

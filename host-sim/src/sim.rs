@@ -1,0 +1,204 @@
+//! The closed loop: the firmware's [`Cascade`] against the simulated actuator, at the
+//! paper-mode rates, with the sensors quantised as on the car (Hall counts, 12-bit column
+//! encoder).
+//!
+//! Timing per reference period (10 ms): the sample arrives at the start of the period and is
+//! pushed first; then 20 position ticks, each followed by 10 current ticks; each current tick
+//! samples the current, computes the voltage and holds it for 50 us (no computation delay is
+//! modelled: the EPOS4 updates its PWM within the period).
+
+use crate::logfmt::{Log, Row};
+use crate::plant::{Actuator, LinearPlant, PlantError, PlantParams};
+use steering_ecu::control::AntiWindup;
+use steering_ecu::control::current::CurrentStatus;
+use steering_ecu::control::position::PositionStatus;
+use steering_ecu::gains::{EposGains, GainError};
+use steering_ecu::gearing::Gearing;
+use steering_ecu::paper_mode::{
+    CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, Cascade, POSITION_LOOP_HZ,
+    POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ,
+};
+use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
+use steering_ecu::units::{Amps, MotorRad, SteeringDeg};
+
+/// Extra log columns a simulated run writes after the five required ones.
+pub const SIM_EXTRA_COLUMNS: [&str; 3] = ["current_setpoint_a", "voltage_v", "setpoint_motor_rad"];
+
+/// Everything a closed-loop run depends on besides the reference.
+#[derive(Debug, Clone)]
+pub struct RunConfig {
+    pub plant: PlantParams,
+    pub gains: EposGains,
+    pub anti_windup: AntiWindup,
+    /// Position feedback from the Hall sensors (paper mode). `false` feeds the loop the exact
+    /// motor angle, to show what the 84-count quantisation costs.
+    pub hall_feedback: bool,
+    /// Log rate, Hz; must divide the 2 kHz position-loop rate. 0 = no log (benchmarks).
+    pub log_rate_hz: u32,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        RunConfig {
+            plant: PlantParams::PAPER,
+            gains: EposGains::PAPER,
+            anti_windup: AntiWindup::ConditionalIntegration,
+            hall_feedback: true,
+            log_rate_hz: 1000,
+        }
+    }
+}
+
+/// Figures every run reports, taken over every current-loop tick (not only logged samples).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct RunSummary {
+    pub duration_s: f64,
+    pub max_current_a: f64,
+    /// When the largest |current| occurred, s.
+    pub max_current_at_s: f64,
+    pub max_voltage_v: f64,
+    /// Share of position ticks with the current set-point at the limit.
+    pub current_limited_share: f64,
+    /// Share of current ticks with the voltage at the limit.
+    pub voltage_limited_share: f64,
+    /// Reference samples the cascade refused (out of range or not finite).
+    pub rejected_references: u32,
+    pub current_ticks: u64,
+}
+
+#[derive(Debug, Clone)]
+pub struct Run {
+    pub log: Log,
+    pub summary: RunSummary,
+}
+
+/// Why a run could not start.
+#[derive(Debug)]
+pub enum SimError {
+    Plant(PlantError),
+    Gains(GainError),
+    LogRate { hz: u32 },
+    EmptyReference,
+}
+
+impl std::fmt::Display for SimError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SimError::Plant(e) => write!(f, "plant: {e}"),
+            SimError::Gains(e) => write!(f, "gains: {e}"),
+            SimError::LogRate { hz } => write!(
+                f,
+                "log rate {hz} Hz does not divide the {POSITION_LOOP_HZ} Hz position loop \
+                 (try 2000, 1000, 500, 200 or 100)"
+            ),
+            SimError::EmptyReference => write!(f, "the reference has no samples"),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+/// Run the closed loop over a reference sampled at 100 Hz (deg at the wheel; sample `n` at
+/// `t = n / 100 s`), starting at rest at the first sample.
+pub fn run(reference_deg: &[f64], cfg: &RunConfig) -> Result<Run, SimError> {
+    let first = *reference_deg.first().ok_or(SimError::EmptyReference)?;
+    let log_every = match cfg.log_rate_hz {
+        0 => None,
+        hz if POSITION_LOOP_HZ.is_multiple_of(hz) => Some(POSITION_LOOP_HZ / hz),
+        hz => return Err(SimError::LogRate { hz }),
+    };
+    let si = cfg.gains.to_si().map_err(SimError::Gains)?;
+    let mut plant =
+        LinearPlant::new(cfg.plant, 1.0 / CURRENT_LOOP_HZ as f64).map_err(SimError::Plant)?;
+    let gearing = Gearing::new(
+        cfg.plant.belt_reduction as f32,
+        cfg.plant.tau_bs as f32,
+        cfg.plant.tau_p as f32,
+    )
+    .ok_or(SimError::Plant(PlantError::BadParameter {
+        name: "gear ratios",
+        value: cfg.plant.motor_per_pinion(),
+    }))?;
+    let mut cascade = Cascade::new(&si, gearing);
+    cascade.set_anti_windup(cfg.anti_windup);
+    cascade.set_winding(cfg.plant.ra as f32, cfg.plant.la as f32);
+    if std::env::var("X_NOGUARD").is_ok() {
+        cascade.set_winding(f32::NAN, 0.0);
+    }
+    let encoder = ColumnEncoder { zero_raw: 0 };
+
+    plant.set_at_rest(first.to_radians());
+    cascade.reset(hall_from_motor(plant.motor_rad()));
+
+    let mut log = match log_every {
+        Some(_) => Log::with_extra_columns(&SIM_EXTRA_COLUMNS),
+        None => Log::default(),
+    };
+    let mut summary = RunSummary::default();
+    let mut current_limited = 0u64;
+    let mut voltage_limited = 0u64;
+    let mut tick: u64 = 0;
+    let dt_position = 1.0 / POSITION_LOOP_HZ as f64;
+
+    for &sample in reference_deg {
+        if cascade.push_reference(SteeringDeg(sample as f32)).is_err() {
+            summary.rejected_references += 1;
+        }
+        for _ in 0..POSITION_TICKS_PER_REFERENCE {
+            let hall = hall_from_motor(plant.motor_rad());
+            let pos = if cfg.hall_feedback {
+                cascade.position_step(hall)
+            } else {
+                cascade.position_step_at(MotorRad(plant.motor_rad() as f32))
+            };
+            if pos.status == PositionStatus::Saturated {
+                current_limited += 1;
+            }
+            let mut voltage = 0.0f64;
+            for _ in 0..CURRENT_TICKS_PER_POSITION_TICK {
+                let out = cascade.current_step(Amps(plant.current_a() as f32));
+                if matches!(
+                    out.status,
+                    CurrentStatus::Saturated | CurrentStatus::CurrentLimited
+                ) {
+                    voltage_limited += 1;
+                }
+                voltage = out.voltage.0 as f64;
+                summary.max_voltage_v = summary.max_voltage_v.max(voltage.abs());
+                plant.step(voltage);
+                if plant.current_a().abs() > summary.max_current_a {
+                    summary.max_current_a = plant.current_a().abs();
+                    summary.max_current_at_s = tick as f64 * dt_position;
+                }
+            }
+            if let Some(every) = log_every
+                && tick.is_multiple_of(every as u64)
+            {
+                let sw = encoder.angle(encoder.raw_from_angle(plant.column_rad()));
+                log.push(
+                    Row {
+                        t: tick as f64 * dt_position,
+                        ref_sw_deg: sample,
+                        sw_deg: (sw.0 as f64).to_degrees(),
+                        motor_rad: motor_from_hall(hall).0 as f64,
+                        current_a: plant.current_a(),
+                    },
+                    &[
+                        cascade.current_setpoint().0 as f64,
+                        voltage,
+                        cascade.setpoint().position.0 as f64,
+                    ],
+                );
+            }
+            tick += 1;
+        }
+    }
+    summary.duration_s = tick as f64 * dt_position;
+    summary.current_ticks = tick * CURRENT_TICKS_PER_POSITION_TICK as u64;
+    summary.current_limited_share = current_limited as f64 / tick.max(1) as f64;
+    summary.voltage_limited_share = voltage_limited as f64 / summary.current_ticks.max(1) as f64;
+    Ok(Run { log, summary })
+}
+
+/// Reference samples per second, for scenario builders.
+pub const REFERENCE_RATE_HZ: f64 = REFERENCE_HZ as f64;

@@ -1,0 +1,24 @@
+//! Hardware-free control core of the steering ECU, shared by the firmware and host-sim.
+//!
+//! Nothing here touches a peripheral: the firmware's tasks and host-sim's simulated ports read
+//! their inputs, call the pure `step` functions below and write the outputs. All arithmetic is
+//! `f32` (the Cortex-M4F has a single-precision FPU), no heap, and no input can make it panic:
+//! every non-finite or out-of-range value has a documented outcome (see each module).
+//!
+//! Map:
+//! - [`units`]: typed angles, currents and voltages; the gear chain wheel <-> motor ([`gearing`]).
+//! - [`sensors`]: Hall counts and the 12-bit column encoder as angles.
+//! - [`gains`]: the EPOS4 gains of the paper's Table 3, converted once to SI.
+//! - [`reference`]: the 100 Hz reference, interpolated with one sample of lag.
+//! - [`control`]: position PID + feedforward, PI current loop, their anti-windup.
+//! - [`paper_mode`]: the cascade at the paper's rates, as the firmware and host-sim both run it.
+#![cfg_attr(not(test), no_std)]
+#![forbid(unsafe_code)]
+
+pub mod control;
+pub mod gains;
+pub mod gearing;
+pub mod paper_mode;
+pub mod reference;
+pub mod sensors;
+pub mod units;
