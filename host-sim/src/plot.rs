@@ -1661,41 +1661,4 @@ mod tests {
         let text = fs::read_to_string(&path).expect("read back");
         assert_well_formed(&text);
     }
-
-    /// Not a test: writes sample pictures to look at into the temp directory,
-    /// `cargo test -p host-sim --lib plot::tests::write_samples -- --ignored`.
-    #[test]
-    #[ignore]
-    fn write_samples() {
-        let dir = std::env::temp_dir().join("host-sim-plot-samples");
-        time_plot(240_000)
-            .save(&dir.join("time.svg"))
-            .expect("save");
-        bode(400).save(&dir.join("bode.svg")).expect("save");
-        let (t, r, mut y, _) = step_response(24_000);
-        for v in &mut y[420..450] {
-            *v = f64::NAN;
-        }
-        TimePlot::new("Zoom with a dropout")
-            .panel(
-                Panel::new("steering wheel (deg)")
-                    .series_styled(
-                        "reference",
-                        &t,
-                        &r,
-                        Style::new().color(Color::BLACK).dashed(),
-                    )
-                    .series_styled("column encoder", &t, &y, Style::new().markers())
-                    .vline(2.0, "step")
-                    .height(260.0),
-            )
-            .x_range(1.5, 2.5)
-            .save(&dir.join("zoom.svg"))
-            .expect("save");
-        bode(60)
-            .x_scale(XScale::Linear)
-            .bandwidth(5.1)
-            .save(&dir.join("bode-linear.svg"))
-            .expect("save");
-    }
 }

@@ -52,7 +52,8 @@ pub fn step(amplitude_deg: f64, at_s: f64, duration_s: f64) -> Vec<f64> {
 /// A built-in driverless run of about 120 s at 5 km/h, shaped like the paper's MPC output
 /// (Figure 10): straights with small corrections, corners of 20-75 deg at the wheel, a slalom,
 /// a hairpin, a sharp correction near 89 s and a burst of content above 4 Hz near 111 s.
-/// Deterministic: the same samples on every machine.
+/// Deterministic: the same samples on every machine. Every sine segment spans whole cycles,
+/// so the profile has no jumps (`builtin_track_has_no_jumps`).
 pub fn builtin_track() -> Vec<f64> {
     // (start s, end s, shape)
     enum Shape {
@@ -91,7 +92,7 @@ pub fn builtin_track() -> Vec<f64> {
             86.0,
             Sine {
                 amp: 40.0,
-                hz: 0.4,
+                hz: 0.5,
                 offset: 0.0,
             },
         ),
@@ -106,7 +107,7 @@ pub fn builtin_track() -> Vec<f64> {
             110.0,
             Sine {
                 amp: 15.0,
-                hz: 0.6,
+                hz: 0.625,
                 offset: 0.0,
             },
         ),
@@ -302,6 +303,26 @@ mod tests {
         assert!(
             reversals >= 16,
             "a burst above 4 Hz near 111 s: {reversals} reversals"
+        );
+    }
+
+    #[test]
+    fn builtin_track_has_no_jumps() {
+        // 100 Hz samples: the fastest intended motion, the 4.5 Hz 10 deg burst, moves at most
+        // 2 pi 4.5 10 / 100 = 2.8 deg per sample.
+        let tr = builtin_track();
+        let worst = tr
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .fold(0.0, f64::max);
+        let at = tr
+            .windows(2)
+            .position(|w| (w[1] - w[0]).abs() == worst)
+            .unwrap_or(0);
+        assert!(
+            worst < 3.0,
+            "largest step between samples {worst} deg at {} s",
+            at as f64 / 100.0
         );
     }
 

@@ -39,6 +39,12 @@ pub struct CurrentOutput {
     pub status: CurrentStatus,
 }
 
+/// How far inside the current limit the guard aims, A. The back-EMF estimate is one period
+/// old; at the motor's full acceleration (about 13 000 rad/s^2 at 20 A) the back-EMF moves
+/// 0.03 V per period, which the 5.7 V/A winding gain turns into 6 mA of overshoot; 50 mA
+/// covers it with room for f32 rounding. Measured without margin: 20.0005 A on an 80 deg step.
+pub const GUARD_MARGIN_A: f32 = 0.05;
+
 /// The motor winding as the current guard models it over one loop period.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -208,8 +214,9 @@ impl CurrentLoop {
         let w = self.winding?;
         let (v0, i0) = self.last?;
         let back_emf = v0 - w.gain * (current - w.decay * i0);
-        let high = back_emf + w.gain * (self.current_limit_a - w.decay * current);
-        let low = back_emf + w.gain * (-self.current_limit_a - w.decay * current);
+        let bound = (self.current_limit_a - GUARD_MARGIN_A).max(0.0);
+        let high = back_emf + w.gain * (bound - w.decay * current);
+        let low = back_emf + w.gain * (-bound - w.decay * current);
         (high.is_finite() && low.is_finite() && low <= high).then_some((low, high))
     }
 }

@@ -1,0 +1,146 @@
+//! The firmware's cascade against the paper's plant: limits, anti-windup, and the figures the
+//! README compares with the paper.
+#![allow(clippy::unwrap_used)] // test helpers: a failed unwrap is a failed test
+
+use host_sim::logfmt::Log;
+use host_sim::report;
+use host_sim::scenario::{self, Sweep};
+use host_sim::sim::{RunConfig, run};
+use steering_ecu::control::AntiWindup;
+
+fn paper() -> RunConfig {
+    RunConfig::default()
+}
+
+#[test]
+fn sweep_never_exceeds_20_a_or_24_v() {
+    let (rep, run) = report::sweep(&Sweep::PAPER, &paper()).unwrap();
+    // Every current-loop tick, not only the logged ones.
+    assert!(
+        rep.max_current_a <= 20.0,
+        "current peaked at {} A",
+        rep.max_current_a
+    );
+    assert!(
+        rep.max_voltage_v <= 24.0,
+        "voltage peaked at {} V",
+        rep.max_voltage_v
+    );
+    // The limits are really reached (the paper saw the current at 20 A), not avoided.
+    assert!(rep.max_current_a > 19.0 && rep.summary.voltage_limited_share > 0.05);
+    let logged = run.log.current_a.iter().fold(0.0f64, |m, i| m.max(i.abs()));
+    assert!(logged <= 20.0);
+    let v = run.log.extra("voltage_v").unwrap();
+    assert!(v.iter().all(|v| v.abs() <= 24.0));
+}
+
+#[test]
+fn track_never_exceeds_20_a_or_24_v_and_tracks_within_the_papers_rmse() {
+    let (rep, _) = report::track(&scenario::builtin_track(), &paper()).unwrap();
+    assert!(rep.max_current_a <= 20.0, "{} A", rep.max_current_a);
+    assert!(rep.max_voltage_v <= 24.0, "{} V", rep.max_voltage_v);
+    // Section 4.4 measured 3 deg RMSE on the car; the model without backlash, friction and
+    // tyre scrub must do at least as well.
+    assert!(rep.rmse_deg < 3.0, "RMSE {} deg", rep.rmse_deg);
+    assert_eq!(rep.summary.rejected_references, 0);
+}
+
+#[test]
+fn large_step_recovers_without_windup_overshoot() {
+    // 80 deg at the wheel is 119 rad at the motor: the current and the voltage saturate for
+    // a quarter of a second. With conditional integration the integrator waits it out.
+    let reference = scenario::step(80.0, 0.1, 1.5);
+    let (held, _) = report::step(&reference, 80.0, &paper()).unwrap();
+    assert!(held.max_current_a > 19.5 && held.max_current_a <= 20.0);
+    assert!(
+        held.summary.voltage_limited_share > 0.1,
+        "the voltage limit is reached"
+    );
+    assert!(held.max_voltage_v <= 24.0);
+    assert!(
+        held.overshoot_pct < 2.0,
+        "overshoot {} %",
+        held.overshoot_pct
+    );
+    assert!(
+        held.final_error_deg.abs() < 0.5,
+        "final error {}",
+        held.final_error_deg
+    );
+
+    // Same step with the integrator left to wind up: the test must be able to tell.
+    let wound = RunConfig {
+        anti_windup: AntiWindup::Disabled,
+        ..paper()
+    };
+    let (free, _) = report::step(&reference, 80.0, &wound).unwrap();
+    assert!(
+        free.overshoot_pct > 10.0,
+        "without anti-windup the step should overshoot, got {} %",
+        free.overshoot_pct
+    );
+}
+
+#[test]
+fn sweep_bandwidth_is_speed_limited_near_the_papers_5_hz() {
+    let (big, _) = report::sweep(&Sweep::PAPER, &paper()).unwrap();
+    let bw = big
+        .bandwidth_hz
+        .expect("the 10 deg sweep falls below -3 dB");
+    // Paper: 5 Hz suspended. At 10 deg the 24 V supply caps the speed near 4.9 Hz
+    // (plant-and-control.md), so a figure much above 7 Hz would be unphysical.
+    assert!(bw > 3.5 && bw < 6.0, "bandwidth {bw} Hz");
+    let small = Sweep {
+        amplitude_deg: 1.0,
+        ..Sweep::PAPER
+    };
+    let (small, _) = report::sweep(&small, &paper()).unwrap();
+    let small_bw = small.bandwidth_hz.unwrap_or(f64::INFINITY);
+    assert!(small_bw > bw + 2.0, "small signal {small_bw} Hz vs {bw} Hz");
+}
+
+#[test]
+fn invalid_reference_samples_are_refused_and_the_position_held() {
+    let mut reference = vec![0.0; 50];
+    reference.extend([f64::NAN, 120.0, f64::INFINITY, -91.0]);
+    reference.extend(vec![5.0; 100]);
+    let r = run(&reference, &paper()).unwrap();
+    assert_eq!(r.summary.rejected_references, 4);
+    assert!(r.summary.max_current_a <= 20.0);
+    let log = &r.log;
+    assert!(log.sw_deg.iter().all(|v| v.is_finite()));
+    // While the bad samples came the actuator stayed at 0 deg (within a few encoder counts).
+    let during = (0.50 * 1000.0) as usize..(0.54 * 1000.0) as usize;
+    assert!(log.sw_deg[during].iter().all(|v| v.abs() < 0.5));
+    // And it follows the good samples afterwards.
+    assert!((log.sw_deg.last().unwrap() - 5.0).abs() < 0.3);
+}
+
+#[test]
+fn simulated_log_round_trips_through_the_log_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = run(&scenario::step(10.0, 0.05, 0.3), &paper()).unwrap();
+    for name in ["run.csv", "run.csv.gz"] {
+        let path = dir.path().join(name);
+        r.log.save(&path).unwrap();
+        let back = Log::load(&path).unwrap();
+        assert_eq!(back.len(), r.log.len());
+        for (a, b) in back.sw_deg.iter().zip(&r.log.sw_deg) {
+            assert!((a - b).abs() < 1e-3);
+        }
+        assert!(back.extra("voltage_v").is_some());
+    }
+}
+
+#[test]
+fn ideal_sensors_change_little_at_10_deg() {
+    // At 10 deg the speed limit, not the Hall quantisation, sets the bandwidth.
+    let ideal = RunConfig {
+        hall_feedback: false,
+        ..paper()
+    };
+    let (a, _) = report::sweep(&Sweep::PAPER, &paper()).unwrap();
+    let (b, _) = report::sweep(&Sweep::PAPER, &ideal).unwrap();
+    let (a, b) = (a.bandwidth_hz.unwrap(), b.bandwidth_hz.unwrap());
+    assert!((a - b).abs() < 0.3, "Hall {a} Hz vs exact {b} Hz");
+}
