@@ -109,6 +109,12 @@ impl Cascade {
         self.current.set_anti_windup(mode);
     }
 
+    /// Voltage limit of the current loop, e.g. the measured battery voltage (default 24 V).
+    /// Non-finite or negative values are ignored.
+    pub fn set_voltage_limit(&mut self, limit: Volts) {
+        self.current.set_voltage_limit(limit);
+    }
+
     /// Anti-windup of the current loop alone (the position loop keeps its own).
     pub fn set_current_anti_windup(&mut self, mode: AntiWindup) {
         self.current.set_anti_windup(mode);

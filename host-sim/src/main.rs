@@ -89,6 +89,9 @@ struct Common {
     /// Feed the position loop the exact motor angle instead of the 84-count Hall angle.
     #[arg(long)]
     ideal_sensors: bool,
+    /// Supply (battery) voltage, the voltage limit of the current loop, V.
+    #[arg(long, default_value_t = 24.0, value_name = "V")]
+    supply_v: f64,
     /// Integrate regardless of saturation (to see what anti-windup prevents).
     #[arg(long)]
     no_anti_windup: bool,
@@ -104,8 +107,28 @@ impl Common {
                 AntiWindup::ConditionalIntegration
             },
             log_rate_hz: self.log_rate_hz,
+            supply_v: self.supply_v,
             ..RunConfig::default()
         }
+    }
+}
+
+/// `println!` that ends the program quietly when stdout is closed (`host-sim ... | head`)
+/// instead of panicking on the broken pipe.
+macro_rules! say {
+    ($($arg:tt)*) => {
+        emit(format_args!($($arg)*))
+    };
+}
+
+fn emit(args: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    if let Err(e) = writeln!(std::io::stdout().lock(), "{args}") {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("host-sim: cannot write to stdout: {e}");
+        std::process::exit(1);
     }
 }
 
@@ -198,14 +221,14 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     }
     let text = serde_json::to_string_pretty(value)?;
     std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
-    println!("figures written to {}", path.display());
+    say!("figures written to {}", path.display());
     Ok(())
 }
 
 fn save_log(log: &Log, common: &Common) -> Result<()> {
     if let Some(path) = &common.log {
         log.save(path)?;
-        println!("log written to {} ({} rows)", path.display(), log.len());
+        say!("log written to {} ({} rows)", path.display(), log.len());
     }
     Ok(())
 }
@@ -217,24 +240,26 @@ fn save_svg(
 ) -> Result<()> {
     let path = dir.join(name);
     svg_save(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-    println!("picture written to {}", path.display());
+    say!("picture written to {}", path.display());
     Ok(())
 }
 
 fn poles(json: Option<&Path>) -> Result<()> {
     let params = PlantParams::PAPER;
     let mech = params.mechanical_poles();
-    println!(
-        "Mechanical poles of eqs. 5-8 (Tables 2, 4; belt factor 1/2, eq. 6 with (tauBS/tauP)^2):"
-    );
-    println!(
+    say!("Mechanical poles of eqs. 5-8 (Tables 2, 4; belt factor 1/2, eq. 6 with (tauBS/tauP)^2):");
+    say!(
         "{:>12} {:>12} {:>10} {:>8} {:>7}",
-        "re rad/s", "im rad/s", "|p| rad/s", "Hz", "zeta"
+        "re rad/s",
+        "im rad/s",
+        "|p| rad/s",
+        "Hz",
+        "zeta"
     );
     for p in &mech {
         let w = p.norm();
         let zeta = if w > 0.0 { -p.re / w } else { f64::NAN };
-        println!(
+        say!(
             "{:>12.2} {:>12.2} {:>10.2} {:>8.2} {:>7.3}",
             p.re,
             p.im,
@@ -243,11 +268,11 @@ fn poles(json: Option<&Path>) -> Result<()> {
             zeta
         );
     }
-    println!(
+    say!(
         "Paper (section 4.3): 0, -334 rad/s real, pairs at 30.9 rad/s (4.9 Hz) and 131 rad/s (20.9 Hz)."
     );
     let em = params.electromechanical_poles();
-    println!(
+    say!(
         "With the winding (eq. 1) the fast pole is at {:.0} rad/s.",
         em.last().map_or(f64::NAN, |p| p.norm())
     );
@@ -268,19 +293,19 @@ fn poles(json: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
-fn print_limits(summary: &host_sim::sim::RunSummary) {
-    println!(
+fn print_limits(summary: &host_sim::sim::RunSummary, supply_v: f64) {
+    say!(
         "  max |current|      {:6.2} A   (limit 20 A; set-point at the limit {:.0} % of position ticks)",
         summary.max_current_a,
         100.0 * summary.current_limited_share
     );
-    println!(
-        "  max |voltage|      {:6.2} V   (limit 24 V; at the limit {:.0} % of current ticks)",
+    say!(
+        "  max |voltage|      {:6.2} V   (limit {supply_v} V; at the limit {:.0} % of current ticks)",
         summary.max_voltage_v,
         100.0 * summary.voltage_limited_share
     );
     if summary.rejected_references > 0 {
-        println!(
+        say!(
             "  rejected reference samples: {}",
             summary.rejected_references
         );
@@ -290,7 +315,7 @@ fn print_limits(summary: &host_sim::sim::RunSummary) {
 fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
     let cfg = common.config();
     let (rep, run) = report::sweep(sweep, &cfg)?;
-    println!(
+    say!(
         "Sine sweep 0-{} Hz in {} s, {} deg at the wheel ({})",
         sweep.f_end_hz,
         sweep.duration_s,
@@ -298,16 +323,16 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
         sensors_label(common)
     );
     match rep.bandwidth_hz {
-        Some(bw) => println!(
+        Some(bw) => say!(
             "  -3 dB bandwidth    {bw:6.2} Hz  (paper, suspended: 5 Hz; on the ground: 4.8 Hz)"
         ),
-        None => println!(
+        None => say!(
             "  -3 dB bandwidth    above {} Hz (paper: 5 Hz)",
             sweep.f_end_hz
         ),
     }
-    println!("  RMS error          {:6.2} deg", rep.tracking.rmse);
-    print_limits(&rep.summary);
+    say!("  RMS error          {:6.2} deg", rep.tracking.rmse);
+    print_limits(&rep.summary, common.supply_v);
     // Small-signal response for comparison: the same loop where no limit is reached.
     let small = Sweep {
         amplitude_deg: 1.0,
@@ -315,7 +340,7 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
     };
     let (small_rep, _) = report::sweep(&small, &cfg)?;
     if let Some(bw) = small_rep.bandwidth_hz {
-        println!("  (at 1 deg, below the speed limit: {bw:.2} Hz)");
+        say!("  (at 1 deg, below the speed limit: {bw:.2} Hz)");
     }
     if let Some(path) = &common.json {
         let mut v = serde_json::to_value(&rep)?;
@@ -333,6 +358,7 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
                 sweep.f_end_hz, sweep.amplitude_deg
             ),
             &run,
+            common.supply_v,
         );
         save_svg(dir, "sweep_time.svg", |p| time.save(p))?;
     }
@@ -370,7 +396,7 @@ fn bode_plot(sweep: &Sweep, rep: &SweepReport, small: &SweepReport) -> BodePlot 
     plot
 }
 
-fn time_plot(title: &str, run: &Run) -> TimePlot {
+fn time_plot(title: &str, run: &Run, supply_v: f64) -> TimePlot {
     let log = &run.log;
     let empty: Vec<f64> = Vec::new();
     let setpoint = log.extra("current_setpoint_a").unwrap_or(&empty);
@@ -403,8 +429,8 @@ fn time_plot(title: &str, run: &Run) -> TimePlot {
         .panel(
             Panel::new("voltage, V")
                 .series("motor terminal", &log.t, voltage)
-                .hline(24.0, "+24 V")
-                .hline(-24.0, "-24 V"),
+                .hline(supply_v, &format!("+{supply_v} V"))
+                .hline(-supply_v, &format!("-{supply_v} V")),
         )
         .x_label("time, s")
 }
@@ -412,27 +438,28 @@ fn time_plot(title: &str, run: &Run) -> TimePlot {
 fn track_cmd(reference: &[f64], name: &str, common: &Common) -> Result<()> {
     let cfg = common.config();
     let (rep, run): (TrackReport, Run) = report::track(reference, &cfg)?;
-    println!(
+    say!(
         "Track run, {} ({:.1} s, {})",
         name,
         rep.summary.duration_s,
         sensors_label(common)
     );
-    println!(
+    say!(
         "  RMSE               {:6.2} deg (paper, section 4.4: 3 deg)",
         rep.rmse_deg
     );
-    println!(
+    say!(
         "  max |error|        {:6.2} deg at {:.2} s (paper: 4.5 deg at 89.4 s; 15.7 deg in a burst above 4 Hz)",
-        rep.max_error_deg, rep.max_error_at_s
+        rep.max_error_deg,
+        rep.max_error_at_s
     );
-    print_limits(&rep.summary);
+    print_limits(&rep.summary, common.supply_v);
     if let Some(path) = &common.json {
         write_json(path, &serde_json::to_value(&rep)?)?;
     }
     save_log(&run.log, common)?;
     if let Some(dir) = &common.plots {
-        let plot = time_plot(&format!("Track run: {name}"), &run);
+        let plot = time_plot(&format!("Track run: {name}"), &run, common.supply_v);
         save_svg(dir, "track_time.svg", |p| plot.save(p))?;
     }
     Ok(())
@@ -442,26 +469,31 @@ fn step_cmd(amplitude_deg: f64, duration_s: f64, common: &Common) -> Result<()> 
     let cfg = common.config();
     let reference = scenario::step(amplitude_deg, 0.1, duration_s);
     let (rep, run) = report::step(&reference, amplitude_deg, &cfg)?;
-    println!(
+    say!(
         "Step of {amplitude_deg} deg at the wheel at 0.1 s ({})",
         sensors_label(common)
     );
     match rep.rise_time_s {
-        Some(t) => println!("  10-90 % rise time  {:6.3} s", t),
-        None => println!("  10-90 % rise time  not reached"),
+        Some(t) => say!("  10-90 % rise time  {:6.3} s", t),
+        None => say!("  10-90 % rise time  not reached"),
     }
-    println!(
+    say!(
         "  overshoot          {:6.2} deg ({:.1} %)",
-        rep.overshoot_deg, rep.overshoot_pct
+        rep.overshoot_deg,
+        rep.overshoot_pct
     );
-    println!("  final error        {:6.2} deg", rep.final_error_deg);
-    print_limits(&rep.summary);
+    say!("  final error        {:6.2} deg", rep.final_error_deg);
+    print_limits(&rep.summary, common.supply_v);
     if let Some(path) = &common.json {
         write_json(path, &serde_json::to_value(&rep)?)?;
     }
     save_log(&run.log, common)?;
     if let Some(dir) = &common.plots {
-        let plot = time_plot(&format!("Step of {amplitude_deg} deg at the wheel"), &run);
+        let plot = time_plot(
+            &format!("Step of {amplitude_deg} deg at the wheel"),
+            &run,
+            common.supply_v,
+        );
         save_svg(dir, "step_time.svg", |p| plot.save(p))?;
     }
     Ok(())
@@ -471,7 +503,7 @@ fn bench(repeats: u32, json: Option<&Path>) -> Result<()> {
     let reference = scenario::builtin_track();
     let mut factors = Vec::new();
     let mut factors_logged = Vec::new();
-    println!("Track run, 120 s at 20 kHz current / 2 kHz position / 100 Hz reference, one thread:");
+    say!("Track run, 120 s at 20 kHz current / 2 kHz position / 100 Hz reference, one thread:");
     let mut duration = 0.0;
     for i in 0..repeats {
         for (log_rate_hz, out) in [(0, &mut factors), (1000, &mut factors_logged)] {
@@ -485,7 +517,7 @@ fn bench(repeats: u32, json: Option<&Path>) -> Result<()> {
             duration = run.summary.duration_s;
             out.push(duration / wall);
         }
-        println!(
+        say!(
             "  run {}/{}: {:.0}x real time (no log), {:.0}x (1 kHz log)",
             i + 1,
             repeats,
@@ -499,7 +531,7 @@ fn bench(repeats: u32, json: Option<&Path>) -> Result<()> {
     };
     let rf = median(&mut factors);
     let rf_logged = median(&mut factors_logged);
-    println!(
+    say!(
         "  median: {rf:.0}x real time ({:.1} ms per simulated 120 s); with the 1 kHz log {rf_logged:.0}x (target 1000x)",
         1e3 * duration / rf
     );

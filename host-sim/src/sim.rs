@@ -19,7 +19,7 @@ use steering_ecu::paper_mode::{
     POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ,
 };
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
-use steering_ecu::units::{Amps, MotorRad, SteeringDeg};
+use steering_ecu::units::{Amps, MotorRad, SteeringDeg, Volts};
 
 /// Extra log columns a simulated run writes after the five required ones.
 pub const SIM_EXTRA_COLUMNS: [&str; 3] = ["current_setpoint_a", "voltage_v", "setpoint_motor_rad"];
@@ -33,6 +33,8 @@ pub struct RunConfig {
     /// Position feedback from the Hall sensors (paper mode). `false` feeds the loop the exact
     /// motor angle, to show what the 84-count quantisation costs.
     pub hall_feedback: bool,
+    /// Supply voltage = the current loop's voltage limit, V (paper: the 24 V LV battery).
+    pub supply_v: f64,
     /// Log rate, Hz; must divide the 2 kHz position-loop rate. 0 = no log (benchmarks).
     pub log_rate_hz: u32,
 }
@@ -44,6 +46,7 @@ impl Default for RunConfig {
             gains: EposGains::PAPER,
             anti_windup: AntiWindup::ConditionalIntegration,
             hall_feedback: true,
+            supply_v: 24.0,
             log_rate_hz: 1000,
         }
     }
@@ -78,6 +81,7 @@ pub enum SimError {
     Plant(PlantError),
     Gains(GainError),
     LogRate { hz: u32 },
+    Supply { volts: f64 },
     EmptyReference,
 }
 
@@ -91,6 +95,9 @@ impl std::fmt::Display for SimError {
                 "log rate {hz} Hz does not divide the {POSITION_LOOP_HZ} Hz position loop \
                  (try 2000, 1000, 500, 200 or 100)"
             ),
+            SimError::Supply { volts } => {
+                write!(f, "supply {volts} V: must be a finite voltage in (0, 60] V")
+            }
             SimError::EmptyReference => write!(f, "the reference has no samples"),
         }
     }
@@ -107,6 +114,11 @@ pub fn run(reference_deg: &[f64], cfg: &RunConfig) -> Result<Run, SimError> {
         hz if POSITION_LOOP_HZ.is_multiple_of(hz) => Some(POSITION_LOOP_HZ / hz),
         hz => return Err(SimError::LogRate { hz }),
     };
+    if !(cfg.supply_v.is_finite() && cfg.supply_v > 0.0 && cfg.supply_v <= 60.0) {
+        return Err(SimError::Supply {
+            volts: cfg.supply_v,
+        });
+    }
     let si = cfg.gains.to_si().map_err(SimError::Gains)?;
     let mut plant =
         LinearPlant::new(cfg.plant, 1.0 / CURRENT_LOOP_HZ as f64).map_err(SimError::Plant)?;
@@ -122,6 +134,7 @@ pub fn run(reference_deg: &[f64], cfg: &RunConfig) -> Result<Run, SimError> {
     let mut cascade = Cascade::new(&si, gearing);
     cascade.set_anti_windup(cfg.anti_windup);
     cascade.set_winding(cfg.plant.ra as f32, cfg.plant.la as f32);
+    cascade.set_voltage_limit(Volts(cfg.supply_v as f32));
     if std::env::var("X_NOGUARD").is_ok() {
         cascade.set_winding(f32::NAN, 0.0);
     }

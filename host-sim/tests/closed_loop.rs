@@ -144,3 +144,23 @@ fn ideal_sensors_change_little_at_10_deg() {
     let (a, b) = (a.bandwidth_hz.unwrap(), b.bandwidth_hz.unwrap());
     assert!((a - b).abs() < 0.3, "Hall {a} Hz vs exact {b} Hz");
 }
+
+#[test]
+fn higher_supply_raises_the_speed_limited_bandwidth() {
+    // At 10 deg the 24 V limit sets the bandwidth; a charged 7S pack (29.4 V) lifts it.
+    let (at_24, _) = report::sweep(&Sweep::PAPER, &paper()).unwrap();
+    let charged = RunConfig {
+        supply_v: 29.4,
+        ..paper()
+    };
+    let (at_29, _) = report::sweep(&Sweep::PAPER, &charged).unwrap();
+    let (a, b) = (at_24.bandwidth_hz.unwrap(), at_29.bandwidth_hz.unwrap());
+    assert!(b > a + 0.3, "24 V: {a} Hz, 29.4 V: {b} Hz");
+    assert!(at_29.max_voltage_v <= 29.4 && at_29.max_voltage_v > 24.0);
+
+    let bad = RunConfig {
+        supply_v: f64::NAN,
+        ..paper()
+    };
+    assert!(run(&Sweep::PAPER.samples(), &bad).is_err());
+}
