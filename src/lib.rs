@@ -15,6 +15,8 @@
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 
+pub mod as_state;
+pub mod can;
 pub mod control;
 pub mod gains;
 pub mod gearing;
