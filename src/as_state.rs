@@ -67,7 +67,12 @@ mod tests {
     fn only_ready_and_driving_power_the_actuator() {
         assert!(AsState::Ready.actuator_may_be_powered());
         assert!(AsState::Driving.actuator_may_be_powered());
-        for s in [AsState::Manual, AsState::Off, AsState::Emergency, AsState::Finished] {
+        for s in [
+            AsState::Manual,
+            AsState::Off,
+            AsState::Emergency,
+            AsState::Finished,
+        ] {
             assert!(!s.actuator_may_be_powered());
         }
     }

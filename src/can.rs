@@ -47,6 +47,11 @@ impl Frame {
         })
     }
 
+    /// A full 8-byte frame: cannot fail, so encoders need no error path.
+    pub const fn from_bytes(id: StandardId, data: [u8; 8]) -> Self {
+        Frame { id, len: 8, data }
+    }
+
     pub fn id(&self) -> StandardId {
         self.id
     }
@@ -73,5 +78,6 @@ mod tests {
         assert_eq!(Frame::new(id, &[1, 2, 3]).unwrap().data(), &[1, 2, 3]);
         assert!(Frame::new(id, &[0; 9]).is_none());
         assert_eq!(Frame::new(id, &[]).unwrap().data(), &[] as &[u8]);
+        assert_eq!(Frame::from_bytes(id, [7; 8]).data(), &[7; 8]);
     }
 }

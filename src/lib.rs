@@ -15,12 +15,21 @@
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 
+pub mod amt20;
 pub mod as_state;
 pub mod can;
+pub mod canopen;
+pub mod commutation;
 pub mod control;
+pub mod ecu;
+pub mod faults;
 pub mod gains;
 pub mod gearing;
 pub mod paper_mode;
+pub mod ports;
+pub mod protocol;
 pub mod reference;
 pub mod sensors;
+pub mod steering;
+pub mod tasks;
 pub mod units;

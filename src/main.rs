@@ -17,10 +17,165 @@ fn main() {
 
 #[cfg(target_os = "none")]
 mod firmware {
+    use core::cell::RefCell;
     use defmt_rtt as _;
     use embassy_executor::Spawner;
-    use embassy_time::{Duration, Ticker};
+    use embassy_futures::select::{Either, select};
+    use embassy_stm32::can::filter::Mask32;
+    use embassy_stm32::can::{
+        self, Can, Fifo, Id, Rx0InterruptHandler, Rx1InterruptHandler, SceInterruptHandler,
+        TxInterruptHandler,
+    };
+    use embassy_stm32::gpio::{Level, Output, Speed};
+    use embassy_stm32::mode::Blocking;
+    use embassy_stm32::peripherals::CAN1;
+    use embassy_stm32::spi::{self, Spi};
+    use embassy_stm32::time::Hertz;
+    use embassy_time::{Duration, Instant, Ticker, Timer};
     use panic_probe as _;
+    use static_cell::StaticCell;
+    use steering_ecu::amt20;
+    use steering_ecu::can::{Frame, StandardId};
+    use steering_ecu::ecu::Ecu;
+    use steering_ecu::ports::{BusError, CanRx, CanTx, ColumnEncoderPort, EncoderError};
+    use steering_ecu::sensors::ColumnEncoder;
+    use steering_ecu::tasks::{self, FrameQueue, Route, RouterCounters, SharedEcu, route_frames};
+
+    /// The ECU's shared state, made once at start-up.
+    static ECU: StaticCell<SharedEcu> = StaticCell::new();
+    /// Raw column-encoder word at straight ahead; set at bring-up (see the README checklist).
+    const COLUMN_ZERO_RAW: u16 = 0;
+    /// AMT20 SPI clock: the datasheet allows up to 1 MHz; 500 kHz leaves margin for the cable
+    /// along the column.
+    const ENCODER_SPI_HZ: u32 = 500_000;
+    /// Chip select released between bytes for at least this long (AMT20 datasheet: 20 us).
+    const ENCODER_BYTE_GAP_US: u64 = 25;
+
+    /// CAN bit rate, bit/s. 1 Mbit/s is the EPOS4's default and what the paper's car ran; the
+    /// bxCAN timing is derived from APB1 at start-up (45 MHz on the F446: 3 x 15 time quanta).
+    const CAN_BITRATE: u32 = 1_000_000;
+    /// How often a silent bus is checked for bus-off, ms. A bus-off controller receives
+    /// nothing, so the check cannot wait for a frame.
+    const BUS_OFF_POLL_MS: u64 = 5;
+
+    embassy_stm32::bind_interrupts!(struct CanIrqs {
+        CAN1_RX0 => Rx0InterruptHandler<CAN1>;
+        CAN1_RX1 => Rx1InterruptHandler<CAN1>;
+        CAN1_SCE => SceInterruptHandler<CAN1>;
+        CAN1_TX => TxInterruptHandler<CAN1>;
+    });
+
+    /// Frames for the reference task (the vehicle computer's frames).
+    static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
+    /// Frames for the EPOS4 link (PDOs, SDO responses, heartbeat, EMCY).
+    static DRIVE_FRAMES: FrameQueue = FrameQueue::new();
+    /// Frames the tasks want on the bus.
+    static TX_FRAMES: FrameQueue = FrameQueue::new();
+
+    /// The bxCAN receive half as the core's [`CanRx`]: standard data frames only (extended
+    /// frames are not part of this bus's protocol and are skipped).
+    struct BxRx<'d>(can::CanRx<'d>);
+
+    impl CanRx for BxRx<'_> {
+        async fn receive(&mut self) -> Result<Frame, BusError> {
+            loop {
+                // Automatic bus-off recovery is off (bxCAN default), so the flag stays set
+                // until the fault is handled: it is a latched fault of the state machine.
+                if embassy_stm32::pac::CAN1.esr().read().boff() {
+                    return Err(BusError::BusOff);
+                }
+                let timeout = Timer::after(Duration::from_millis(BUS_OFF_POLL_MS));
+                match select(self.0.read(), timeout).await {
+                    Either::First(Ok(envelope)) => {
+                        let frame = &envelope.frame;
+                        if let Id::Standard(id) = frame.id() {
+                            let core = StandardId::new(id.as_raw())
+                                .and_then(|id| Frame::new(id, frame.data()));
+                            if let Some(core) = core {
+                                return Ok(core);
+                            }
+                        }
+                    }
+                    Either::First(Err(_)) => return Err(BusError::Other),
+                    Either::Second(()) => {}
+                }
+            }
+        }
+    }
+
+    /// The bxCAN transmit half as the core's [`CanTx`].
+    struct BxTx<'d>(can::CanTx<'d>);
+
+    impl CanTx for BxTx<'_> {
+        async fn transmit(&mut self, frame: &Frame) -> Result<(), BusError> {
+            let hw = can::Frame::new_standard(frame.id().raw(), frame.data())
+                .map_err(|_| BusError::Other)?;
+            self.0.write(&hw).await;
+            Ok(())
+        }
+    }
+
+    /// The AMT20 on SPI1 with a GPIO chip select, one byte per select as the encoder wants.
+    struct Amt20Port<'d> {
+        spi: Spi<'d, Blocking, spi::mode::Master>,
+        cs: Output<'d>,
+    }
+
+    impl ColumnEncoderPort for Amt20Port<'_> {
+        async fn read(&mut self) -> Result<u16, EncoderError> {
+            let mut read = amt20::Read::new();
+            let mut byte = read.first_byte();
+            loop {
+                self.cs.set_low();
+                let mut buf = [byte];
+                let sent = self.spi.blocking_transfer_in_place(&mut buf);
+                self.cs.set_high();
+                sent.map_err(|_| EncoderError::NoResponse)?;
+                Timer::after(Duration::from_micros(ENCODER_BYTE_GAP_US)).await;
+                match read.on_received(buf[0]) {
+                    amt20::Next::Transfer(next) => byte = next,
+                    amt20::Next::Position(raw) => return Ok(raw),
+                    amt20::Next::Failed(e) => return Err(e),
+                }
+            }
+        }
+    }
+
+    #[embassy_executor::task]
+    async fn reference_task(ecu: &'static SharedEcu) {
+        tasks::reference_task(REFERENCE_FRAMES.receiver(), ecu).await
+    }
+
+    #[embassy_executor::task]
+    async fn status_task(ecu: &'static SharedEcu) {
+        tasks::status_task(TX_FRAMES.sender(), ecu).await
+    }
+
+    #[embassy_executor::task]
+    async fn encoder_task(mut port: Amt20Port<'static>, ecu: &'static SharedEcu) {
+        tasks::encoder_task(
+            &mut port,
+            ColumnEncoder {
+                zero_raw: COLUMN_ZERO_RAW,
+            },
+            ecu,
+        )
+        .await
+    }
+
+    /// Reference frames to the reference task, the EPOS4's to the drive link.
+    struct FirmwareRoutes;
+
+    impl Route for FirmwareRoutes {
+        fn route(&self, frame: &Frame) -> Option<usize> {
+            match frame.id().raw() {
+                steering_ecu::tasks::VEHICLE_REFERENCE_ID => Some(0),
+                // EMCY 0x081.., TPDOs 0x181.. 0x4FF, SDO responses 0x581.., heartbeat 0x701..
+                0x081..=0x0FF | 0x181..=0x4FF | 0x581..=0x5FF | 0x701..=0x77F => Some(1),
+                _ => None,
+            }
+        }
+    }
 
     /// Rate of the loop that will run the control step (the later issue hangs CAN and the EPOS4
     /// off it).
@@ -116,6 +271,68 @@ mod firmware {
 
         // The pool holds exactly one heartbeat task, so this fails only if spawned twice.
         spawner.spawn(defmt::unwrap!(heartbeat()));
+
+        // Start-up only: the defaults are valid by construction (tested on the host).
+        let ecu: &'static SharedEcu =
+            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(Ecu::paper()))));
+        spawner.spawn(defmt::unwrap!(reference_task(ecu)));
+        spawner.spawn(defmt::unwrap!(status_task(ecu)));
+
+        // AMT20 on SPI1: PA5 SCK, PA6 MISO, PA7 MOSI (Arduino D13/D12/D11), CS on PB6 (D10).
+        let mut spi_config = spi::Config::default();
+        spi_config.frequency = Hertz(ENCODER_SPI_HZ);
+        let spi = Spi::new_blocking(
+            peripherals.SPI1,
+            peripherals.PA5,
+            peripherals.PA7,
+            peripherals.PA6,
+            spi_config,
+        );
+        let cs = Output::new(peripherals.PB6, Level::High, Speed::VeryHigh);
+        spawner.spawn(defmt::unwrap!(encoder_task(Amt20Port { spi, cs }, ecu)));
+
+        // CAN1 on PA11 (RX) / PA12 (TX): the Nucleo's morpho pins to the transceiver.
+        let mut can = Can::new(
+            peripherals.CAN1,
+            peripherals.PA11,
+            peripherals.PA12,
+            CanIrqs,
+        );
+        can.modify_filters()
+            .enable_bank(0, Fifo::Fifo0, Mask32::accept_all());
+        can.modify_config().set_bitrate(CAN_BITRATE);
+        can.enable().await;
+        defmt::info!("CAN1 up at {=u32} bit/s", CAN_BITRATE);
+
+        // `main` keeps the peripheral alive (dropping `Can` would shut it down) and runs its
+        // two halves for ever.
+        let (tx, rx) = can.split();
+        let mut rx = BxRx(rx);
+        let mut tx = BxTx(tx);
+        let receive = async {
+            let mut counters = RouterCounters::default();
+            let queues = [REFERENCE_FRAMES.sender(), DRIVE_FRAMES.sender()];
+            let end = route_frames(&mut rx, &FirmwareRoutes, &queues, &mut counters).await;
+            defmt::error!("CAN receive stopped: {}", end);
+            let tec = embassy_stm32::pac::CAN1.esr().read().tec();
+            let now = Instant::now().as_micros();
+            ecu.lock(|e| {
+                let _ = e.borrow_mut().on_bus_off(now, tec);
+            });
+        };
+        let transmit = async {
+            loop {
+                let frame = TX_FRAMES.receive().await;
+                if let Err(e) = tx.transmit(&frame).await {
+                    defmt::warn!("CAN transmit failed: {}", e);
+                }
+            }
+        };
+        embassy_futures::join::join(receive, transmit).await;
+        loop {
+            // Bus-off: stay here with the bus down; the state machine has the fault.
+            Timer::after(Duration::from_secs(1)).await;
+        }
     }
 
     /// Ticks at the control rate and logs once per second. The `Ticker` schedules each tick from

@@ -1,6 +1,9 @@
 //! host-sim: the paper's steering actuator (plant of eqs. 1-8) under the firmware's own control
 //! core, with the scenarios, the analysis and the pictures around it.
 pub mod analysis;
+pub mod canbus;
+pub mod epos4_sim;
+pub mod gap;
 pub mod logfmt;
 pub mod plant;
 pub mod plot;

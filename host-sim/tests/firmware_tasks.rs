@@ -1,0 +1,231 @@
+//! The firmware's own tasks (reference receiver, status sender, encoder reader) and its
+//! direct-drive fast loops, running against the simulated actuator in virtual time: the
+//! steering rules, end to end. Own test binary: the mock clock and task pools are global.
+#![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+
+use embassy_executor::{Executor, Spawner};
+use embassy_time::{Duration, MockDriver};
+use host_sim::plant::{Actuator, LinearPlant, PlantParams, state};
+use std::cell::RefCell;
+use std::sync::Mutex as StdMutex;
+use steering_ecu::as_state::AsState;
+use steering_ecu::can::Frame;
+use steering_ecu::ecu::Ecu;
+use steering_ecu::faults::Fault;
+use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
+use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
+use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
+use steering_ecu::steering::{DriveDemand, EcuState};
+use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
+use steering_ecu::units::{Amps, SteeringDeg};
+
+static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
+static TX_FRAMES: FrameQueue = FrameQueue::new();
+/// The column angle the simulated encoder reads, rad (written by the harness each step).
+static COLUMN_RAD: StdMutex<f64> = StdMutex::new(0.0);
+
+struct SimEncoder;
+impl ColumnEncoderPort for SimEncoder {
+    async fn read(&mut self) -> Result<u16, EncoderError> {
+        let rad = COLUMN_RAD.lock().map(|v| *v).unwrap_or(f64::NAN);
+        Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad))
+    }
+}
+
+#[embassy_executor::task]
+async fn reference(ecu: &'static SharedEcu) {
+    tasks::reference_task(REFERENCE_FRAMES.receiver(), ecu).await
+}
+
+#[embassy_executor::task]
+async fn status(ecu: &'static SharedEcu) {
+    tasks::status_task(TX_FRAMES.sender(), ecu).await
+}
+
+#[embassy_executor::task]
+async fn encoder(ecu: &'static SharedEcu) {
+    tasks::encoder_task(&mut SimEncoder, ColumnEncoder { zero_raw: 0 }, ecu).await
+}
+
+#[embassy_executor::task]
+async fn keep_awake() {
+    loop {
+        embassy_futures::yield_now().await;
+    }
+}
+
+/// What the vehicle computer sends in each 10 ms period of the scenario.
+#[derive(Clone, Copy, Debug)]
+enum Send {
+    Ref(AsState, f32),
+    Nothing,
+    CorruptCrc(AsState, f32),
+}
+
+/// One sample of the run, taken every 10 ms just before the vehicle's frame.
+#[derive(Clone, Copy, Debug)]
+struct Sample {
+    t_ms: u64,
+    demand: DriveDemand,
+    state: EcuState,
+    column_deg: f64,
+    current_a: f64,
+    faults: u16,
+}
+
+/// Runs the tasks for `script.len()` periods of 10 ms; `at_period` may act on the ECU (the
+/// clear request, which has no frame yet).
+fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample> {
+    MockDriver::get().reset();
+    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(
+        Ecu::paper().unwrap(),
+    ))));
+    let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
+    let protocol = ProtocolConfig::default();
+    let mut plant = LinearPlant::new(PlantParams::PAPER, 50e-6).unwrap();
+    let mut counter = AliveCounter::wrapping(0);
+    let mut samples = Vec::new();
+    let mut tick: u64 = 0; // 50 us steps
+    let end = script.len() as u64 * 200;
+    let script = script.to_vec();
+    executor.run_until(
+        |spawner: Spawner| {
+            spawner.spawn(reference(ecu).unwrap());
+            spawner.spawn(status(ecu).unwrap());
+            spawner.spawn(encoder(ecu).unwrap());
+            spawner.spawn(keep_awake().unwrap());
+        },
+        || {
+            let now_us = tick * 50;
+            if tick.is_multiple_of(200) {
+                let period = (tick / 200) as usize;
+                let (demand, state, faults) = ecu.lock(|e| {
+                    let mut e = e.borrow_mut();
+                    at_period(period, &mut e, now_us);
+                    let o = e.output();
+                    (o.demand, o.state, o.faults.bits())
+                });
+                samples.push(Sample {
+                    t_ms: now_us / 1000,
+                    demand,
+                    state,
+                    column_deg: plant.column_rad().to_degrees(),
+                    current_a: plant.current_a(),
+                    faults,
+                });
+                let frame = match script.get(period) {
+                    Some(Send::Ref(as_state, deg)) => Some((*as_state, *deg, false)),
+                    Some(Send::CorruptCrc(as_state, deg)) => Some((*as_state, *deg, true)),
+                    _ => None,
+                };
+                if let Some((as_state, deg, corrupt)) = frame {
+                    counter = counter.next();
+                    let f = protocol.encode_reference(&Reference {
+                        angle: SteeringDeg(deg),
+                        as_state,
+                        counter,
+                    });
+                    let f = if corrupt {
+                        let mut bytes = [0u8; 8];
+                        bytes.copy_from_slice(f.data());
+                        bytes[0] ^= 0x5A;
+                        Frame::new(f.id(), &bytes).unwrap()
+                    } else {
+                        f
+                    };
+                    let _ = REFERENCE_FRAMES.try_send(f);
+                }
+                while TX_FRAMES.try_receive().is_ok() {}
+            }
+            // The fast loops, as the firmware's timer interrupts run them.
+            let hall = hall_from_motor(plant.motor_rad());
+            let voltage = ecu.lock(|e| {
+                let mut e = e.borrow_mut();
+                if tick.is_multiple_of(10) {
+                    e.position_tick(hall);
+                }
+                e.current_tick(now_us, Amps(plant.current_a() as f32))
+            });
+            // Bridge off: the winding is left to its back-EMF, the current dies out.
+            let v = match voltage {
+                Some(v) => v.0 as f64,
+                None => PlantParams::PAPER.ke * plant.state()[state::W_ROT],
+            };
+            plant.step(v);
+            if let Ok(mut c) = COLUMN_RAD.lock() {
+                *c = plant.column_rad();
+            }
+            MockDriver::get().advance(Duration::from_micros(50));
+            tick += 1;
+            tick >= end
+        },
+    );
+    samples
+}
+
+#[test]
+fn steering_rules_end_to_end_on_the_firmware_tasks() {
+    // Timeline, 10 ms per entry:
+    //   0-9    AS Off, 0 deg          -> drive disabled
+    //   10-59  AS Ready/Driving 10 deg -> tracking, the column reaches 10 deg
+    //   60-79  nothing                -> hold after 30 ms, disabled + timeout fault after 130 ms
+    //   80-89  AS Driving again       -> still disabled: the fault is latched
+    //   90-99  AS Off                 -> clear request at 95 accepted
+    //   100-129 AS Driving 0 deg      -> tracking again
+    //   130-135 corrupted CRC         -> invalid-frame fault latched, disabled
+    //   136-139 AS Emergency          -> disabled
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Ready, 10.0); 10]);
+    script.extend(vec![Send::Ref(AsState::Driving, 10.0); 40]);
+    script.extend(vec![Send::Nothing; 20]);
+    script.extend(vec![Send::Ref(AsState::Driving, 10.0); 10]);
+    script.extend(vec![Send::Ref(AsState::Off, 10.0); 10]);
+    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 30]);
+    script.extend(vec![Send::CorruptCrc(AsState::Driving, 0.0); 6]);
+    script.extend(vec![Send::Ref(AsState::Emergency, 0.0); 4]);
+    let s = run(&script, |period, ecu, now| {
+        if period == 95 {
+            assert_eq!(ecu.machine_mut().request_clear_faults(now), Ok(()));
+        }
+    });
+    let at = |p: usize| {
+        assert_eq!(s[p].t_ms, p as u64 * 10, "one sample per period");
+        s[p]
+    };
+    assert_eq!(at(5).demand, DriveDemand::Disabled);
+    assert_eq!(at(5).state, EcuState::Idle);
+    assert_eq!(at(30).demand, DriveDemand::Track);
+    assert!(
+        (at(59).column_deg - 10.0).abs() < 0.5,
+        "column {}",
+        at(59).column_deg
+    );
+    // Reference stops after period 59's frame: hold from 30 ms, then disabled and latched.
+    assert_eq!(
+        at(62).demand,
+        DriveDemand::Track,
+        "20 ms without a frame: still tracking"
+    );
+    assert_eq!(at(64).demand, DriveDemand::Hold);
+    assert!((at(70).column_deg - 10.0).abs() < 0.5, "holds the position");
+    assert_eq!(at(75).demand, DriveDemand::Disabled);
+    assert!(at(75).faults & (1 << Fault::ReferenceTimeout.bit()) != 0);
+    assert!(at(79).current_a.abs() < 0.5, "current taken to zero");
+    assert_eq!(
+        at(85).demand,
+        DriveDemand::Disabled,
+        "latched while driving"
+    );
+    assert_eq!(at(85).state, EcuState::Faulted);
+    assert_eq!(at(97).faults, 0, "cleared in AS Off on request");
+    assert_eq!(at(120).demand, DriveDemand::Track);
+    assert!(at(129).column_deg.abs() < 0.5);
+    assert_eq!(
+        at(136).demand,
+        DriveDemand::Disabled,
+        "five bad CRCs in a row"
+    );
+    assert!(at(136).faults & (1 << Fault::InvalidFrames.bit()) != 0);
+    assert_eq!(at(139).demand, DriveDemand::Disabled);
+    assert!(s.iter().all(|x| x.current_a.abs() <= 20.0));
+}

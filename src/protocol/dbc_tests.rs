@@ -1,0 +1,197 @@
+//! The DBC file against the codec: IDs, lengths, and every signal decoded with the DBC's own
+//! start bit, length, byte order, sign, factor and offset gives what the Rust decoder gives.
+
+use super::*;
+use can_dbc::{ByteOrder, Dbc, Message, MessageId, Signal, ValueDescription, ValueType};
+use proptest::prelude::*;
+
+const DBC: &str = include_str!("steering-ecu.dbc");
+
+fn dbc() -> Dbc {
+    Dbc::try_from(DBC).expect("the DBC parses")
+}
+
+fn message<'a>(dbc: &'a Dbc, name: &str) -> &'a Message {
+    dbc.messages
+        .iter()
+        .find(|m| m.name == name)
+        .unwrap_or_else(|| panic!("message {name} in the DBC"))
+}
+
+fn signal<'a>(message: &'a Message, name: &str) -> &'a Signal {
+    message
+        .signals
+        .iter()
+        .find(|s| s.name == name)
+        .unwrap_or_else(|| panic!("signal {name} in {}", message.name))
+}
+
+/// Raw value of `signal` in `data`, as a generic DBC decoder (SavvyCAN, cantools) reads it.
+fn raw(signal: &Signal, data: &[u8]) -> i64 {
+    assert_eq!(
+        signal.byte_order,
+        ByteOrder::LittleEndian,
+        "{} is Intel",
+        signal.name
+    );
+    let word = u64::from_le_bytes(data.try_into().unwrap());
+    let size = signal.size as u32;
+    let bits = (word >> signal.start_bit) & ((1u64 << size) - 1);
+    match signal.value_type {
+        ValueType::Unsigned => bits as i64,
+        ValueType::Signed => ((bits << (64 - size)) as i64) >> (64 - size),
+    }
+}
+
+fn physical(signal: &Signal, data: &[u8]) -> f64 {
+    raw(signal, data) as f64 * signal.factor + signal.offset
+}
+
+#[test]
+fn ids_lengths_and_signal_sets_agree() {
+    let dbc = dbc();
+    let cfg = ProtocolConfig::DEFAULT;
+    let reference = message(&dbc, "SteeringReference");
+    let status = message(&dbc, "SteeringStatus");
+    assert_eq!(reference.id, MessageId::Standard(cfg.reference_id.raw()));
+    assert_eq!(status.id, MessageId::Standard(cfg.status_id.raw()));
+    assert_eq!(reference.size, u64::from(FRAME_LEN));
+    assert_eq!(status.size, u64::from(FRAME_LEN));
+    assert_eq!(dbc.messages.len(), 2);
+
+    for m in [reference, status] {
+        // Signals inside the frame and not overlapping.
+        let mut used = 0u64;
+        for s in &m.signals {
+            assert!(s.start_bit + s.size <= 64, "{}", s.name);
+            let mask = (((1u128 << s.size) - 1) as u64) << s.start_bit;
+            assert_eq!(used & mask, 0, "{} overlaps", s.name);
+            used |= mask;
+        }
+    }
+    let names = |m: &Message| m.signals.iter().map(|s| s.name.clone()).collect::<Vec<_>>();
+    assert_eq!(
+        names(reference),
+        ["REF_Crc", "REF_Counter", "REF_AsState", "REF_SteeringAngle"]
+    );
+    assert_eq!(
+        names(status),
+        [
+            "STA_Crc",
+            "STA_Counter",
+            "STA_MotorCurrent",
+            "STA_SteeringAngle",
+            "STA_EcuState",
+            "STA_Faults"
+        ]
+    );
+}
+
+#[test]
+fn reference_range_and_as_state_table_agree() {
+    let dbc = dbc();
+    let reference = message(&dbc, "SteeringReference");
+    let angle = signal(reference, "REF_SteeringAngle");
+    let max = f64::from(ProtocolConfig::DEFAULT.max_angle.0);
+    assert_eq!(angle.max, can_dbc::NumericValue::Uint(max as u64));
+    assert_eq!(angle.min, can_dbc::NumericValue::Int(-(max as i64)));
+
+    let table = dbc
+        .value_descriptions_for_signal(reference.id, "REF_AsState")
+        .expect("a value table for REF_AsState");
+    let mut codes = 0;
+    for entry in table {
+        let code = u8::try_from(entry.id).unwrap();
+        let state = AsState::from_code(code).expect("a defined AS state");
+        assert_eq!(format!("{state:?}"), entry.description);
+        codes += 1;
+    }
+    assert_eq!(codes, 6, "all six AS states named");
+    assert!(
+        dbc.value_descriptions
+            .iter()
+            .all(|v| matches!(v, ValueDescription::Signal { .. }))
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(5_000))]
+
+    #[test]
+    fn dbc_decodes_reference_frames_as_the_codec_does(
+        raw_angle: i16,
+        code in 0u8..6,
+        counter in 0u8..16,
+    ) {
+        let dbc = dbc_cached();
+        let cfg = ProtocolConfig::DEFAULT;
+        let m = message(dbc, "SteeringReference");
+        let sent = Reference {
+            angle: angle_from_raw(raw_angle),
+            as_state: AsState::from_code(code).unwrap(),
+            counter: AliveCounter::new(counter).unwrap(),
+        };
+        let f = cfg.encode_reference(&sent);
+        let data = f.data();
+        let got = cfg.decode_reference(&f).unwrap();
+
+        prop_assert_eq!(raw(signal(m, "REF_Crc"), data), i64::from(data[0]));
+        prop_assert_eq!(data[0], frame_crc(cfg.reference_id, data.try_into().unwrap()));
+        prop_assert_eq!(raw(signal(m, "REF_Counter"), data), i64::from(got.counter.raw()));
+        prop_assert_eq!(raw(signal(m, "REF_AsState"), data), i64::from(got.as_state.code()));
+        let angle = physical(signal(m, "REF_SteeringAngle"), data);
+        if raw_angle == ANGLE_NOT_AVAILABLE {
+            prop_assert!(got.angle.0.is_nan());
+            prop_assert_eq!(raw(signal(m, "REF_SteeringAngle"), data), i64::from(i16::MIN));
+        } else {
+            // f32 against f64: agree to 1 % of a bit.
+            prop_assert!((angle - f64::from(got.angle.0)).abs() < 1e-4, "{} {:?}", angle, got.angle);
+        }
+    }
+
+    #[test]
+    fn dbc_decodes_status_frames_as_the_codec_does(
+        raw_angle: i16,
+        raw_current in -2048i16..=2047,
+        ecu_state: u8,
+        faults: u16,
+        counter in 0u8..16,
+    ) {
+        let dbc = dbc_cached();
+        let cfg = ProtocolConfig::DEFAULT;
+        let m = message(dbc, "SteeringStatus");
+        let sent = Status {
+            angle: angle_from_raw(raw_angle),
+            current: current_from_raw(raw_current),
+            ecu_state,
+            faults,
+            counter: AliveCounter::new(counter).unwrap(),
+        };
+        let f = cfg.encode_status(&sent);
+        let data = f.data();
+        let got = cfg.decode_status(&f).unwrap();
+
+        prop_assert_eq!(raw(signal(m, "STA_Crc"), data), i64::from(data[0]));
+        prop_assert_eq!(raw(signal(m, "STA_Counter"), data), i64::from(counter));
+        prop_assert_eq!(raw(signal(m, "STA_EcuState"), data), i64::from(ecu_state));
+        prop_assert_eq!(raw(signal(m, "STA_Faults"), data), i64::from(faults));
+        prop_assert_eq!(raw(signal(m, "STA_SteeringAngle"), data), i64::from(raw_angle));
+        prop_assert_eq!(raw(signal(m, "STA_MotorCurrent"), data), i64::from(raw_current));
+        if raw_angle != ANGLE_NOT_AVAILABLE {
+            let angle = physical(signal(m, "STA_SteeringAngle"), data);
+            prop_assert!((angle - f64::from(got.angle.0)).abs() < 1e-4);
+        }
+        if raw_current != CURRENT_NOT_AVAILABLE {
+            let current = physical(signal(m, "STA_MotorCurrent"), data);
+            prop_assert!((current - f64::from(got.current.0)).abs() < 2e-4);
+        }
+        prop_assert_eq!(got.ecu_state, ecu_state);
+        prop_assert_eq!(got.faults, faults);
+    }
+}
+
+/// The DBC parsed once for the property tests (parsing per case would dominate their runtime).
+fn dbc_cached() -> &'static Dbc {
+    static DBC_PARSED: std::sync::OnceLock<Dbc> = std::sync::OnceLock::new();
+    DBC_PARSED.get_or_init(dbc)
+}

@@ -1,0 +1,426 @@
+//! The vehicle-facing CAN protocol: the 100 Hz steering reference from the vehicle computer,
+//! the 100 Hz status frame back, their codec, and the end-to-end (E2E) check every reference
+//! passes before the control core sees it ([`e2e`]).
+//!
+//! IDs, layouts and scaling are also in `src/protocol/steering-ecu.dbc`, for SavvyCAN and
+//! cantools; a host test decodes this codec's frames with that file and compares.
+//!
+//! # Frames
+//!
+//! Classic CAN, 11-bit IDs, 8 data bytes, all signals Intel (little-endian), bit numbers as in
+//! the DBC (bit 0 = LSB of byte 0). IDs are the defaults of [`ProtocolConfig`].
+//!
+//! Reference, `0x100`, vehicle computer -> steering ECU, every 10 ms:
+//!
+//! ```text
+//! byte | bits   | signal             | raw type | scale        | range
+//! -----+--------+--------------------+----------+--------------+--------------------------
+//!  0   |  0..7  | REF_Crc            | u8       | -            | CRC-8/AUTOSAR, see below
+//!  1   |  8..11 | REF_Counter        | u4       | 1            | 0..15, +1 per frame, wraps
+//!  1   | 12..15 | REF_AsState        | u4       | AsState code | 0..5 (Off, Ready, Driving,
+//!      |        |                    |          |              | Emergency, Finished, Manual)
+//!  2-3 | 16..31 | REF_SteeringAngle  | i16      | 0.01 deg/bit | +-327.67 deg; valid +-90 deg
+//!  4-7 | 32..63 | reserved           | -        | -            | sent 0, covered by the CRC,
+//!      |        |                    |          |              | otherwise ignored
+//! ```
+//!
+//! Status, `0x101`, steering ECU -> vehicle computer, every 10 ms:
+//!
+//! ```text
+//! byte | bits   | signal             | raw type | scale        | range
+//! -----+--------+--------------------+----------+--------------+--------------------------
+//!  0   |  0..7  | STA_Crc            | u8       | -            | CRC-8/AUTOSAR, see below
+//!  1   |  8..11 | STA_Counter        | u4       | 1            | 0..15, +1 per frame, wraps
+//!  1-2 | 12..23 | STA_MotorCurrent   | i12      | 0.02 A/bit   | +-40.94 A
+//!  3-4 | 24..39 | STA_SteeringAngle  | i16      | 0.01 deg/bit | +-327.67 deg (column encoder)
+//!  5   | 40..47 | STA_EcuState       | u8       | 1            | the state machine's code
+//!  6-7 | 48..63 | STA_Faults         | u16      | bit field    | the fault register's bits
+//! ```
+//!
+//! The status frame has 68 bits of wish list for 64 bits of frame: the motor current gets 12
+//! bits at 0.02 A/bit (twice the 20 A current limit, 20 mA resolution) so that the ECU state
+//! and the fault bits go out whole. Each angle and current field has one raw value reserved for
+//! "not available": the most negative one (angle `-32768`, current `-2048`). NaN encodes to it
+//! and decodes from it; finite values beyond the range saturate to the largest representable
+//! magnitude, because a saturated reading is still the right sign and the vehicle computer
+//! must see that the wheel is far out.
+//!
+//! # CRC
+//!
+//! CRC-8/AUTOSAR ([`crc`]): poly 0x2F, init 0xFF, not reflected, xorout 0xFF, check value
+//! 0xDF over `"123456789"`. Byte 0 of each frame is the CRC over
+//!
+//! ```text
+//! [ID & 0xFF, ID >> 8, byte 1, byte 2, ..., byte 7]
+//! ```
+//!
+//! i.e. the 11-bit CAN ID as two little-endian bytes (the "data ID", not transmitted), then
+//! payload bytes 1 to 7. Folding the ID in means a frame copied to another ID (a status frame
+//! looped back, a gateway mix-up) fails the CRC even where the ID filter would not catch it.
+//!
+//! # E2E rules for the reference (see [`e2e`])
+//!
+//! In this order; the first rule a frame breaks is the reason it is dropped:
+//!
+//! ```text
+//! rule                                  | on failure (FrameError)         | counts toward fault
+//! --------------------------------------+---------------------------------+--------------------
+//! ID == reference ID                    | WrongId { id }                  | no (other traffic)
+//! DLC == 8 bytes                        | WrongLength { len }             | yes
+//! byte 0 == CRC                         | Crc { expected, found }         | yes
+//! counter != last counter               | Stale { counter }               | yes
+//! counter == last counter + 1 (mod 16)  | Counter { expected, found }     | yes
+//! AS state code in 0..=5                | UnknownAsState { code }         | yes
+//! |angle| <= 90 deg                     | AngleOutOfRange { angle, .. }   | yes
+//! |angle - last accepted| <= budget     | RateTooHigh { step, allowed }   | yes
+//! ```
+//!
+//! "Last counter" is the counter of the last frame that passed the CRC, accepted or not, so
+//! one lost frame costs the next frame too (it is dropped as a jump, and re-synchronises the
+//! counter), and the one after is accepted again. The rate budget is 400 deg/s times the time
+//! since the last accepted reference, at least one 10 ms period: 4.00 deg per sample.
+//! Five invalid frames in a row (configurable) make [`e2e::E2eVerdict::Fault`].
+
+pub mod crc;
+pub mod e2e;
+
+#[cfg(test)]
+mod dbc_tests;
+
+use crate::as_state::AsState;
+use crate::can::{Frame, StandardId};
+use crate::units::{Amps, SteeringDeg};
+
+pub use e2e::{DropCounters, E2eChecker, E2eVerdict};
+
+/// Length of both frames, bytes.
+pub const FRAME_LEN: u8 = 8;
+/// Reference and status period, us (100 Hz, paper section 4.1).
+pub const PERIOD_US: u32 = 10_000;
+/// Steering-angle scale of both frames, deg per bit.
+pub const ANGLE_DEG_PER_BIT: f32 = 0.01;
+/// Motor-current scale of the status frame, A per bit.
+pub const CURRENT_A_PER_BIT: f32 = 0.02;
+/// The inverses, exact in f32 (0.01 and 0.02 are not), so whole degrees give whole raw values.
+const ANGLE_BITS_PER_DEG: f32 = 100.0;
+const CURRENT_BITS_PER_A: f32 = 50.0;
+/// Raw angle meaning "not available" (NaN).
+pub const ANGLE_NOT_AVAILABLE: i16 = i16::MIN;
+/// Raw 12-bit current meaning "not available" (NaN).
+pub const CURRENT_NOT_AVAILABLE: i16 = -2048;
+const CURRENT_RAW_MAX: i16 = 2047;
+
+/// Default reference ID.
+pub const REFERENCE_ID: StandardId = match StandardId::new(0x100) {
+    Some(id) => id,
+    None => panic!("0x100 is an 11-bit ID"), // evaluated at compile time
+};
+/// Default status ID.
+pub const STATUS_ID: StandardId = match StandardId::new(0x101) {
+    Some(id) => id,
+    None => panic!("0x101 is an 11-bit ID"), // evaluated at compile time
+};
+
+/// The 4-bit alive counter of both frames: 0..=15, +1 per frame, 15 is followed by 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AliveCounter(u8);
+
+impl AliveCounter {
+    /// Number of counter values; the counter runs modulo this.
+    pub const MODULUS: u8 = 16;
+
+    /// `None` above 15.
+    pub const fn new(raw: u8) -> Option<Self> {
+        if raw < Self::MODULUS {
+            Some(AliveCounter(raw))
+        } else {
+            None
+        }
+    }
+
+    /// The low four bits of `raw`, as a sender that counts in a wider integer means it.
+    pub const fn wrapping(raw: u8) -> Self {
+        AliveCounter(raw % Self::MODULUS)
+    }
+
+    pub const fn raw(self) -> u8 {
+        self.0
+    }
+
+    /// The counter of the next frame.
+    pub const fn next(self) -> Self {
+        Self::wrapping(self.0.wrapping_add(1))
+    }
+}
+
+/// A steering reference as the vehicle computer sends it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Reference {
+    /// Steering-wheel angle asked for, deg at the wheel.
+    pub angle: SteeringDeg,
+    pub as_state: AsState,
+    pub counter: AliveCounter,
+}
+
+/// What the steering ECU reports back.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Status {
+    /// Measured steering-column angle (column encoder), deg at the wheel; NaN = not available.
+    pub angle: SteeringDeg,
+    /// Measured motor current, A; NaN = not available.
+    pub current: Amps,
+    /// The state machine's state code; carried as is.
+    pub ecu_state: u8,
+    /// The fault bits; carried as is.
+    pub faults: u16,
+    pub counter: AliveCounter,
+}
+
+/// Why a received frame was dropped. The decoders return `WrongId`, `WrongLength`, `Crc` and
+/// `UnknownAsState`; the E2E checker adds the ones that need history or limits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FrameError {
+    /// Not the ID asked for (`id` is the one received).
+    WrongId { id: StandardId },
+    /// DLC other than 8 bytes.
+    WrongLength { len: u8 },
+    /// Byte 0 is not the CRC of the frame: `expected` computed here, `found` in byte 0.
+    Crc { expected: u8, found: u8 },
+    /// The counter did not advance: the sender repeated a frame or stopped updating it.
+    Stale { counter: u8 },
+    /// The counter jumped: `found - expected` frames (mod 16) were lost in between.
+    Counter { expected: u8, found: u8 },
+    /// An AS state code the rules do not define.
+    UnknownAsState { code: u8 },
+    /// Reference beyond the configured steering range (NaN-coded angles included).
+    AngleOutOfRange {
+        angle: SteeringDeg,
+        limit: SteeringDeg,
+    },
+    /// The reference moved `step` since the last accepted one, more than the `allowed` budget.
+    RateTooHigh {
+        step: SteeringDeg,
+        allowed: SteeringDeg,
+    },
+}
+
+/// Why a [`ProtocolConfig`] was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// Reference and status must have different IDs (the CRC folds the ID in, but a receiver
+    /// filtering by ID could not tell them apart).
+    SameIds,
+    /// Steering range not finite, not positive, or beyond the i16 range (327.67 deg).
+    MaxAngle,
+    /// Rate limit not finite, or not positive.
+    MaxRate,
+    /// Zero reference period.
+    Period,
+    /// Zero invalid frames in a row would be a fault before the first frame.
+    MaxInvalidInRow,
+    /// Zero timeout.
+    Timeout,
+}
+
+/// IDs and E2E limits. [`ProtocolConfig::DEFAULT`] is what the DBC describes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ProtocolConfig {
+    pub reference_id: StandardId,
+    pub status_id: StandardId,
+    /// Largest accepted |reference|, deg at the wheel.
+    pub max_angle: SteeringDeg,
+    /// Largest accepted reference rate, deg/s at the wheel.
+    pub max_rate_deg_per_s: f32,
+    /// Nominal reference period, us; the smallest time the rate budget is computed for.
+    pub period_us: u32,
+    /// This many invalid reference frames in a row are a fault.
+    pub max_invalid_in_row: u8,
+    /// No accepted reference for longer than this, us, is a timeout ([`E2eChecker::timed_out`]).
+    pub timeout_us: u32,
+}
+
+impl ProtocolConfig {
+    /// 0x100 / 0x101, +-90 deg, 400 deg/s, 10 ms, 5 in a row, 50 ms.
+    ///
+    /// - +-90 deg: the paper's steering range (section 2, [`crate::paper_mode::STEERING_RANGE_DEG`]).
+    /// - 400 deg/s: the actuator's no-load speed is 24 V / ke = 457 rad/s at the motor, / 85.45
+    ///   (gear chain, Table 2) = 5.35 rad/s = 306 deg/s at the wheel; with a full 7S pack
+    ///   (29.4 V) 375 deg/s. A reference faster than 400 deg/s is one no supply lets the
+    ///   actuator follow, so it is implausible; everything the actuator could follow passes.
+    ///   Per 10 ms sample that is 4.00 deg.
+    /// - 5 in a row, 50 ms: five reference periods, the same tolerance for lost and for bad
+    ///   frames; the interpolator holds the last sample meanwhile.
+    pub const DEFAULT: ProtocolConfig = ProtocolConfig {
+        reference_id: REFERENCE_ID,
+        status_id: STATUS_ID,
+        max_angle: SteeringDeg(crate::paper_mode::STEERING_RANGE_DEG),
+        max_rate_deg_per_s: 400.0,
+        period_us: PERIOD_US,
+        max_invalid_in_row: 5,
+        timeout_us: 5 * PERIOD_US,
+    };
+
+    /// `Ok` when every field is usable; see [`ConfigError`].
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let max_angle_raw = f32::from(i16::MAX) * ANGLE_DEG_PER_BIT;
+        if self.reference_id == self.status_id {
+            Err(ConfigError::SameIds)
+        } else if !(self.max_angle.0 > 0.0 && self.max_angle.0 <= max_angle_raw) {
+            Err(ConfigError::MaxAngle)
+        } else if !(self.max_rate_deg_per_s.is_finite() && self.max_rate_deg_per_s > 0.0) {
+            Err(ConfigError::MaxRate)
+        } else if self.period_us == 0 {
+            Err(ConfigError::Period)
+        } else if self.max_invalid_in_row == 0 {
+            Err(ConfigError::MaxInvalidInRow)
+        } else if self.timeout_us == 0 {
+            Err(ConfigError::Timeout)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// The reference frame for `reference` (vehicle-computer side: host-sim, bench tools).
+    pub fn encode_reference(&self, reference: &Reference) -> Frame {
+        let word = u64::from(reference.counter.raw()) << 8
+            | u64::from(reference.as_state.code() & 0x0F) << 12
+            | u64::from(angle_to_raw(reference.angle) as u16) << 16;
+        frame_with_crc(self.reference_id, word)
+    }
+
+    /// Decodes a reference frame on its own: ID, length, CRC and AS state code. Counter, range
+    /// and rate need history and limits: that is [`E2eChecker::check`], which the control
+    /// core's input must come through.
+    pub fn decode_reference(&self, frame: &Frame) -> Result<Reference, FrameError> {
+        let word = checked_word(self.reference_id, frame)?;
+        let code = field(word, 12, 4) as u8;
+        let as_state = AsState::from_code(code).ok_or(FrameError::UnknownAsState { code })?;
+        Ok(Reference {
+            angle: angle_from_raw(field(word, 16, 16) as u16 as i16),
+            as_state,
+            counter: AliveCounter::wrapping(field(word, 8, 4) as u8),
+        })
+    }
+
+    /// The status frame for `status`.
+    pub fn encode_status(&self, status: &Status) -> Frame {
+        let word = u64::from(status.counter.raw()) << 8
+            | u64::from(current_to_raw(status.current) as u16 & 0x0FFF) << 12
+            | u64::from(angle_to_raw(status.angle) as u16) << 24
+            | u64::from(status.ecu_state) << 40
+            | u64::from(status.faults) << 48;
+        frame_with_crc(self.status_id, word)
+    }
+
+    /// Decodes a status frame (vehicle-computer side, host-sim): ID, length, CRC.
+    pub fn decode_status(&self, frame: &Frame) -> Result<Status, FrameError> {
+        let word = checked_word(self.status_id, frame)?;
+        Ok(Status {
+            angle: angle_from_raw(field(word, 24, 16) as u16 as i16),
+            current: current_from_raw(sign_extend_12(field(word, 12, 12) as u16)),
+            ecu_state: field(word, 40, 8) as u8,
+            faults: field(word, 48, 16) as u16,
+            counter: AliveCounter::wrapping(field(word, 8, 4) as u8),
+        })
+    }
+}
+
+impl Default for ProtocolConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// The CRC byte 0 must carry: CRC-8/AUTOSAR over the ID (2 bytes, little-endian) and payload
+/// bytes 1..=7.
+pub fn frame_crc(id: StandardId, payload: &[u8; 8]) -> u8 {
+    let data_id = id.raw().to_le_bytes();
+    crc::crc8_autosar(data_id.iter().chain(payload.iter().skip(1)))
+}
+
+/// `len` bits of the little-endian frame word from bit `start` (DBC Intel numbering).
+const fn field(word: u64, start: u32, len: u32) -> u64 {
+    (word >> start) & ((1 << len) - 1)
+}
+
+/// The payload as a little-endian word, after the ID, length and CRC checks.
+fn checked_word(id: StandardId, frame: &Frame) -> Result<u64, FrameError> {
+    if frame.id() != id {
+        return Err(FrameError::WrongId { id: frame.id() });
+    }
+    let payload: [u8; 8] = frame
+        .data()
+        .try_into()
+        .map_err(|_| FrameError::WrongLength {
+            // A frame holds at most 8 bytes, so the length fits a u8.
+            len: frame.data().len() as u8,
+        })?;
+    let expected = frame_crc(id, &payload);
+    let [found, ..] = payload;
+    if expected != found {
+        return Err(FrameError::Crc { expected, found });
+    }
+    Ok(u64::from_le_bytes(payload))
+}
+
+fn frame_with_crc(id: StandardId, word_without_crc: u64) -> Frame {
+    let mut payload = (word_without_crc & !0xFF).to_le_bytes();
+    let crc = frame_crc(id, &payload);
+    payload[0] = crc;
+    Frame::from_bytes(id, payload)
+}
+
+/// Rounds half away from zero; `as` saturates, so any finite value lands in range.
+fn round_to_i32(x: f32) -> i32 {
+    (if x >= 0.0 { x + 0.5 } else { x - 0.5 }) as i32
+}
+
+/// NaN -> "not available"; beyond +-327.67 deg -> +-327.67 deg (the reserved raw value stays
+/// reserved).
+fn angle_to_raw(angle: SteeringDeg) -> i16 {
+    if angle.0.is_nan() {
+        return ANGLE_NOT_AVAILABLE;
+    }
+    let raw =
+        round_to_i32(angle.0 * ANGLE_BITS_PER_DEG).clamp(-i32::from(i16::MAX), i32::from(i16::MAX));
+    raw as i16
+}
+
+fn angle_from_raw(raw: i16) -> SteeringDeg {
+    if raw == ANGLE_NOT_AVAILABLE {
+        SteeringDeg(f32::NAN)
+    } else {
+        SteeringDeg(f32::from(raw) * ANGLE_DEG_PER_BIT)
+    }
+}
+
+/// NaN -> "not available"; beyond +-40.94 A -> +-40.94 A.
+fn current_to_raw(current: Amps) -> i16 {
+    if current.0.is_nan() {
+        return CURRENT_NOT_AVAILABLE;
+    }
+    let max = i32::from(CURRENT_RAW_MAX);
+    round_to_i32(current.0 * CURRENT_BITS_PER_A).clamp(-max, max) as i16
+}
+
+fn current_from_raw(raw: i16) -> Amps {
+    if raw == CURRENT_NOT_AVAILABLE {
+        Amps(f32::NAN)
+    } else {
+        Amps(f32::from(raw) * CURRENT_A_PER_BIT)
+    }
+}
+
+/// A 12-bit two's-complement field as an i16.
+const fn sign_extend_12(raw: u16) -> i16 {
+    ((raw << 4) as i16) >> 4
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,208 @@
+//! The firmware's tasks, written against the [`crate::ports`] traits and embassy's time and
+//! channels, so the STM32 and host-sim run the same code. A task reads a port, calls a pure
+//! `step` of the core, writes a port.
+
+use crate::can::Frame;
+use crate::ecu::Ecu;
+use crate::ports::{BusError, CanRx, ColumnEncoderPort, EncoderError};
+use crate::sensors::ColumnEncoder;
+use crate::units::SteeringDeg;
+use core::cell::RefCell;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::{Channel, Receiver, Sender};
+use embassy_time::{Duration, Instant, Ticker, with_timeout};
+
+/// The ECU state shared by the tasks and the fast-loop interrupts: each takes the lock for one
+/// pure method call, so the longest hold is one state-machine step.
+pub type SharedEcu = Mutex<CriticalSectionRawMutex, RefCell<Ecu>>;
+
+/// Reference period, and the status frame's period (protocol::PERIOD_US).
+pub const REFERENCE_PERIOD: Duration = Duration::from_millis(10);
+/// The state machine is ticked at least this often when no frame comes, so a timeout is
+/// seen within 2 ms of its deadline.
+pub const TICK_PERIOD: Duration = Duration::from_millis(2);
+/// Column encoder sampling period (500 Hz).
+pub const ENCODER_PERIOD: Duration = Duration::from_millis(2);
+
+/// Default identifier of the vehicle computer's reference frame (see the DBC).
+pub const VEHICLE_REFERENCE_ID: u16 = 0x100;
+
+/// Frames waiting for one consumer; 8 covers the 2.5 frames per reference period the vehicle
+/// and the EPOS4 send to each consumer with room for a late task.
+pub const QUEUE_DEPTH: usize = 8;
+
+pub type FrameQueue = Channel<CriticalSectionRawMutex, Frame, QUEUE_DEPTH>;
+pub type FrameSender<'a> = Sender<'a, CriticalSectionRawMutex, Frame, QUEUE_DEPTH>;
+pub type FrameReceiver<'a> = Receiver<'a, CriticalSectionRawMutex, Frame, QUEUE_DEPTH>;
+
+fn now_us() -> u64 {
+    Instant::now().as_micros()
+}
+
+/// The 100 Hz reference receiver: every frame through the E2E check into the state machine;
+/// without frames the state machine is still ticked, so the 30 ms timeout is seen on time.
+pub async fn reference_task(frames: FrameReceiver<'_>, ecu: &SharedEcu) -> ! {
+    loop {
+        let received = with_timeout(TICK_PERIOD, frames.receive()).await;
+        let now = now_us();
+        ecu.lock(|e| {
+            let mut e = e.borrow_mut();
+            let _ = match received {
+                Ok(frame) => e.on_reference_frame(now, &frame),
+                Err(_) => e.tick(now),
+            };
+        });
+    }
+}
+
+/// The 100 Hz status sender. A full transmit queue drops this period's frame (the counter
+/// shows the gap to the vehicle computer) rather than delaying the next one.
+pub async fn status_task(tx: FrameSender<'_>, ecu: &SharedEcu) -> ! {
+    let mut ticker = Ticker::every(REFERENCE_PERIOD);
+    loop {
+        ticker.next().await;
+        let frame = ecu.lock(|e| e.borrow_mut().status_frame());
+        let _ = tx.try_send(frame);
+    }
+}
+
+/// The column-encoder reader: every sample to the plausibility checks of the state machine.
+pub async fn encoder_task(
+    port: &mut impl ColumnEncoderPort,
+    zero: ColumnEncoder,
+    ecu: &SharedEcu,
+) -> ! {
+    let mut ticker = Ticker::every(ENCODER_PERIOD);
+    loop {
+        ticker.next().await;
+        let reading = port.read().await;
+        let now = now_us();
+        ecu.lock(|e| {
+            let mut e = e.borrow_mut();
+            let _ = match reading {
+                Ok(raw) => e.on_encoder(now, SteeringDeg::from(zero.angle(raw))),
+                Err(EncoderError::NoResponse) => e.on_encoder_error(now, 1),
+                Err(EncoderError::InvalidReading) => e.on_encoder_error(now, 2),
+            };
+        });
+    }
+}
+
+/// Which consumer a received frame belongs to.
+pub trait Route {
+    /// `Some(i)` for the i-th consumer, `None` to drop the frame (not ours).
+    fn route(&self, frame: &Frame) -> Option<usize>;
+}
+
+/// What the router saw that the state machine must know.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RouterCounters {
+    pub routed: u32,
+    pub unrouted: u32,
+    /// A consumer's queue was full: the frame was dropped (counted, never blocks the bus).
+    pub queue_full: u32,
+    pub bus_errors: u32,
+}
+
+/// Receive frames forever and hand each to its consumer's queue. A full queue drops the frame
+/// (the consumer's own checks notice the gap) rather than stalling reception for everyone.
+/// Returns only when the controller reports bus-off, so the caller latches that fault.
+pub async fn route_frames<R: Route>(
+    rx: &mut impl CanRx,
+    routes: &R,
+    queues: &[FrameSender<'_>],
+    counters: &mut RouterCounters,
+) -> BusError {
+    loop {
+        match rx.receive().await {
+            Ok(frame) => match routes.route(&frame).and_then(|i| queues.get(i)) {
+                Some(queue) => {
+                    if queue.try_send(frame).is_ok() {
+                        counters.routed = counters.routed.saturating_add(1);
+                    } else {
+                        counters.queue_full = counters.queue_full.saturating_add(1);
+                    }
+                }
+                None => counters.unrouted = counters.unrouted.saturating_add(1),
+            },
+            Err(BusError::BusOff) => return BusError::BusOff,
+            Err(_) => counters.bus_errors = counters.bus_errors.saturating_add(1),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::can::StandardId;
+
+    struct Script(std::vec::IntoIter<Result<Frame, BusError>>);
+    impl CanRx for Script {
+        async fn receive(&mut self) -> Result<Frame, BusError> {
+            self.0.next().unwrap_or(Err(BusError::BusOff))
+        }
+    }
+
+    struct ById;
+    impl Route for ById {
+        fn route(&self, frame: &Frame) -> Option<usize> {
+            match frame.id().raw() {
+                0x100 => Some(0),
+                0x181..=0x1FF | 0x701..=0x77F => Some(1),
+                _ => None,
+            }
+        }
+    }
+
+    fn frame(id: u16) -> Frame {
+        Frame::new(StandardId::new(id).unwrap(), &[id as u8]).unwrap()
+    }
+
+    #[test]
+    fn frames_go_to_their_consumer_and_bus_off_ends_routing() {
+        let reference = FrameQueue::new();
+        let drive = FrameQueue::new();
+        let mut rx = Script(
+            vec![
+                Ok(frame(0x100)),
+                Ok(frame(0x181)),
+                Err(BusError::Overrun),
+                Ok(frame(0x555)),
+                Ok(frame(0x701)),
+            ]
+            .into_iter(),
+        );
+        let mut counters = RouterCounters::default();
+        let end = embassy_futures::block_on(route_frames(
+            &mut rx,
+            &ById,
+            &[reference.sender(), drive.sender()],
+            &mut counters,
+        ));
+        assert_eq!(end, BusError::BusOff);
+        assert_eq!(reference.try_receive().map(|f| f.id().raw()), Ok(0x100));
+        assert_eq!(drive.try_receive().map(|f| f.id().raw()), Ok(0x181));
+        assert_eq!(drive.try_receive().map(|f| f.id().raw()), Ok(0x701));
+        assert_eq!(counters.routed, 3);
+        assert_eq!(counters.unrouted, 1);
+        assert_eq!(counters.bus_errors, 1);
+    }
+
+    #[test]
+    fn a_full_queue_drops_and_counts_instead_of_blocking() {
+        let reference = FrameQueue::new();
+        let frames: Vec<_> = (0..QUEUE_DEPTH + 3).map(|_| Ok(frame(0x100))).collect();
+        let mut rx = Script(frames.into_iter());
+        let mut counters = RouterCounters::default();
+        embassy_futures::block_on(route_frames(
+            &mut rx,
+            &ById,
+            &[reference.sender()],
+            &mut counters,
+        ));
+        assert_eq!(counters.routed as usize, QUEUE_DEPTH);
+        assert_eq!(counters.queue_full, 3);
+    }
+}
