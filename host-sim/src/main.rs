@@ -1,8 +1,9 @@
 //! `host-sim`: the paper's steering actuator simulated under the firmware's control code.
 //!
-//! Subcommands: `poles`, `sweep`, `track`, `step`, `bench`. Each prints a readable summary;
-//! `--json PATH` writes its figures, `--log PATH` the run's log (CSV, `.csv.gz` compressed),
-//! `--plots DIR` its pictures (SVG).
+//! Subcommands: `poles`, `sweep`, `track`, `step`, `bench`, `gap` (sim-to-real gap diagnosis
+//! of a log, `gap selftest`, `gap bench`) and `identify` (Table 4 from a log). Each prints a
+//! readable summary; `--json PATH` writes its figures, `--log PATH` the run's log (CSV,
+//! `.csv.gz` compressed), `--plots DIR` its pictures (SVG).
 
 use clap::{Args, Parser, Subcommand};
 use host_sim::analysis::FrequencyResponse;
@@ -70,6 +71,12 @@ enum Command {
         #[arg(long, value_name = "PATH")]
         json: Option<PathBuf>,
     },
+    /// Sim-to-real gap of a log: where it lies, which unmodelled effect causes it, how far it
+    /// shrinks. `gap selftest` checks the diagnosis on logs with a withheld effect; `gap bench`
+    /// times a 120 s log.
+    Gap(host_sim::gap::cli::GapArgs),
+    /// The nine parameters of Table 4 fitted to a log by nonlinear least squares (sec. 4.3).
+    Identify(host_sim::gap::cli::IdentifyArgs),
 }
 
 #[derive(Args, Debug)]
@@ -191,6 +198,8 @@ fn dispatch(command: Command) -> Result<()> {
             step_cmd(amplitude_deg, duration_s, &common)
         }
         Command::Bench { repeats, json } => bench(repeats.max(1), json.as_deref()),
+        Command::Gap(args) => host_sim::gap::cli::gap(&args),
+        Command::Identify(args) => host_sim::gap::cli::identify(&args),
     }
 }
 

@@ -1,1 +1,965 @@
-//! (being written)
+//! Sim-to-real gap diagnosis: where a log departs from the nominal model (frequency band,
+//! operating regime, segment of the chain, signal), which unmodelled effect explains it, and
+//! how far the gap shrinks once that effect is added, checked on a second log.
+//!
+//! Theory of operation:
+//!
+//! ```text
+//!  log --(rig columns, binned to the rig grid)--> Record
+//!  Record.reference --> model + effects (closed loop, paper mode) --> output, effort
+//!  residual = (simulated - measured) / ||measured - mean||, per signal, stacked
+//!  nominal ---------------------------------------> baseline GoF, where (bands, regimes, segment)
+//!  for each candidate effect: LM fit of its 1-2 parameters --> GoF, ranking
+//!  verdict: best effect if it removes enough of the residual above the noise floor;
+//!           then the best pair, if the pair removes enough of what is left
+//! ```
+//!
+//! GoF is the paper's eq. 11 per signal; the combined figure is `1 - sqrt(mean (1 - GoF)^2)`
+//! over the output and the effort, which is what the fits minimise.
+
+pub mod cli;
+pub mod fit;
+pub mod identify;
+pub mod locate;
+pub mod model;
+pub mod plots;
+pub mod rig;
+pub mod selftest;
+
+use fit::{FitOptions, ParamSpec};
+use model::{Effects, SimOut};
+use rig::{Rig, RigModel};
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// A log on the rig's grid: the paper rig's 10 ms reference periods (signals averaged over
+/// each period), or the EMPS samples as they are.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Record {
+    /// Grid step, s.
+    pub dt: f64,
+    /// Reference at the start of each step.
+    pub reference: Vec<f64>,
+    pub output: Vec<f64>,
+    pub effort: Vec<f64>,
+    /// Motor angle in output units through the rigid gearing; for the segment analysis.
+    pub motor: Option<Vec<f64>>,
+    /// A known disturbance added to the effort (EMPS pulses).
+    pub disturbance: Option<Vec<f64>>,
+}
+
+impl Record {
+    /// Samples at any rate onto a grid of step `dt`: the reference interpolated at the start
+    /// of each step, the other signals averaged over it (interpolated where a step holds no
+    /// sample).
+    pub fn from_samples_binned(
+        t: &[f64],
+        reference: &[f64],
+        output: &[f64],
+        effort: &[f64],
+        motor: Option<Vec<f64>>,
+        dt: f64,
+    ) -> Record {
+        let t0 = t.first().copied().unwrap_or(0.0);
+        let end = t.last().copied().unwrap_or(0.0) - t0;
+        let n = ((end / dt).floor() as usize).max(1);
+        let interp = |y: &[f64], tk: f64| -> f64 {
+            let j = t.partition_point(|v| *v < tk);
+            if j == 0 {
+                y[0]
+            } else if j >= t.len() {
+                y[t.len() - 1]
+            } else {
+                let s = (tk - t[j - 1]) / (t[j] - t[j - 1]).max(1e-12);
+                y[j - 1] + s * (y[j] - y[j - 1])
+            }
+        };
+        let bin = |y: &[f64]| -> Vec<f64> {
+            let mut sum = vec![0.0; n];
+            let mut cnt = vec![0usize; n];
+            for (ti, yi) in t.iter().zip(y) {
+                let k = ((ti - t0) / dt).floor();
+                if k >= 0.0 && (k as usize) < n {
+                    sum[k as usize] += yi;
+                    cnt[k as usize] += 1;
+                }
+            }
+            (0..n)
+                .map(|k| {
+                    if cnt[k] > 0 {
+                        sum[k] / cnt[k] as f64
+                    } else {
+                        interp(y, t0 + (k as f64 + 0.5) * dt)
+                    }
+                })
+                .collect()
+        };
+        Record {
+            dt,
+            reference: (0..n)
+                .map(|k| interp(reference, t0 + k as f64 * dt))
+                .collect(),
+            output: bin(output),
+            effort: bin(effort),
+            motor: motor.map(|m| bin(&m)),
+            disturbance: None,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.reference.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.reference.is_empty()
+    }
+
+    pub fn duration_s(&self) -> f64 {
+        self.len() as f64 * self.dt
+    }
+}
+
+/// The candidate effects the diagnosis fits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum EffectKind {
+    Backlash,
+    CoulombFriction,
+    Delay,
+    TireGround,
+    SupplySag,
+}
+
+impl EffectKind {
+    /// The four the issue asks for, in the order they are reported.
+    pub const CORE: [EffectKind; 4] = [
+        EffectKind::Backlash,
+        EffectKind::CoulombFriction,
+        EffectKind::Delay,
+        EffectKind::TireGround,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            EffectKind::Backlash => "backlash",
+            EffectKind::CoulombFriction => "coulomb_friction",
+            EffectKind::Delay => "delay",
+            EffectKind::TireGround => "tire_ground",
+            EffectKind::SupplySag => "supply_sag",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<EffectKind> {
+        [
+            EffectKind::Backlash,
+            EffectKind::CoulombFriction,
+            EffectKind::Delay,
+            EffectKind::TireGround,
+            EffectKind::SupplySag,
+        ]
+        .into_iter()
+        .find(|k| k.name() == name)
+    }
+
+    /// The effects that make sense on a rig.
+    pub fn for_rig(rig: &Rig) -> Vec<EffectKind> {
+        match rig.model {
+            RigModel::Paper(_) => EffectKind::CORE.to_vec(),
+            RigModel::Emps(_) => vec![
+                EffectKind::Backlash,
+                EffectKind::CoulombFriction,
+                EffectKind::Delay,
+                EffectKind::TireGround,
+            ],
+        }
+    }
+
+    /// The fitted parameters, their bounds, start and difference step, in the rig's units.
+    pub fn specs(self, rig: &Rig) -> Vec<ParamSpec> {
+        let paper = matches!(rig.model, RigModel::Paper(_));
+        let spec = |name, lo, hi, start, step| ParamSpec {
+            name,
+            lo,
+            hi,
+            start,
+            step,
+        };
+        match (self, &rig.model) {
+            (EffectKind::Backlash, RigModel::Paper(_)) => {
+                vec![spec("width_deg", 0.0, 4.0, 0.0, 0.1)]
+            }
+            (EffectKind::Backlash, _) => vec![spec("width_m", 0.0, 2e-3, 0.0, 1e-5)],
+            (EffectKind::CoulombFriction, RigModel::Paper(_)) => {
+                vec![spec("torque_nm", 0.0, 0.5, 0.0, 0.01)]
+            }
+            (EffectKind::CoulombFriction, RigModel::Emps(m)) => vec![
+                spec("force_n", 0.0, 100.0, 0.0, 0.5),
+                spec("viscous_ns_per_m", 0.0, 2.0 * m.fv, m.fv, 2.0),
+            ],
+            (EffectKind::Delay, _) => vec![spec(
+                "delay_ms",
+                0.0,
+                if paper { 100.0 } else { 50.0 },
+                0.0,
+                if paper { 2.0 } else { 0.5 },
+            )],
+            (EffectKind::TireGround, RigModel::Paper(_)) => vec![
+                spec("force_n", 0.0, 3000.0, 0.0, 60.0),
+                spec("stiffness_n_per_mm", 50.0, 2000.0, 600.0, 50.0),
+            ],
+            (EffectKind::TireGround, _) => vec![
+                spec("force_n", 0.0, 200.0, 0.0, 1.0),
+                spec("stiffness_n_per_mm", 1.0, 2000.0, 200.0, 10.0),
+            ],
+            (EffectKind::SupplySag, RigModel::Paper(m)) => {
+                vec![spec("supply_v", 8.0, 30.0, m.supply_v, 0.3)]
+            }
+            (EffectKind::SupplySag, _) => vec![],
+        }
+    }
+
+    /// Write fitted parameters into an effect set.
+    pub fn apply(self, p: &[f64], fx: &mut Effects) {
+        let get = |i: usize| p.get(i).copied().unwrap_or(0.0);
+        match self {
+            EffectKind::Backlash => fx.backlash = get(0),
+            EffectKind::CoulombFriction => {
+                fx.coulomb = get(0);
+                if p.len() > 1 {
+                    fx.viscous_override = get(1);
+                }
+            }
+            EffectKind::Delay => fx.delay_s = get(0) * 1e-3,
+            EffectKind::TireGround => {
+                fx.tire_force_n = get(0);
+                fx.tire_stiffness_n_per_mm = get(1);
+            }
+            EffectKind::SupplySag => fx.supply_v = get(0),
+        }
+    }
+}
+
+/// The model of a rig with effects, simulated on a record.
+pub fn simulate(rig: &Rig, rec: &Record, fx: &Effects) -> SimOut {
+    match &rig.model {
+        RigModel::Paper(m) => model::simulate_paper(m, rec, fx),
+        RigModel::Emps(m) => model::simulate_emps(m, rec, fx),
+    }
+}
+
+/// Eq. 11 per signal and combined, on a record against a simulation, from `skip` on.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct Fit {
+    pub gof: f64,
+    pub gof_output: f64,
+    pub gof_effort: f64,
+    pub rms_output: f64,
+    pub rms_effort: f64,
+    /// `100 ||y - ysim|| / ||y||` on the effort (the EMPS benchmark's figure), %.
+    pub effort_rel_error_pct: f64,
+}
+
+/// The normalised, stacked residual that every fit minimises.
+#[derive(Debug, Clone)]
+pub struct Scorer {
+    skip: usize,
+    den_output: f64,
+    den_effort: f64,
+}
+
+fn demeaned_norm(y: &[f64]) -> f64 {
+    let n = y.len().max(1) as f64;
+    let mean = y.iter().sum::<f64>() / n;
+    y.iter()
+        .map(|v| (v - mean).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        .max(1e-12)
+}
+
+impl Scorer {
+    pub fn new(rig: &Rig, rec: &Record) -> Scorer {
+        let skip = ((rig.skip_s / rec.dt).round() as usize).min(rec.len().saturating_sub(2));
+        Scorer {
+            skip,
+            den_output: demeaned_norm(&rec.output[skip..]),
+            den_effort: demeaned_norm(&rec.effort[skip..]),
+        }
+    }
+
+    pub fn skip(&self) -> usize {
+        self.skip
+    }
+
+    pub fn residual(&self, rec: &Record, sim: &SimOut) -> Vec<f64> {
+        let n = rec.len().min(sim.output.len()).min(sim.effort.len());
+        if n <= self.skip {
+            return vec![1e3; 2];
+        }
+        let mut r = Vec::with_capacity(2 * (n - self.skip));
+        for k in self.skip..n {
+            r.push((sim.output[k] - rec.output[k]) / self.den_output);
+        }
+        for k in self.skip..n {
+            r.push((sim.effort[k] - rec.effort[k]) / self.den_effort);
+        }
+        r
+    }
+
+    pub fn fit(&self, rec: &Record, sim: &SimOut) -> Fit {
+        let n = rec.len().min(sim.output.len()).min(sim.effort.len());
+        let s = self.skip.min(n);
+        let sq = |a: &[f64], b: &[f64]| -> f64 {
+            a[s..n]
+                .iter()
+                .zip(&b[s..n])
+                .map(|(x, y)| (x - y).powi(2))
+                .sum::<f64>()
+        };
+        let eo = sq(&sim.output, &rec.output);
+        let ee = sq(&sim.effort, &rec.effort);
+        let go = 1.0 - eo.sqrt() / self.den_output;
+        let ge = 1.0 - ee.sqrt() / self.den_effort;
+        let m = (n - s).max(1) as f64;
+        let effort_norm = rec.effort[s..n]
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt()
+            .max(1e-12);
+        Fit {
+            gof: combined_gof(go, ge),
+            gof_output: go,
+            gof_effort: ge,
+            rms_output: (eo / m).sqrt(),
+            rms_effort: (ee / m).sqrt(),
+            effort_rel_error_pct: 100.0 * ee.sqrt() / effort_norm,
+        }
+    }
+
+    /// The cost floor the measurement noise alone would leave: the white part of each signal,
+    /// estimated from its third differences (a smooth signal has none; white noise of
+    /// variance s^2 gives 20 s^2).
+    pub fn noise_floor_cost(&self, rec: &Record) -> f64 {
+        let floor = |y: &[f64], den: f64| -> f64 {
+            let y = &y[self.skip..];
+            if y.len() < 8 {
+                return 0.0;
+            }
+            let d3: Vec<f64> = y
+                .windows(4)
+                .map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0])
+                .collect();
+            // Median absolute value, robust against the jumps of a track run.
+            let mut a: Vec<f64> = d3.iter().map(|v| v.abs()).collect();
+            a.sort_by(|x, y| x.total_cmp(y));
+            let sigma = a[a.len() / 2] / 0.6745 / 20f64.sqrt();
+            sigma * sigma * y.len() as f64 / (den * den)
+        };
+        floor(&rec.output, self.den_output) + floor(&rec.effort, self.den_effort)
+    }
+}
+
+/// Combined GoF of the output and the effort: `1 - sqrt(((1-go)^2 + (1-ge)^2) / 2)`.
+pub fn combined_gof(go: f64, ge: f64) -> f64 {
+    1.0 - (((1.0 - go).powi(2) + (1.0 - ge).powi(2)) / 2.0).sqrt()
+}
+
+/// One candidate (or pair) after its fit.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Candidate {
+    /// Effect name; a pair is `a+b`.
+    pub effect: String,
+    pub params: BTreeMap<String, f64>,
+    /// Standard error of each parameter.
+    pub std_err: BTreeMap<String, f64>,
+    pub gof: f64,
+    pub gof_validation: Option<f64>,
+    pub fit: Fit,
+    pub fit_validation: Option<Fit>,
+    /// Share of the nominal model's cost this effect removes.
+    pub improvement: f64,
+    /// Every parameter at least two standard errors from zero.
+    pub significant: bool,
+    pub simulations: usize,
+    #[serde(skip)]
+    pub kinds: Vec<EffectKind>,
+    #[serde(skip)]
+    pub values: Vec<f64>,
+    #[serde(skip)]
+    pub cost: f64,
+}
+
+/// The verdict: the effects named, and the GoF with them.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Verdict {
+    pub effects: Vec<String>,
+    pub gof_after: f64,
+    pub gof_validation: Option<f64>,
+    pub fit_after: Fit,
+    pub fit_validation: Option<Fit>,
+    /// Why: the cost left, the noise floor, and the rule that applied.
+    pub reason: String,
+}
+
+/// Everything the diagnosis found.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Diagnosis {
+    pub rig: String,
+    pub duration_s: f64,
+    pub baseline_gof: f64,
+    pub baseline: Fit,
+    pub baseline_validation: Option<Fit>,
+    /// Normalised cost of the nominal model, and the floor the noise alone leaves.
+    pub baseline_cost: f64,
+    pub noise_floor_cost: f64,
+    pub verdict: Verdict,
+    pub ranking: Vec<Candidate>,
+    #[serde(rename = "where")]
+    pub where_: locate::Where,
+    /// Parameters of Table 4 the nominal model started from after `--refit-linear`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refit_linear: Option<identify::Identified>,
+    pub simulations: usize,
+    pub elapsed_s: f64,
+}
+
+/// How to run a diagnosis.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub effects: Vec<EffectKind>,
+    pub fit: FitOptions,
+    /// An effect is named when it removes at least this share of the reducible cost
+    /// (nominal cost minus the noise floor)...
+    pub min_share_of_reducible: f64,
+    /// ...and at least this share of the whole nominal cost.
+    pub min_improvement: f64,
+    /// A second effect is added when the pair removes this share of what the first left.
+    pub min_pair_improvement: f64,
+    pub threads: usize,
+    pub progress: bool,
+    /// Logs longer than this are fitted on their worst window of this length, s (0 = all).
+    pub max_fit_s: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            effects: EffectKind::CORE.to_vec(),
+            fit: FitOptions::default(),
+            min_share_of_reducible: 0.3,
+            min_improvement: 0.15,
+            min_pair_improvement: 0.2,
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            progress: false,
+            max_fit_s: 30.0,
+        }
+    }
+}
+
+/// A small stderr progress bar counting simulations.
+#[derive(Debug)]
+pub struct Progress {
+    done: AtomicUsize,
+    total: AtomicUsize,
+    on: bool,
+}
+
+impl Progress {
+    pub fn new(total: usize, on: bool) -> Progress {
+        Progress {
+            done: AtomicUsize::new(0),
+            total: AtomicUsize::new(total.max(1)),
+            on,
+        }
+    }
+    pub fn add_total(&self, n: usize) {
+        self.total.fetch_add(n, Ordering::Relaxed);
+    }
+    pub fn tick(&self) {
+        let d = self.done.fetch_add(1, Ordering::Relaxed) + 1;
+        if self.on {
+            let t = self.total.load(Ordering::Relaxed).max(d);
+            let w = 30;
+            let f = d * w / t;
+            eprint!(
+                "\rfitting [{}{}] {d}/{t} simulations",
+                "#".repeat(f),
+                " ".repeat(w - f)
+            );
+        }
+    }
+    pub fn finish(&self) {
+        if self.on {
+            eprintln!();
+        }
+    }
+    pub fn done(&self) -> usize {
+        self.done.load(Ordering::Relaxed)
+    }
+}
+
+/// Fit a set of effects together, starting from `start` values (or the specs' starts).
+/// Fitted values, their standard errors, the cost and the number of simulations.
+type FitOut = (Vec<f64>, Vec<f64>, f64, usize);
+
+#[allow(clippy::too_many_arguments)]
+fn fit_effects(
+    rig: &Rig,
+    rec: &Record,
+    scorer: &Scorer,
+    kinds: &[EffectKind],
+    start: Option<&[f64]>,
+    base: &Effects,
+    opts: FitOptions,
+    progress: &Progress,
+) -> FitOut {
+    let mut specs: Vec<ParamSpec> = kinds.iter().flat_map(|k| k.specs(rig)).collect();
+    if let Some(s) = start {
+        for (sp, v) in specs.iter_mut().zip(s) {
+            sp.start = *v;
+        }
+    }
+    let lens: Vec<usize> = kinds.iter().map(|k| k.specs(rig).len()).collect();
+    let residual = |p: &[f64]| -> Vec<f64> {
+        let mut fx = *base;
+        let mut i = 0;
+        for (k, n) in kinds.iter().zip(&lens) {
+            k.apply(&p[i..i + n], &mut fx);
+            i += n;
+        }
+        scorer.residual(rec, &simulate(rig, rec, &fx))
+    };
+    let res = fit::levenberg_marquardt(&specs, opts, &residual, &|| progress.tick());
+    (res.params, res.std_err, res.cost, res.evaluations)
+}
+
+fn cost(r: &[f64]) -> f64 {
+    r.iter().map(|v| v * v).sum()
+}
+
+/// Diagnose `rec` on `rig`; `validation` is checked with the parameters fitted on `rec`.
+pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Options) -> Diagnosis {
+    let started = std::time::Instant::now();
+    let scorer = Scorer::new(rig, rec);
+    let vscorer = validation.map(|v| (v, Scorer::new(rig, v)));
+    let nominal = Effects::nominal();
+    let sim0 = simulate(rig, rec, &nominal);
+    let fit0 = scorer.fit(rec, &sim0);
+    // A long log is fitted on the window where the nominal residual is largest (the figures
+    // are still given on the whole log): the fits then cost the same for any log length.
+    let frec_owned = fit_window(rig, rec, &scorer, &sim0, opts.max_fit_s);
+    let frec = frec_owned.as_ref().unwrap_or(rec);
+    let fscorer_owned = frec_owned.as_ref().map(|w| Scorer::new(rig, w));
+    let fscorer = fscorer_owned.as_ref().unwrap_or(&scorer);
+    let cost0 = match &frec_owned {
+        Some(w) => cost(&fscorer.residual(w, &simulate(rig, w, &nominal))),
+        None => cost(&scorer.residual(rec, &sim0)),
+    };
+    let floor = fscorer.noise_floor_cost(frec);
+    let fit_on_validation = |fx: &Effects| -> Option<Fit> {
+        vscorer
+            .as_ref()
+            .map(|(v, s)| s.fit(v, &simulate(rig, v, fx)))
+    };
+    let per_fit = |np: usize| opts.fit.scan + 1 + opts.fit.iterations * (np + 2);
+    let progress = Progress::new(
+        opts.effects
+            .iter()
+            .map(|k| per_fit(k.specs(rig).len()))
+            .sum::<usize>()
+            + per_fit(3),
+        opts.progress,
+    );
+
+    // Each candidate on its own, in parallel.
+    let mut ranking: Vec<Candidate> = Vec::new();
+    let jobs: Vec<EffectKind> = opts.effects.clone();
+    let threads = opts.threads.max(1);
+    let results: Vec<(EffectKind, FitOut)> = std::thread::scope(|s| {
+        let mut out = Vec::new();
+        for chunk in jobs.chunks(jobs.len().div_ceil(threads).max(1)) {
+            let handle = s.spawn(|| {
+                chunk
+                    .iter()
+                    .map(|&k| {
+                        (
+                            k,
+                            fit_effects(
+                                rig,
+                                frec,
+                                fscorer,
+                                &[k],
+                                None,
+                                &nominal,
+                                opts.fit,
+                                &progress,
+                            ),
+                        )
+                    })
+                    .collect::<Vec<_>>()
+            });
+            out.push(handle);
+        }
+        out.into_iter()
+            .flat_map(|h| h.join().unwrap_or_default())
+            .collect()
+    });
+    for (k, (values, errs, c, evals)) in results {
+        ranking.push(make_candidate(
+            rig,
+            rec,
+            &scorer,
+            &[k],
+            values,
+            errs,
+            c,
+            evals,
+            cost0,
+            &fit_on_validation,
+        ));
+    }
+    ranking.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+
+    // The verdict.
+    let reducible = (cost0 - floor).max(0.0);
+    let named = |c: &Candidate, reference_cost: f64, share: f64| -> bool {
+        let gain = reference_cost - c.cost;
+        gain > opts.min_share_of_reducible * reducible.max(1e-12) && gain > share * reference_cost
+    };
+    let mut verdict_candidate: Option<Candidate> = None;
+    let mut reason;
+    if let Some(best) = ranking
+        .first()
+        .filter(|c| named(c, cost0, opts.min_improvement))
+    {
+        reason = format!(
+            "{} removes {:.0} % of the nominal cost ({:.3} of {:.3}; noise floor {:.3})",
+            best.effect,
+            100.0 * best.improvement,
+            cost0 - best.cost,
+            cost0,
+            floor
+        );
+        let mut chosen = best.clone();
+        // A second effect: every other candidate fitted on top of the best one, jointly
+        // (the new effect first, so the scan runs over its leading parameter).
+        let others: Vec<Candidate> = ranking.iter().skip(1).cloned().collect();
+        let pair_fits: Vec<Candidate> = std::thread::scope(|s| {
+            let handles: Vec<_> = others
+                .iter()
+                .map(|other| {
+                    let (best, scorer, progress, fov) =
+                        (&best, &scorer, &progress, &fit_on_validation);
+                    s.spawn(move || {
+                        let kinds = [other.kinds[0], best.kinds[0]];
+                        let n_other = other.kinds[0].specs(rig).len();
+                        let start: Vec<f64> = other.kinds[0]
+                            .specs(rig)
+                            .iter()
+                            .map(|sp| sp.start)
+                            .chain(best.values.iter().copied())
+                            .collect();
+                        let _ = n_other;
+                        let (values, errs, c, evals) = fit_effects(
+                            rig,
+                            frec,
+                            fscorer,
+                            &kinds,
+                            Some(&start),
+                            &nominal,
+                            opts.fit,
+                            progress,
+                        );
+                        make_candidate(rig, rec, scorer, &kinds, values, errs, c, evals, cost0, fov)
+                    })
+                })
+                .collect();
+            handles.into_iter().filter_map(|h| h.join().ok()).collect()
+        });
+        let mut best_pair: Option<Candidate> = None;
+        for cand in pair_fits {
+            if best_pair.as_ref().is_none_or(|b| cand.cost < b.cost) {
+                best_pair = Some(cand);
+            }
+        }
+        if let Some(pair) = best_pair {
+            let gain = best.cost - pair.cost;
+            // The pair must remove a share of what the best left, a share of what is above
+            // the noise floor, and more than most of the noise floor's own worth: otherwise
+            // the second effect is fitting the noise (or the first fit's own error).
+            if gain > opts.min_pair_improvement * best.cost
+                && gain > opts.min_share_of_reducible * (best.cost - floor).max(0.0)
+                && gain > 0.7 * floor
+                && (pair.significant || gain > 1.5 * floor)
+            {
+                reason.push_str(&format!(
+                    "; adding {} removes {:.0} % of what was left",
+                    pair.effect.split('+').next().unwrap_or(""),
+                    100.0 * gain / best.cost
+                ));
+                chosen = pair.clone();
+            } else {
+                reason.push_str(&format!(
+                    "; the best pair {} removes only {:.0} % of what was left",
+                    pair.effect,
+                    100.0 * gain / best.cost
+                ));
+            }
+            ranking.push(pair);
+        }
+        verdict_candidate = Some(chosen);
+    } else {
+        reason = format!(
+            "no effect removes enough of the nominal cost {:.3} (noise floor {:.3}; best {})",
+            cost0,
+            floor,
+            ranking
+                .first()
+                .map(|c| format!("{} {:.0} %", c.effect, 100.0 * c.improvement))
+                .unwrap_or_default()
+        );
+    }
+    progress.finish();
+    let base_validation = fit_on_validation(&nominal);
+    let verdict = match &verdict_candidate {
+        Some(c) => Verdict {
+            effects: c.kinds.iter().map(|k| k.name().to_string()).collect(),
+            gof_after: c.gof,
+            gof_validation: c.gof_validation,
+            fit_after: c.fit,
+            fit_validation: c.fit_validation,
+            reason,
+        },
+        None => Verdict {
+            effects: vec![],
+            gof_after: fit0.gof,
+            gof_validation: base_validation.map(|f| f.gof),
+            fit_after: fit0,
+            fit_validation: base_validation,
+            reason,
+        },
+    };
+    let after_fx = verdict_candidate
+        .as_ref()
+        .map_or(nominal, |c| c.effects_on(rig));
+    let sim_after = simulate(rig, rec, &after_fx);
+    let where_ = locate::locate(rig, rec, &scorer, &sim0, &sim_after);
+    Diagnosis {
+        rig: rig.name.clone(),
+        duration_s: rec.duration_s(),
+        baseline_gof: fit0.gof,
+        baseline: fit0,
+        baseline_validation: base_validation,
+        baseline_cost: cost0,
+        noise_floor_cost: floor,
+        verdict,
+        ranking,
+        where_,
+        refit_linear: None,
+        simulations: progress.done() + 2,
+        elapsed_s: started.elapsed().as_secs_f64(),
+    }
+}
+
+impl Candidate {
+    /// The effect set of this candidate on a rig (the parameter count depends on the rig).
+    pub fn effects_on(&self, rig: &Rig) -> Effects {
+        let mut fx = Effects::nominal();
+        let mut i = 0;
+        for k in &self.kinds {
+            let n = k.specs(rig).len();
+            k.apply(&self.values[i..i + n], &mut fx);
+            i += n;
+        }
+        fx
+    }
+}
+
+/// The window of `max_s` with the largest nominal residual, as its own record; `None` when
+/// the log is not longer than that.
+fn fit_window(
+    rig: &Rig,
+    rec: &Record,
+    scorer: &Scorer,
+    sim0: &SimOut,
+    max_s: f64,
+) -> Option<Record> {
+    if max_s <= 0.0 || rec.duration_s() <= max_s * 1.2 {
+        return None;
+    }
+    let w = (max_s / rec.dt) as usize;
+    let r = scorer.residual(rec, sim0);
+    let half = r.len() / 2;
+    let skip = scorer.skip();
+    let e: Vec<f64> = (0..half)
+        .map(|k| r[k] * r[k] + r[half + k] * r[half + k])
+        .collect();
+    let mut csum = vec![0.0; e.len() + 1];
+    for k in 0..e.len() {
+        csum[k + 1] = csum[k] + e[k];
+    }
+    let stride = ((1.0 / rec.dt) as usize).max(1);
+    let mut best = (0usize, f64::MIN);
+    let mut k = 0;
+    while k + w <= e.len() {
+        let v = csum[k + w] - csum[k];
+        if v > best.1 {
+            best = (k, v);
+        }
+        k += stride;
+    }
+    let (a, b) = (best.0 + skip, (best.0 + skip + w).min(rec.len()));
+    let _ = rig;
+    Some(Record {
+        dt: rec.dt,
+        reference: rec.reference[a..b].to_vec(),
+        output: rec.output[a..b].to_vec(),
+        effort: rec.effort[a..b].to_vec(),
+        motor: rec.motor.as_ref().map(|m| m[a..b].to_vec()),
+        disturbance: rec.disturbance.as_ref().map(|d| d[a..b].to_vec()),
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn make_candidate(
+    rig: &Rig,
+    rec: &Record,
+    scorer: &Scorer,
+    kinds: &[EffectKind],
+    values: Vec<f64>,
+    errs: Vec<f64>,
+    c: f64,
+    evals: usize,
+    cost0: f64,
+    validation: &dyn Fn(&Effects) -> Option<Fit>,
+) -> Candidate {
+    let specs: Vec<(EffectKind, ParamSpec)> = kinds
+        .iter()
+        .flat_map(|k| k.specs(rig).into_iter().map(move |s| (*k, s)))
+        .collect();
+    let mut params = BTreeMap::new();
+    let mut std_err = BTreeMap::new();
+    let mut significant = true;
+    for (((owner, s), v), e) in specs.iter().zip(&values).zip(&errs) {
+        let key = if kinds.len() > 1 {
+            format!("{}.{}", owner.name(), s.name)
+        } else {
+            s.name.to_string()
+        };
+        params.insert(key.clone(), *v);
+        std_err.insert(key, *e);
+        if s.lo == 0.0 && e.is_finite() && *v < 2.0 * e {
+            significant = false;
+        }
+    }
+    let mut cand = Candidate {
+        effect: kinds.iter().map(|k| k.name()).collect::<Vec<_>>().join("+"),
+        params,
+        std_err,
+        gof: 0.0,
+        gof_validation: None,
+        fit: Fit::default(),
+        fit_validation: None,
+        improvement: 1.0 - c / cost0.max(1e-300),
+        significant,
+        simulations: evals,
+        kinds: kinds.to_vec(),
+        values,
+        cost: c,
+    };
+    let fx = cand.effects_on(rig);
+    cand.fit = scorer.fit(rec, &simulate(rig, rec, &fx));
+    cand.gof = cand.fit.gof;
+    cand.fit_validation = validation(&fx);
+    cand.gof_validation = cand.fit_validation.map(|f| f.gof);
+    cand
+}
+
+impl Diagnosis {
+    /// The JSON the issue asks for (a superset).
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or(serde_json::Value::Null)
+    }
+
+    /// A readable report.
+    pub fn summary(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "gap diagnosis, rig {}, {:.1} s, {} simulations in {:.1} s",
+            self.rig, self.duration_s, self.simulations, self.elapsed_s
+        );
+        let f = &self.baseline;
+        let _ = writeln!(
+            s,
+            "nominal model: GoF {:.1} % (output {:.1} %, effort {:.1} %), residual RMS output {:.4}, effort {:.4}; effort rel. error {:.2} %",
+            100.0 * f.gof,
+            100.0 * f.gof_output,
+            100.0 * f.gof_effort,
+            f.rms_output,
+            f.rms_effort,
+            f.effort_rel_error_pct
+        );
+        let _ = writeln!(s, "\nwhere:");
+        s.push_str(&self.where_.summary());
+        let _ = writeln!(s, "\nwhich (ranked):");
+        let _ = writeln!(
+            s,
+            "  {:<28} {:>7} {:>7} {:>7} {:>9}  params",
+            "effect", "GoF %", "out %", "eff %", "valid. %"
+        );
+        for c in &self.ranking {
+            let params: Vec<String> = c
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k}={v:.4}"))
+                .collect();
+            let _ = writeln!(
+                s,
+                "  {:<28} {:>7.1} {:>7.1} {:>7.1} {:>9}  {}",
+                c.effect,
+                100.0 * c.gof,
+                100.0 * c.fit.gof_output,
+                100.0 * c.fit.gof_effort,
+                c.gof_validation
+                    .map_or("-".into(), |g| format!("{:.1}", 100.0 * g)),
+                params.join(" ")
+            );
+        }
+        let v = &self.verdict;
+        let _ = writeln!(
+            s,
+            "\nverdict: {}",
+            if v.effects.is_empty() {
+                "none: the nominal model explains the log down to its noise floor".to_string()
+            } else {
+                v.effects.join(" + ")
+            }
+        );
+        let _ = writeln!(s, "  {}", v.reason);
+        let _ = writeln!(
+            s,
+            "  GoF {:.1} % -> {:.1} % (output {:.1} -> {:.1} %, effort {:.1} -> {:.1} %); effort rel. error {:.2} -> {:.2} %",
+            100.0 * self.baseline_gof,
+            100.0 * v.gof_after,
+            100.0 * self.baseline.gof_output,
+            100.0 * v.fit_after.gof_output,
+            100.0 * self.baseline.gof_effort,
+            100.0 * v.fit_after.gof_effort,
+            self.baseline.effort_rel_error_pct,
+            v.fit_after.effort_rel_error_pct
+        );
+        if let (Some(b), Some(a)) = (&self.baseline_validation, &v.fit_validation) {
+            let _ = writeln!(
+                s,
+                "  validation log: GoF {:.1} % -> {:.1} %; effort rel. error {:.2} -> {:.2} %",
+                100.0 * b.gof,
+                100.0 * a.gof,
+                b.effort_rel_error_pct,
+                a.effort_rel_error_pct
+            );
+        }
+        s
+    }
+}

@@ -1,0 +1,203 @@
+//! The `gap` and `identify` subcommands: arguments and what they print and write.
+
+use super::rig::Rig;
+use super::{EffectKind, Options, diagnose, selftest};
+use clap::Args;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+
+#[derive(Args, Debug)]
+pub struct GapArgs {
+    /// The log (rig's CSV columns, .csv or .csv.gz, any rate); or `selftest`, or `bench`.
+    #[arg(value_name = "LOG")]
+    pub log: PathBuf,
+    /// A second log, checked with the parameters fitted on LOG only.
+    #[arg(long, value_name = "LOG2")]
+    pub validate: Option<PathBuf>,
+    /// Rig file (JSON, see host-sim/rigs/); `paper` (default) and `emps` are built in.
+    #[arg(long, value_name = "FILE")]
+    pub rig: Option<PathBuf>,
+    /// Refit Table 4 to LOG first (`identify`) and diagnose against that model.
+    #[arg(long)]
+    pub refit_linear: bool,
+    /// Write the figures as JSON.
+    #[arg(long, value_name = "PATH")]
+    pub json: Option<PathBuf>,
+    /// Write the pictures (SVG) into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
+    /// Candidate effects, comma-separated (default: the four core ones).
+    #[arg(long, value_delimiter = ',')]
+    pub effects: Vec<String>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// selftest: number of cases.
+    #[arg(long, default_value_t = 50)]
+    pub cases: usize,
+    /// selftest: seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// selftest: seconds per case.
+    #[arg(long, default_value_t = 12.0)]
+    pub duration_s: f64,
+}
+
+#[derive(Args, Debug)]
+pub struct IdentifyArgs {
+    /// The log (project log format, .csv or .csv.gz).
+    #[arg(value_name = "LOG")]
+    pub log: PathBuf,
+    /// Rig file; must be a paper-type rig.
+    #[arg(long, value_name = "FILE")]
+    pub rig: Option<PathBuf>,
+    /// LM iterations.
+    #[arg(long, default_value_t = 12)]
+    pub iterations: usize,
+    #[arg(long, value_name = "PATH")]
+    pub json: Option<PathBuf>,
+}
+
+fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(())
+}
+
+fn options(args: &GapArgs, rig: &Rig) -> Result<Options> {
+    let mut opts = Options {
+        effects: EffectKind::for_rig(rig),
+        progress: true,
+        ..Options::default()
+    };
+    if let Some(t) = args.threads {
+        opts.threads = t.max(1);
+    }
+    if !args.effects.is_empty() {
+        opts.effects = args
+            .effects
+            .iter()
+            .map(|n| {
+                EffectKind::from_name(n.trim()).ok_or_else(|| {
+                    format!(
+                        "--effects: unknown effect {n:?} (backlash, coulomb_friction, delay, \
+                         tire_ground, supply_sag)"
+                    )
+                })
+            })
+            .collect::<std::result::Result<_, _>>()?;
+    }
+    Ok(opts)
+}
+
+pub fn gap(args: &GapArgs) -> Result<()> {
+    match args.log.to_str() {
+        Some("selftest") => return selftest_cmd(args),
+        Some("bench") => return bench_cmd(args),
+        _ => {}
+    }
+    let mut rig = match &args.rig {
+        Some(p) => Rig::load(p)?,
+        None => Rig::paper(),
+    };
+    let rec = rig.load_record(&args.log)?;
+    let val = match &args.validate {
+        Some(p) => Some(rig.load_record(p)?),
+        None => None,
+    };
+    let opts = options(args, &rig)?;
+    let mut refit = None;
+    if args.refit_linear {
+        let id = super::identify::identify(&rig, &rec, 10, true)?;
+        super::identify::apply(&mut rig, &id);
+        refit = Some(id);
+    }
+    let mut d = diagnose(&rig, &rec, val.as_ref(), &opts);
+    d.refit_linear = refit;
+    print!("{}", d.summary());
+    if let Some(path) = &args.json {
+        write_json(path, &d.to_json())?;
+    }
+    if let Some(dir) = &args.plots {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let files = super::plots::write_all(&rig, &rec, &d, dir)?;
+        for f in files {
+            println!("wrote {}", f.display());
+        }
+    }
+    Ok(())
+}
+
+fn selftest_cmd(args: &GapArgs) -> Result<()> {
+    let mut opts = selftest::default_options();
+    if let Some(t) = args.threads {
+        opts.threads = t.max(1);
+    }
+    let started = Instant::now();
+    let report = selftest::run(args.cases, args.seed, args.duration_s, &opts, &|r| {
+        eprintln!(
+            "case {:3} {:<32} hidden {:<28} named {:<28} {}  GoF {:5.1} -> {:5.1} %",
+            r.case.index,
+            r.case.scenario,
+            selftest::label(&r.case.hidden),
+            selftest::label(&r.named),
+            if r.correct { "ok " } else { "MISS" },
+            100.0 * r.gof_before,
+            100.0 * r.gof_after
+        );
+        if !r.correct {
+            eprintln!("         {}", r.reason);
+        }
+    });
+    print!("{}", report.confusion_table());
+    println!("{:.1} s", started.elapsed().as_secs_f64());
+    if let Some(path) = &args.json {
+        write_json(path, &serde_json::to_value(&report)?)?;
+    }
+    Ok(())
+}
+
+fn bench_cmd(args: &GapArgs) -> Result<()> {
+    let rig = Rig::paper();
+    let mut fx = super::model::Effects::nominal();
+    fx.coulomb = 0.12;
+    let case = selftest::Case {
+        index: 0,
+        scenario: "built-in 120 s track, Coulomb 0.12 Nm".into(),
+        hidden: vec!["coulomb_friction".into()],
+        effects: fx,
+        reference: crate::scenario::builtin_track(),
+    };
+    let rec = selftest::record_of(&rig, &case, 7);
+    let mut opts = options(args, &rig)?;
+    opts.progress = false;
+    let started = Instant::now();
+    let d = diagnose(&rig, &rec, None, &opts);
+    let elapsed = started.elapsed().as_secs_f64();
+    println!(
+        "gap bench: {:.0} s log ({}), {} simulations, diagnosed in {:.1} s on {} thread(s); verdict {:?}",
+        rec.duration_s(),
+        case.scenario,
+        d.simulations,
+        elapsed,
+        opts.threads,
+        d.verdict.effects
+    );
+    Ok(())
+}
+
+pub fn identify(args: &IdentifyArgs) -> Result<()> {
+    let rig = match &args.rig {
+        Some(p) => Rig::load(p)?,
+        None => Rig::paper(),
+    };
+    let rec = rig.load_record(&args.log)?;
+    let id = super::identify::identify(&rig, &rec, args.iterations, true)?;
+    print!("{}", id.summary());
+    if let Some(path) = &args.json {
+        write_json(path, &serde_json::to_value(&id)?)?;
+    }
+    Ok(())
+}

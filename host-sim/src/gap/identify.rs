@@ -1,0 +1,152 @@
+//! The paper's section 4.3: the nine parameters of Table 4 fitted by nonlinear least squares
+//! from a log (closed loop, paper mode, both signals), with the GoF of eq. 11.
+
+use super::fit::{FitOptions, ParamSpec, levenberg_marquardt};
+use super::model::Effects;
+use super::rig::{Rig, RigModel};
+use super::{Progress, Record, Scorer, simulate};
+use crate::plant::PlantParams;
+use std::collections::BTreeMap;
+
+/// The identified Table 4 parameters and the fit.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct Identified {
+    pub params: BTreeMap<String, f64>,
+    /// Combined GoF with the rig's parameters and with the fitted ones.
+    pub gof_before: f64,
+    pub gof: f64,
+    pub gof_output: f64,
+    pub gof_effort: f64,
+    pub simulations: usize,
+}
+
+fn set(p: &mut PlantParams, name: &str, v: f64) {
+    match name {
+        "j_bs" => p.j_bs = v,
+        "j_sw" => p.j_sw = v,
+        "j_w" => p.j_w = v,
+        "k_b" => p.k_b = v,
+        "beta_b" => p.beta_b = v,
+        "beta_bs" => p.beta_bs = v,
+        "k_tb" => p.k_tb = v,
+        "beta_tb" => p.beta_tb = v,
+        "beta_sw" => p.beta_sw = v,
+        _ => {}
+    }
+}
+
+/// Fit Table 4 on a paper-type rig.
+pub fn identify(
+    rig: &Rig,
+    rec: &Record,
+    iterations: usize,
+    progress: bool,
+) -> Result<Identified, String> {
+    let RigModel::Paper(model) = &rig.model else {
+        return Err(format!(
+            "identify needs a paper-type rig (Table 4); rig {} is not one",
+            rig.name
+        ));
+    };
+    let base = model.plant;
+    let names = base.identified();
+    // Bounds a decade either side of Table 4; beta_tb (0 in Table 4) gets an absolute range.
+    let specs: Vec<ParamSpec> = names
+        .iter()
+        .map(|(name, v)| {
+            if *v > 0.0 {
+                ParamSpec {
+                    name,
+                    lo: v / 10.0,
+                    hi: v * 10.0,
+                    start: *v,
+                    step: 0.05 * v,
+                }
+            } else {
+                ParamSpec {
+                    name,
+                    lo: 0.0,
+                    hi: 0.1,
+                    start: 0.0,
+                    step: 0.002,
+                }
+            }
+        })
+        .collect();
+    let scorer = Scorer::new(rig, rec);
+    let with = |p: &[f64]| -> Rig {
+        let mut r = rig.clone();
+        if let RigModel::Paper(m) = &mut r.model {
+            for ((name, _), v) in names.iter().zip(p) {
+                set(&mut m.plant, name, *v);
+            }
+        }
+        r
+    };
+    let bar = Progress::new(1 + iterations * (specs.len() + 2), progress);
+    let residual = |p: &[f64]| -> Vec<f64> {
+        let r = with(p);
+        scorer.residual(rec, &simulate(&r, rec, &Effects::nominal()))
+    };
+    let fx = Effects::nominal();
+    let before = scorer.fit(rec, &simulate(rig, rec, &fx));
+    let res = levenberg_marquardt(
+        &specs,
+        FitOptions {
+            scan: 0,
+            iterations,
+            polish: 0,
+        },
+        &residual,
+        &|| bar.tick(),
+    );
+    bar.finish();
+    let after = scorer.fit(rec, &simulate(&with(&res.params), rec, &fx));
+    Ok(Identified {
+        params: names
+            .iter()
+            .zip(&res.params)
+            .map(|((n, _), v)| (n.to_string(), *v))
+            .collect(),
+        gof_before: before.gof,
+        gof: after.gof,
+        gof_output: after.gof_output,
+        gof_effort: after.gof_effort,
+        simulations: res.evaluations + 2,
+    })
+}
+
+/// Put identified parameters into a paper-type rig.
+pub fn apply(rig: &mut Rig, id: &Identified) {
+    if let RigModel::Paper(m) = &mut rig.model {
+        for (name, v) in &id.params {
+            set(&mut m.plant, name, *v);
+        }
+    }
+}
+
+impl Identified {
+    pub fn summary(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        let paper = PlantParams::PAPER.identified();
+        let _ = writeln!(
+            s,
+            "Table 4 fitted by nonlinear least squares ({} simulations):",
+            self.simulations
+        );
+        for (name, table) in paper {
+            let v = self.params.get(name).copied().unwrap_or(f64::NAN);
+            let _ = writeln!(s, "  {name:<8} {v:>12.5e}   (Table 4: {table:.5e})");
+        }
+        let _ = writeln!(
+            s,
+            "GoF (eq. 11, output and effort combined) {:.1} % -> {:.1} % (output {:.1} %, effort {:.1} %)",
+            100.0 * self.gof_before,
+            100.0 * self.gof,
+            100.0 * self.gof_output,
+            100.0 * self.gof_effort
+        );
+        s
+    }
+}

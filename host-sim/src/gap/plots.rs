@@ -1,0 +1,163 @@
+//! The diagnosis pictures: residual over time with the regimes shaded, the Bode plot of
+//! measured, nominal and nominal-plus-verdict, and the segment replay.
+
+use super::model::Effects;
+use super::rig::{Rig, RigModel};
+use super::{Diagnosis, EffectKind, Record, simulate};
+use crate::plot::{BodePlot, Color, Panel, Style, TimePlot};
+use std::path::{Path, PathBuf};
+
+/// Contiguous runs of `true` in a mask, as (start, end) times.
+fn runs(mask: &[bool], dt: f64) -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    let mut start = None;
+    for (k, m) in mask.iter().enumerate() {
+        match (m, start) {
+            (true, None) => start = Some(k),
+            (false, Some(s)) => {
+                out.push((s as f64 * dt, k as f64 * dt));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        out.push((s as f64 * dt, mask.len() as f64 * dt));
+    }
+    out
+}
+
+fn verdict_effects(rig: &Rig, d: &Diagnosis) -> Effects {
+    let kinds: Vec<EffectKind> = d
+        .verdict
+        .effects
+        .iter()
+        .filter_map(|n| EffectKind::from_name(n))
+        .collect();
+    let key = kinds.iter().map(|k| k.name()).collect::<Vec<_>>().join("+");
+    d.ranking
+        .iter()
+        .find(|c| c.effect == key)
+        .map_or(Effects::nominal(), |c| c.effects_on(rig))
+}
+
+/// Write `gap_residual.svg`, `gap_bode.svg` and (with a motor angle) `gap_segments.svg`.
+pub fn write_all(
+    rig: &Rig,
+    rec: &Record,
+    d: &Diagnosis,
+    dir: &Path,
+) -> Result<Vec<PathBuf>, Box<dyn std::error::Error>> {
+    let (out_unit, eff_unit) = match rig.model {
+        RigModel::Paper(_) => ("deg", "A"),
+        RigModel::Emps(_) => ("m", "V"),
+    };
+    let sim0 = simulate(rig, rec, &Effects::nominal());
+    let fx = verdict_effects(rig, d);
+    let sim1 = simulate(rig, rec, &fx);
+    let n = rec.len().min(sim0.output.len()).min(sim1.output.len());
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * rec.dt).collect();
+    let after_name = if d.verdict.effects.is_empty() {
+        "nominal (verdict: none)".to_string()
+    } else {
+        format!("nominal + {}", d.verdict.effects.join(" + "))
+    };
+    let res = |sim: &[f64], y: &[f64]| -> Vec<f64> { (0..n).map(|k| sim[k] - y[k]).collect() };
+    let mut plot = TimePlot::new(&format!(
+        "Residual over time, rig {} (GoF {:.1} % -> {:.1} %)",
+        rig.name,
+        100.0 * d.baseline_gof,
+        100.0 * d.verdict.gof_after
+    ))
+    .panel(
+        Panel::new(&format!("output, {out_unit}"))
+            .series("reference", &t, &rec.reference[..n])
+            .series("measured", &t, &rec.output[..n])
+            .series_styled("nominal", &t, &sim0.output[..n], Style::new().dashed()),
+    )
+    .panel(
+        Panel::new(&format!("output residual, {out_unit}"))
+            .series("nominal - measured", &t, &res(&sim0.output, &rec.output))
+            .series(&after_name, &t, &res(&sim1.output, &rec.output)),
+    )
+    .panel(
+        Panel::new(&format!("effort residual, {eff_unit}"))
+            .series("nominal - measured", &t, &res(&sim0.effort, &rec.effort))
+            .series(&after_name, &t, &res(&sim1.effort, &rec.effort)),
+    )
+    .x_label("time, s");
+    // Shade the two regimes that localise effects best; at most 200 intervals each.
+    for r in &d.where_.regimes {
+        if r.name == "velocity_reversal" || r.name == "current_limit" {
+            for (a, b) in runs(&r.mask, rec.dt).into_iter().take(200) {
+                plot = plot.shade(a, b, &r.name);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    let p = dir.join("gap_residual.svg");
+    plot.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+    files.push(p);
+
+    let f = &d.where_.frequency;
+    if !f.measured.freq_hz.is_empty() {
+        let bode = BodePlot::new(&format!("Reference -> output, rig {}", rig.name))
+            .series(
+                "measured",
+                &f.measured.freq_hz,
+                &f.measured.magnitude_db,
+                &f.measured.phase_deg,
+            )
+            .series_styled(
+                "nominal",
+                &f.nominal.freq_hz,
+                &f.nominal.magnitude_db,
+                &f.nominal.phase_deg,
+                Style::new().dashed(),
+            )
+            .series(
+                &after_name,
+                &f.after.freq_hz,
+                &f.after.magnitude_db,
+                &f.after.phase_deg,
+            )
+            .coherence("measured", &f.measured.freq_hz, &f.measured.coherence);
+        let p = dir.join("gap_bode.svg");
+        bode.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+        files.push(p);
+    }
+
+    if let Some(m) = &rec.motor {
+        let seg = TimePlot::new("Segment replay: where in the chain the residual arises")
+            .panel(
+                Panel::new("reference -> motor, deg at the wheel")
+                    .series("measured motor", &t, &m[..n])
+                    .series_styled(
+                        "closed loop, nominal",
+                        &t,
+                        &sim0.motor[..n],
+                        Style::new().dashed(),
+                    )
+                    .series(
+                        "residual",
+                        &t,
+                        &(0..n).map(|k| sim0.motor[k] - m[k]).collect::<Vec<_>>(),
+                    ),
+            )
+            .panel(
+                Panel::new("motor -> steering, deg").series_styled(
+                    "twist (column - motor through the gearing): measured - nominal",
+                    &t,
+                    &(0..n)
+                        .map(|k| (rec.output[k] - m[k]) - (sim0.output[k] - sim0.motor[k]))
+                        .collect::<Vec<_>>(),
+                    Style::new().color(Color::VERMILLION),
+                ),
+            )
+            .x_label("time, s");
+        let p = dir.join("gap_segments.svg");
+        seg.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+        files.push(p);
+    }
+    Ok(files)
+}

@@ -1,0 +1,111 @@
+//! The diagnosis end to end on logs written to disk in the project log format: a nominal log
+//! gets the verdict "none", a log with hidden Coulomb friction gets "coulomb_friction", and the
+//! JSON carries the fields the issue names.
+
+use host_sim::gap::model::Effects;
+use host_sim::gap::rig::Rig;
+use host_sim::gap::selftest::{Case, record_of};
+use host_sim::gap::{Options, diagnose};
+use std::io::Write;
+
+fn chirp(amplitude: f64, f1: f64, duration_s: f64) -> Vec<f64> {
+    let n = (duration_s * 100.0) as usize + 1;
+    (0..n)
+        .map(|k| {
+            let t = k as f64 / 100.0;
+            amplitude
+                * (std::f64::consts::TAU * (0.2 * t + (f1 - 0.2) * t * t / (2.0 * duration_s)))
+                    .sin()
+        })
+        .collect()
+}
+
+/// A log of the paper rig with `effects`, written as `t,ref_sw_deg,sw_deg,motor_rad,current_a`.
+fn write_log(dir: &std::path::Path, name: &str, effects: Effects) -> std::path::PathBuf {
+    let rig = Rig::paper();
+    let case = Case {
+        index: 3,
+        scenario: "chirp".into(),
+        hidden: vec![],
+        effects,
+        reference: chirp(6.0, 4.0, 10.0),
+    };
+    let rec = record_of(&rig, &case, 11);
+    let per = motor_per_pinion();
+    let path = dir.join(name);
+    let mut f = std::fs::File::create(&path).expect("create log");
+    writeln!(f, "t,ref_sw_deg,sw_deg,motor_rad,current_a").expect("write");
+    let motor = rec.motor.clone().unwrap_or_default();
+    #[allow(clippy::needless_range_loop)]
+    for k in 0..rec.len() {
+        writeln!(
+            f,
+            "{:.4},{:.4},{:.4},{:.5},{:.4}",
+            k as f64 * 0.01 + 0.005,
+            rec.reference[k],
+            rec.output[k],
+            motor[k].to_radians() * per,
+            rec.effort[k]
+        )
+        .expect("write");
+    }
+    path
+}
+
+fn motor_per_pinion() -> f64 {
+    host_sim::plant::PlantParams::PAPER.motor_per_pinion()
+}
+
+fn opts() -> Options {
+    Options {
+        threads: 2,
+        ..Options::default()
+    }
+}
+
+#[test]
+fn nominal_log_gets_no_effect_and_coulomb_log_gets_coulomb() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let rig = Rig::paper();
+
+    let nominal = write_log(dir.path(), "nominal.csv", Effects::nominal());
+    let rec = rig.load_record(&nominal).expect("load nominal");
+    let d = diagnose(&rig, &rec, None, &opts());
+    println!("{}", d.summary());
+    assert!(d.verdict.effects.is_empty(), "{:?}", d.verdict);
+
+    let mut fx = Effects::nominal();
+    fx.coulomb = 0.15;
+    let friction = write_log(dir.path(), "coulomb.csv", fx);
+    let rec = rig.load_record(&friction).expect("load coulomb");
+    let d = diagnose(
+        &rig,
+        &rec,
+        Some(&rig.load_record(&nominal).expect("nominal")),
+        &opts(),
+    );
+    println!("{}", d.summary());
+    assert_eq!(d.verdict.effects, vec!["coulomb_friction".to_string()]);
+    assert!(d.verdict.gof_after > d.baseline_gof + 0.05);
+    let fc = d.ranking[0].params["torque_nm"];
+    assert!((0.1..0.2).contains(&fc), "fitted {fc} Nm, hidden 0.15 Nm");
+
+    let json = d.to_json();
+    for key in ["baseline_gof", "verdict", "ranking", "where"] {
+        assert!(json.get(key).is_some(), "JSON lacks {key}");
+    }
+    assert!(json["verdict"]["effects"].is_array());
+    assert!(json["verdict"]["gof_validation"].is_number());
+    assert!(json["ranking"][0]["params"].is_object());
+    assert!(
+        json["where"]["bands"]
+            .as_array()
+            .is_some_and(|b| !b.is_empty())
+    );
+    assert!(
+        json["where"]["regimes"]
+            .as_array()
+            .is_some_and(|r| r.len() == 4)
+    );
+    assert!(json["where"]["segment"].is_string());
+}
