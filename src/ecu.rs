@@ -35,6 +35,7 @@ pub struct Ecu {
     hall_count: i32,
     column: SteeringDeg,
     current: Amps,
+    clear_refusals: u16,
 }
 
 impl Ecu {
@@ -53,6 +54,7 @@ impl Ecu {
             hall_count: 0,
             column: SteeringDeg(f32::NAN),
             current: Amps(f32::NAN),
+            clear_refusals: 0,
         })
     }
 
@@ -77,6 +79,11 @@ impl Ecu {
         &self.e2e
     }
 
+    /// Clear requests (reference frame bit) the state machine refused, saturating.
+    pub fn clear_refusals(&self) -> u16 {
+        self.clear_refusals
+    }
+
     fn apply(&mut self, out: Output) -> Output {
         if out.drive_just_enabled {
             self.cascade.reset(self.hall_count);
@@ -89,7 +96,14 @@ impl Ecu {
     pub fn on_reference_frame(&mut self, now_us: u64, frame: &Frame) -> Output {
         let out = match self.e2e.check(frame, now_us) {
             E2eVerdict::Valid(reference) => {
-                let out = self.machine.on_reference(now_us, reference.as_state);
+                let mut out = self.machine.on_reference(now_us, reference.as_state);
+                if reference.clear_faults {
+                    // Refused unless AS Off with every cause gone; the faults stay then.
+                    if self.machine.request_clear_faults(now_us).is_err() {
+                        self.clear_refusals = self.clear_refusals.saturating_add(1);
+                    }
+                    out = self.machine.tick(now_us);
+                }
                 let out = self.apply(out);
                 if out.demand == DriveDemand::Track {
                     // The E2E check already bounds the angle to the cascade's range; a refusal

@@ -58,6 +58,8 @@ async fn keep_awake() {
 #[derive(Clone, Copy, Debug)]
 enum Send {
     Ref(AsState, f32),
+    /// A reference frame with the clear-faults request bit set.
+    Clear(AsState, f32),
     Nothing,
     CorruptCrc(AsState, f32),
 }
@@ -114,16 +116,18 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
                     faults,
                 });
                 let frame = match script.get(period) {
-                    Some(Send::Ref(as_state, deg)) => Some((*as_state, *deg, false)),
-                    Some(Send::CorruptCrc(as_state, deg)) => Some((*as_state, *deg, true)),
+                    Some(Send::Ref(as_state, deg)) => Some((*as_state, *deg, false, false)),
+                    Some(Send::Clear(as_state, deg)) => Some((*as_state, *deg, false, true)),
+                    Some(Send::CorruptCrc(as_state, deg)) => Some((*as_state, *deg, true, false)),
                     _ => None,
                 };
-                if let Some((as_state, deg, corrupt)) = frame {
+                if let Some((as_state, deg, corrupt, clear_faults)) = frame {
                     counter = counter.next();
                     let f = protocol.encode_reference(&Reference {
                         angle: SteeringDeg(deg),
                         as_state,
                         counter,
+                        clear_faults,
                     });
                     let f = if corrupt {
                         let mut bytes = [0u8; 8];
@@ -170,7 +174,8 @@ fn steering_rules_end_to_end_on_the_firmware_tasks() {
     //   10-59  AS Ready/Driving 10 deg -> tracking, the column reaches 10 deg
     //   60-79  nothing                -> hold after 30 ms, disabled + timeout fault after 130 ms
     //   80-89  AS Driving again       -> still disabled: the fault is latched
-    //   90-99  AS Off                 -> clear request at 95 accepted
+    //   80      clear request while driving -> refused
+    //   90-99  AS Off                 -> clear request (frame bit) at 95 accepted
     //   100-129 AS Driving 0 deg      -> tracking again
     //   130-135 corrupted CRC         -> invalid-frame fault latched, disabled
     //   136-139 AS Emergency          -> disabled
@@ -178,14 +183,21 @@ fn steering_rules_end_to_end_on_the_firmware_tasks() {
     script.extend(vec![Send::Ref(AsState::Ready, 10.0); 10]);
     script.extend(vec![Send::Ref(AsState::Driving, 10.0); 40]);
     script.extend(vec![Send::Nothing; 20]);
-    script.extend(vec![Send::Ref(AsState::Driving, 10.0); 10]);
-    script.extend(vec![Send::Ref(AsState::Off, 10.0); 10]);
+    script.push(Send::Clear(AsState::Driving, 10.0));
+    script.extend(vec![Send::Ref(AsState::Driving, 10.0); 9]);
+    script.extend(vec![Send::Ref(AsState::Off, 10.0); 5]);
+    script.push(Send::Clear(AsState::Off, 10.0));
+    script.extend(vec![Send::Ref(AsState::Off, 10.0); 4]);
     script.extend(vec![Send::Ref(AsState::Driving, 0.0); 30]);
     script.extend(vec![Send::CorruptCrc(AsState::Driving, 0.0); 6]);
     script.extend(vec![Send::Ref(AsState::Emergency, 0.0); 4]);
-    let s = run(&script, |period, ecu, now| {
-        if period == 95 {
-            assert_eq!(ecu.machine_mut().request_clear_faults(now), Ok(()));
+    let s = run(&script, |period, ecu, _| {
+        if period == 85 {
+            assert_eq!(
+                ecu.clear_refusals(),
+                1,
+                "the request while driving was refused"
+            );
         }
     });
     let at = |p: usize| {

@@ -72,7 +72,13 @@ fn ids_lengths_and_signal_sets_agree() {
     let names = |m: &Message| m.signals.iter().map(|s| s.name.clone()).collect::<Vec<_>>();
     assert_eq!(
         names(reference),
-        ["REF_Crc", "REF_Counter", "REF_AsState", "REF_SteeringAngle"]
+        [
+            "REF_Crc",
+            "REF_Counter",
+            "REF_AsState",
+            "REF_SteeringAngle",
+            "REF_ClearFaults"
+        ]
     );
     assert_eq!(
         names(status),
@@ -122,6 +128,7 @@ proptest! {
         raw_angle: i16,
         code in 0u8..6,
         counter in 0u8..16,
+        clear_faults: bool,
     ) {
         let dbc = dbc_cached();
         let cfg = ProtocolConfig::DEFAULT;
@@ -130,6 +137,7 @@ proptest! {
             angle: angle_from_raw(raw_angle),
             as_state: AsState::from_code(code).unwrap(),
             counter: AliveCounter::new(counter).unwrap(),
+            clear_faults,
         };
         let f = cfg.encode_reference(&sent);
         let data = f.data();
@@ -139,6 +147,8 @@ proptest! {
         prop_assert_eq!(data[0], frame_crc(cfg.reference_id, data.try_into().unwrap()));
         prop_assert_eq!(raw(signal(m, "REF_Counter"), data), i64::from(got.counter.raw()));
         prop_assert_eq!(raw(signal(m, "REF_AsState"), data), i64::from(got.as_state.code()));
+        prop_assert_eq!(raw(signal(m, "REF_ClearFaults"), data), i64::from(clear_faults));
+        prop_assert_eq!(got.clear_faults, clear_faults);
         let angle = physical(signal(m, "REF_SteeringAngle"), data);
         if raw_angle == ANGLE_NOT_AVAILABLE {
             prop_assert!(got.angle.0.is_nan());

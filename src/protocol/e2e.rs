@@ -200,6 +200,7 @@ impl E2eChecker {
         let as_state = AsState::from_code(code).ok_or(FrameError::UnknownAsState { code })?;
 
         let angle_raw = field(word, 16, 16) as u16 as i16;
+        let clear_faults = field(word, 32, 1) == 1;
         if i32::from(angle_raw).abs() > self.max_angle_raw {
             return Err(FrameError::AngleOutOfRange {
                 angle: super::angle_from_raw(angle_raw),
@@ -226,6 +227,7 @@ impl E2eChecker {
             angle: super::angle_from_raw(angle_raw),
             as_state,
             counter,
+            clear_faults,
         })
     }
 

@@ -20,7 +20,9 @@
 //!  1   | 12..15 | REF_AsState        | u4       | AsState code | 0..5 (Off, Ready, Driving,
 //!      |        |                    |          |              | Emergency, Finished, Manual)
 //!  2-3 | 16..31 | REF_SteeringAngle  | i16      | 0.01 deg/bit | +-327.67 deg; valid +-90 deg
-//!  4-7 | 32..63 | reserved           | -        | -            | sent 0, covered by the CRC,
+//!  4   | 32     | REF_ClearFaults    | u1       | 1 = request  | clear latched faults (only
+//!      |        |                    |          |              | honoured in AS Off)
+//!  4-7 | 33..63 | reserved           | -        | -            | sent 0, covered by the CRC,
 //!      |        |                    |          |              | otherwise ignored
 //! ```
 //!
@@ -162,6 +164,9 @@ pub struct Reference {
     pub angle: SteeringDeg,
     pub as_state: AsState,
     pub counter: AliveCounter,
+    /// Request to clear the latched faults. Honoured only in AS Off and once every fault's
+    /// cause is gone (the state machine's rule); otherwise the request is refused and counted.
+    pub clear_faults: bool,
 }
 
 /// What the steering ECU reports back.
@@ -290,7 +295,8 @@ impl ProtocolConfig {
     pub fn encode_reference(&self, reference: &Reference) -> Frame {
         let word = u64::from(reference.counter.raw()) << 8
             | u64::from(reference.as_state.code() & 0x0F) << 12
-            | u64::from(angle_to_raw(reference.angle) as u16) << 16;
+            | u64::from(angle_to_raw(reference.angle) as u16) << 16
+            | u64::from(reference.clear_faults) << 32;
         frame_with_crc(self.reference_id, word)
     }
 
@@ -305,6 +311,7 @@ impl ProtocolConfig {
             angle: angle_from_raw(field(word, 16, 16) as u16 as i16),
             as_state,
             counter: AliveCounter::wrapping(field(word, 8, 4) as u8),
+            clear_faults: field(word, 32, 1) == 1,
         })
     }
 

@@ -8,6 +8,7 @@ fn reference(angle: f32, as_state: AsState, counter: u8) -> Reference {
         angle: SteeringDeg(angle),
         as_state,
         counter: AliveCounter::wrapping(counter),
+        clear_faults: false,
     }
 }
 
