@@ -196,23 +196,35 @@ impl SdoResponse {
     }
 }
 
-/// The server's response in `frame`, if it is an 8-byte frame from `node`'s SDO server.
-pub fn parse_response(frame: &Frame, node: NodeId) -> Option<SdoResponse> {
-    if node_of(frame.id(), function::SDO_TX) != Some(node) {
+/// An 8-byte SDO frame of `node` on the channel `base` (request or response) as its command
+/// byte, the object it names and the 4-byte payload.
+fn split(frame: &Frame, node: NodeId, base: u16) -> Option<(u8, ObjectAddress, u32)> {
+    if node_of(frame.id(), base) != Some(node) {
         return None;
     }
     let d: [u8; 8] = frame.data().try_into().ok()?;
     let object = ObjectAddress::new(u16::from_le_bytes([d[1], d[2]]), d[3]);
-    let payload = u32::from_le_bytes([d[4], d[5], d[6], d[7]]);
-    let cs = d[0];
+    Some((d[0], object, u32::from_le_bytes([d[4], d[5], d[6], d[7]])))
+}
+
+/// The value of an expedited transfer and its size in bytes if the command byte indicates it
+/// (s bit set: the n field counts the unused bytes); bytes beyond the size are masked off.
+fn expedited(cs: u8, payload: u32) -> (u32, Option<u8>) {
+    let bytes = (cs & 0x01 != 0).then(|| 4 - ((cs >> 2) & 0x03));
+    let value = match bytes {
+        Some(n) => payload & (u32::MAX >> (8 * (4 - n as u32))),
+        None => payload,
+    };
+    (value, bytes)
+}
+
+/// The server's response in `frame`, if it is an 8-byte frame from `node`'s SDO server.
+pub fn parse_response(frame: &Frame, node: NodeId) -> Option<SdoResponse> {
+    let (cs, object, payload) = split(frame, node, function::SDO_TX)?;
     Some(match cs >> 5 {
         3 => SdoResponse::Downloaded { object },
         2 if cs & 0x02 != 0 => {
-            let bytes = (cs & 0x01 != 0).then(|| 4 - ((cs >> 2) & 0x03));
-            let value = match bytes {
-                Some(n) => payload & (u32::MAX >> (8 * (4 - n as u32))),
-                None => payload,
-            };
+            let (value, bytes) = expedited(cs, payload);
             SdoResponse::Uploaded {
                 object,
                 value,
@@ -251,20 +263,10 @@ pub enum ServerRequest {
 
 /// The client request in `frame`, if it is an 8-byte frame to `node`'s SDO server.
 pub fn parse_request(frame: &Frame, node: NodeId) -> Option<ServerRequest> {
-    if node_of(frame.id(), function::SDO_RX) != Some(node) {
-        return None;
-    }
-    let d: [u8; 8] = frame.data().try_into().ok()?;
-    let object = ObjectAddress::new(u16::from_le_bytes([d[1], d[2]]), d[3]);
-    let payload = u32::from_le_bytes([d[4], d[5], d[6], d[7]]);
-    let cs = d[0];
+    let (cs, object, payload) = split(frame, node, function::SDO_RX)?;
     Some(match cs >> 5 {
         1 if cs & 0x02 != 0 => {
-            let bytes = (cs & 0x01 != 0).then(|| 4 - ((cs >> 2) & 0x03));
-            let value = match bytes {
-                Some(n) => payload & (u32::MAX >> (8 * (4 - n as u32))),
-                None => payload,
-            };
+            let (value, bytes) = expedited(cs, payload);
             ServerRequest::Download {
                 object,
                 value,
