@@ -254,6 +254,12 @@ impl Epos4Sim {
         self.plant.current_a()
     }
 
+    /// The steering-column angle of the simulated actuator, rad (what the ECU's column
+    /// encoder reads).
+    pub fn column_rad(&self) -> f64 {
+        self.plant.column_rad()
+    }
+
     /// Raw value of an object (for tests).
     pub fn object(&self, object: ObjectAddress) -> Option<u32> {
         self.od.get(&object).map(|e| e.value)

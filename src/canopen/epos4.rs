@@ -334,6 +334,8 @@ pub struct Feedback {
     pub current_ma: i32,
     /// When TPDO1 last arrived (`now_us` of `on_frame`).
     pub updated_us: u64,
+    /// When TPDO2 (the current) last arrived.
+    pub current_updated_us: u64,
 }
 
 /// Frames to put on the bus, in order.
@@ -888,6 +890,7 @@ impl Epos4Link {
         if frame.id() == self.tpdo2 {
             if let Some(ma) = pdo::decode_i32(frame.data()) {
                 self.feedback.current_ma = ma;
+                self.feedback.current_updated_us = now_us;
             }
             return out;
         }
