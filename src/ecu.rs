@@ -293,6 +293,13 @@ impl Ecu {
         self.apply(now_us, out)
     }
 
+    /// The motor's Hall sensors gave bad samples in a row (direct mode; see
+    /// [`crate::direct`] for the codes).
+    pub fn on_hall_fault(&mut self, now_us: u64, code: u16) -> Output {
+        let out = self.machine.on_encoder_fault(now_us, code);
+        self.apply(now_us, out)
+    }
+
     pub fn on_bus_off(&mut self, now_us: u64, tec: u8) -> Output {
         let out = self.machine.on_bus_off(now_us, tec);
         self.apply(now_us, out)

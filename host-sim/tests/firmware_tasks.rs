@@ -1,5 +1,6 @@
 //! The firmware's own tasks (reference receiver, status sender, encoder reader) and its
-//! direct-drive fast loops, running against the simulated actuator in virtual time: the
+//! direct-drive fast loop (`steering_ecu::direct::FastLoop`: Hall commutation, current sense,
+//! the cascade), running against the simulated actuator in virtual time: the
 //! steering rules, end to end. Own test binary: the mock clock and task pools are global.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
@@ -10,19 +11,45 @@ use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
+use steering_ecu::commutation::{BRIDGE_OFF, BridgeCommand, HallDecoder, code_of};
+use steering_ecu::direct::FastLoop;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
-use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
+use steering_ecu::ports::{Bridge, ColumnEncoderPort, CurrentSense, EncoderError, HallInputs};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
 use steering_ecu::steering::{DriveDemand, EcuState};
 use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
-use steering_ecu::units::{Amps, SteeringDeg};
+use steering_ecu::units::{Amps, SteeringDeg, Volts};
 
 static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
 static TX_FRAMES: FrameQueue = FrameQueue::new();
 /// The column angle the simulated encoder reads, rad (written by the harness each step).
 static COLUMN_RAD: StdMutex<f64> = StdMutex::new(0.0);
+
+/// The bridge's DC supply, V (Table 2: 24 V).
+const SUPPLY_V: f64 = 24.0;
+
+struct SimHall(u8);
+impl HallInputs for SimHall {
+    fn read(&mut self) -> u8 {
+        self.0
+    }
+}
+
+struct SimSense([Amps; 3]);
+impl CurrentSense for SimSense {
+    fn phase_currents(&mut self) -> [Amps; 3] {
+        self.0
+    }
+}
+
+struct SimBridge(BridgeCommand);
+impl Bridge for SimBridge {
+    fn apply(&mut self, command: &BridgeCommand) {
+        self.0 = *command;
+    }
+}
 
 struct SimEncoder;
 impl ColumnEncoderPort for SimEncoder {
@@ -87,6 +114,7 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
     let mut plant = LinearPlant::new(PlantParams::PAPER, 50e-6).unwrap();
     let mut counter = AliveCounter::wrapping(0);
     let mut samples = Vec::new();
+    let mut fast = FastLoop::new(0, Volts(SUPPLY_V as f32));
     let mut tick: u64 = 0; // 50 us steps
     let end = script.len() as u64 * 200;
     let script = script.to_vec();
@@ -141,18 +169,28 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
                 }
                 while TX_FRAMES.try_receive().is_ok() {}
             }
-            // The fast loops, as the firmware's timer interrupts run them.
-            let hall = hall_from_motor(plant.motor_rad());
-            let voltage = ecu.lock(|e| {
-                let mut e = e.borrow_mut();
-                if tick.is_multiple_of(10) {
-                    e.position_tick(hall);
-                }
-                e.current_tick(now_us, Amps(plant.current_a() as f32))
+            // The fast loop, as the firmware's ADC interrupt runs it: Hall code and phase
+            // currents from the plant, the bridge command back to a terminal voltage.
+            let sector = hall_from_motor(plant.motor_rad()).rem_euclid(6) as u8;
+            let mut truth = HallDecoder::new(0);
+            let _ = truth.update(code_of(sector));
+            let (high, low) = truth.driven_legs().unwrap();
+            let mut phases = [Amps::ZERO; 3];
+            phases[high] = Amps(plant.current_a() as f32);
+            phases[low] = Amps(-plant.current_a() as f32);
+            let mut bridge = SimBridge(BRIDGE_OFF);
+            ecu.lock(|e| {
+                fast.run(
+                    &mut e.borrow_mut(),
+                    now_us,
+                    &mut SimHall(code_of(sector)),
+                    &mut SimSense(phases),
+                    &mut bridge,
+                )
             });
             // Bridge off: the winding is left to its back-EMF, the current dies out.
-            let v = match voltage {
-                Some(v) => v.0 as f64,
+            let v = match truth.terminal_voltage(&bridge.0, SUPPLY_V as f32) {
+                Some(v) => v as f64,
                 None => PlantParams::PAPER.ke * plant.state()[state::W_ROT],
             };
             plant.step(v);
