@@ -6,8 +6,9 @@
 //! faults and stores them. The bit positions below are the wire format of the status frame's
 //! fault bits: they never move, a new fault takes a free bit.
 //!
-//! A panic is not in the list: the firmware's panic handler turns the bridge off (EPOS4
-//! disabled, PWM outputs low) and resets the MCU, so no code of this crate runs after it.
+//! A panic is not in the list: the firmware's panic handler turns the drive off (EPOS4
+//! "disable voltage", PWM outputs low) and halts the MCU, so no code of this crate runs after
+//! it (see `src/firmware/safety.rs`).
 
 use heapless::Deque;
 

@@ -190,6 +190,20 @@ pub fn gain_words(gains: &EposGains) -> Result<[(ObjectAddress, u32); 7], GainWo
     ])
 }
 
+/// The SDO request that writes controlword "disable voltage" (0x0000) to `node`: the power
+/// stage off from any state. Sent without waiting for an answer by the link after a failure and
+/// by the firmware's panic handler.
+pub fn disable_voltage_frame(node: NodeId) -> Option<Frame> {
+    super::sdo::request_frame(
+        node,
+        &SdoRequest::Download(SdoWrite {
+            object: od::CONTROLWORD,
+            value: Command::DisableVoltage.controlword() as u32,
+            width: Width::U16,
+        }),
+    )
+}
+
 /// Everything [`Epos4Link`] needs to know.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -641,12 +655,7 @@ impl Epos4Link {
             }
             Phase::Failed(_) if !self.failsafe_sent => {
                 self.failsafe_sent = true;
-                let request = SdoRequest::Download(SdoWrite {
-                    object: od::CONTROLWORD,
-                    value: Command::DisableVoltage.controlword() as u32,
-                    width: Width::U16,
-                });
-                if let Some(f) = super::sdo::request_frame(self.config.node, &request) {
+                if let Some(f) = disable_voltage_frame(self.config.node) {
                     let _ = out.push(f);
                 }
             }
