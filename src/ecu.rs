@@ -113,6 +113,8 @@ pub struct Ecu {
     link_error: Option<LinkError>,
     last_link_reset_us: Option<u64>,
     current_seen_us: u64,
+    /// The last reference sample the drive was given (wheel deg), for the tracking check.
+    reference: Option<SteeringDeg>,
 }
 
 impl Ecu {
@@ -146,6 +148,7 @@ impl Ecu {
             link_error: None,
             last_link_reset_us: None,
             current_seen_us: 0,
+            reference: None,
         })
     }
 
@@ -212,6 +215,10 @@ impl Ecu {
     }
 
     fn apply(&mut self, now_us: u64, out: Output) -> Output {
+        if out.drive_just_enabled {
+            // The first reference sample after enabling is the one to track.
+            self.reference = None;
+        }
         match &mut self.drive {
             Drive::Direct(cascade) => {
                 if out.drive_just_enabled {
@@ -232,6 +239,7 @@ impl Ecu {
     }
 
     fn push_reference(&mut self, angle: SteeringDeg) {
+        self.reference = Some(angle);
         match &mut self.drive {
             // The E2E check already bounds the angle to the cascade's range; a refusal here
             // keeps the ramp in progress, which is the documented outcome.
@@ -283,6 +291,12 @@ impl Ecu {
         self.column = column;
         let motor = self.motor_angle();
         let out = self.machine.on_encoder(now_us, column, motor);
+        let out = match (out.demand, self.reference) {
+            (DriveDemand::Track | DriveDemand::Hold, Some(reference)) => {
+                self.machine.on_tracking(now_us, reference, column)
+            }
+            _ => self.machine.on_not_tracking(now_us),
+        };
         self.apply(now_us, out)
     }
 

@@ -26,6 +26,28 @@ static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
 static TX_FRAMES: FrameQueue = FrameQueue::new();
 /// The column angle the simulated encoder reads, rad (written by the harness each step).
 static COLUMN_RAD: StdMutex<f64> = StdMutex::new(0.0);
+/// A sensor fault the scenario injects (set from `at_period`).
+static INJECT: StdMutex<Inject> = StdMutex::new(Inject::None);
+/// One scenario at a time: the mock clock and the queues are shared by the whole binary.
+static SERIAL: StdMutex<()> = StdMutex::new(());
+/// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
+const RUNS: usize = 6;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Inject {
+    None,
+    /// The column encoder does not answer.
+    EncoderSilent,
+    /// The column encoder reads this much more than the column, deg (a slipping coupling).
+    EncoderOffsetDeg(f64),
+    /// The current sense reads this much more than the winding carries, A (an amplifier
+    /// offset).
+    CurrentBiasA(f32),
+}
+
+fn inject() -> Inject {
+    INJECT.lock().map(|v| *v).unwrap_or(Inject::None)
+}
 
 /// The bridge's DC supply, V (Table 2: 24 V).
 const SUPPLY_V: f64 = 24.0;
@@ -55,26 +77,32 @@ struct SimEncoder;
 impl ColumnEncoderPort for SimEncoder {
     async fn read(&mut self) -> Result<u16, EncoderError> {
         let rad = COLUMN_RAD.lock().map(|v| *v).unwrap_or(f64::NAN);
-        Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad))
+        match inject() {
+            Inject::EncoderSilent => Err(EncoderError::NoResponse),
+            Inject::EncoderOffsetDeg(d) => {
+                Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad + d.to_radians()))
+            }
+            _ => Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad)),
+        }
     }
 }
 
-#[embassy_executor::task]
+#[embassy_executor::task(pool_size = RUNS)]
 async fn reference(ecu: &'static SharedEcu) {
     tasks::reference_task(REFERENCE_FRAMES.receiver(), ecu).await
 }
 
-#[embassy_executor::task]
+#[embassy_executor::task(pool_size = RUNS)]
 async fn status(ecu: &'static SharedEcu) {
     tasks::status_task(TX_FRAMES.sender(), ecu).await
 }
 
-#[embassy_executor::task]
+#[embassy_executor::task(pool_size = RUNS)]
 async fn encoder(ecu: &'static SharedEcu) {
     tasks::encoder_task(&mut SimEncoder, ColumnEncoder { zero_raw: 0 }, ecu).await
 }
 
-#[embassy_executor::task]
+#[embassy_executor::task(pool_size = RUNS)]
 async fn keep_awake() {
     loop {
         embassy_futures::yield_now().await;
@@ -105,7 +133,13 @@ struct Sample {
 /// Runs the tasks for `script.len()` periods of 10 ms; `at_period` may act on the ECU (the
 /// clear request, which has no frame yet).
 fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample> {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     MockDriver::get().reset();
+    while REFERENCE_FRAMES.try_receive().is_ok() {}
+    while TX_FRAMES.try_receive().is_ok() {}
+    if let Ok(mut i) = INJECT.lock() {
+        *i = Inject::None;
+    }
     let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(
         Ecu::paper().unwrap(),
     ))));
@@ -176,8 +210,12 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
             let _ = truth.update(code_of(sector));
             let (high, low) = truth.driven_legs().unwrap();
             let mut phases = [Amps::ZERO; 3];
-            phases[high] = Amps(plant.current_a() as f32);
-            phases[low] = Amps(-plant.current_a() as f32);
+            let bias = match inject() {
+                Inject::CurrentBiasA(a) => a,
+                _ => 0.0,
+            };
+            phases[high] = Amps(plant.current_a() as f32 + bias);
+            phases[low] = Amps(-plant.current_a() as f32 - bias);
             let mut bridge = SimBridge(BRIDGE_OFF);
             ecu.lock(|e| {
                 fast.run(
@@ -278,4 +316,63 @@ fn steering_rules_end_to_end_on_the_firmware_tasks() {
     assert!(at(136).faults & (1 << Fault::InvalidFrames.bit()) != 0);
     assert_eq!(at(139).demand, DriveDemand::Disabled);
     assert!(s.iter().all(|x| x.current_a.abs() <= 20.0));
+}
+
+#[test]
+fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
+    // 0-9 AS Off, 10-99 AS Driving 5 deg; the fault is injected from period 30 on.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 5.0); 90]);
+    /// (what breaks, the injection for a period, the fault that must latch)
+    type Case = (&'static str, fn(usize) -> Inject, Fault);
+    let cases: [Case; 4] = [
+        ("encoder silent", |_| Inject::EncoderSilent, Fault::Encoder),
+        (
+            "encoder jumps 40 deg",
+            |_| Inject::EncoderOffsetDeg(40.0),
+            Fault::EncoderJump,
+        ),
+        (
+            // 0.4 deg per 10 ms = 40 deg/s: slower than the jump check; past the 15 deg
+            // window (on top of the belt's own lag) after about 0.4 s.
+            "coupling slips slowly",
+            |p| Inject::EncoderOffsetDeg(0.4 * (p - 29) as f64),
+            Fault::EncoderMotorDisagreement,
+        ),
+        (
+            // The current loop regulates the measured current within 20 A, so the winding
+            // carries -10 A and the column runs away: only the tracking check sees it (and
+            // then, with the bridge off, the over-current check sees the 30 A offset).
+            "current sense reads 30 A high",
+            |_| Inject::CurrentBiasA(30.0),
+            Fault::TrackingError,
+        ),
+    ];
+    for (name, injection, fault) in cases {
+        let s = run(&script, |period, _, _| {
+            if period >= 30
+                && let Ok(mut i) = INJECT.lock()
+            {
+                *i = injection(period);
+            }
+        });
+        assert_eq!(s[29].demand, DriveDemand::Track, "{name}: tracking before");
+        assert_eq!(s[29].faults, 0, "{name}: no fault before");
+        let at = (30..s.len())
+            .find(|&p| s[p].faults != 0)
+            .unwrap_or_else(|| panic!("{name}: nothing latched: {:?}", s[99]));
+        assert!(
+            s[at].faults & (1 << fault.bit()) != 0,
+            "{name}: {fault:?} is among the first faults latched: {:#x}",
+            s[at].faults
+        );
+        eprintln!(
+            "{name}: {fault:?} latched {} ms after the injection, column at {:.1} deg",
+            (at - 30) * 10,
+            s[at].column_deg
+        );
+        assert_eq!(s[at].demand, DriveDemand::Disabled, "{name}");
+        assert_eq!(s[99].state, EcuState::Faulted, "{name}: stays latched");
+        assert!(s[99].current_a.abs() < 0.5, "{name}: current taken to zero");
+    }
 }
