@@ -1,6 +1,7 @@
 //! The steering ECU's faults: what can go wrong ([`Fault`]), the latched set as it goes into the
 //! CAN status frame ([`FaultSet`]), and a fixed-size ring of fault records ([`FaultLog`]) that
-//! a diagnostic request reads back over CAN.
+//! keeps the detail of each (the code, the value that tripped it) for the defmt log and the
+//! debugger; it is not sent over CAN yet (the status frame carries the bits only).
 //!
 //! Detection, latching and clearing live in [`crate::steering`]; this module only names the
 //! faults and stores them. The bit positions below are the wire format of the status frame's

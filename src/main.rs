@@ -51,7 +51,7 @@ mod firmware {
     use steering_ecu::ecu::Ecu;
     use steering_ecu::ports::{BusError, CanRx, CanTx, ColumnEncoderPort, EncoderError};
     use steering_ecu::sensors::ColumnEncoder;
-    use steering_ecu::tasks::{self, FrameQueue, Route, RouterCounters, SharedEcu, route_frames};
+    use steering_ecu::tasks::{self, FrameQueue, Route, RouterCounters, SharedEcu};
 
     #[cfg(feature = "drive-direct")]
     mod bridge;
@@ -366,13 +366,16 @@ mod firmware {
         let receive = async {
             let mut counters = RouterCounters::default();
             let queues = [REFERENCE_FRAMES.sender(), DRIVE_FRAMES.sender()];
-            let end = route_frames(&mut rx, &FirmwareRoutes, &queues, &mut counters).await;
-            defmt::error!("CAN receive stopped: {}", end);
-            let tec = embassy_stm32::pac::CAN1.esr().read().tec();
-            let now = Instant::now().as_micros();
-            ecu.lock(|e| {
-                let _ = e.borrow_mut().on_bus_off(now, tec);
-            });
+            let end = tasks::receive_task(
+                &mut rx,
+                &FirmwareRoutes,
+                &queues,
+                &mut counters,
+                ecu,
+                || embassy_stm32::pac::CAN1.esr().read().tec(),
+            )
+            .await;
+            defmt::error!("CAN receive stopped: {} (faults latched)", end);
         };
         let transmit = async {
             loop {

@@ -176,6 +176,26 @@ pub async fn route_frames<R: Route>(
     }
 }
 
+/// The receive side of the bus: [`route_frames`] until the controller reports bus-off, then
+/// the bus-off fault into the state machine (`tec`: the transmit error counter, if the
+/// caller's peripheral gives one). Returns so the caller can keep the bus down.
+pub async fn receive_task<R: Route>(
+    rx: &mut impl CanRx,
+    routes: &R,
+    queues: &[FrameSender<'_>],
+    counters: &mut RouterCounters,
+    ecu: &SharedEcu,
+    tec: impl FnOnce() -> u8,
+) -> BusError {
+    let end = route_frames(rx, routes, queues, counters).await;
+    let now = now_us();
+    let tec = tec();
+    ecu.lock(|e| {
+        let _ = e.borrow_mut().on_bus_off(now, tec);
+    });
+    end
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -376,3 +376,49 @@ fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
         assert!(s[99].current_a.abs() < 0.5, "{name}: current taken to zero");
     }
 }
+
+/// The receive side of the bus: bus-off ends routing and latches the fault.
+#[test]
+fn bus_off_ends_reception_and_latches_the_fault() {
+    use steering_ecu::can::StandardId;
+    use steering_ecu::ports::{BusError, CanRx};
+    use steering_ecu::tasks::{Route, RouterCounters};
+
+    struct Script(std::vec::IntoIter<Result<Frame, BusError>>);
+    impl CanRx for Script {
+        async fn receive(&mut self) -> Result<Frame, BusError> {
+            self.0.next().unwrap_or(Err(BusError::BusOff))
+        }
+    }
+    struct AllToReference;
+    impl Route for AllToReference {
+        fn route(&self, _: &Frame) -> Option<usize> {
+            Some(0)
+        }
+    }
+
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let ecu = SharedEcu::new(RefCell::new(Ecu::paper().unwrap()));
+    let queue = FrameQueue::new();
+    let frame = Frame::new(StandardId::new(0x100).unwrap(), &[0; 8]).unwrap();
+    let mut rx = Script(vec![Ok(frame), Err(BusError::Overrun)].into_iter());
+    let mut counters = RouterCounters::default();
+    let end = embassy_futures::block_on(tasks::receive_task(
+        &mut rx,
+        &AllToReference,
+        &[queue.sender()],
+        &mut counters,
+        &ecu,
+        || 248,
+    ));
+    assert_eq!(end, BusError::BusOff);
+    assert_eq!((counters.routed, counters.bus_errors), (1, 1));
+    let out = ecu.lock(|e| e.borrow().output());
+    assert!(out.faults.contains(Fault::BusOff), "{:?}", out.faults);
+    assert_eq!(out.demand, DriveDemand::Disabled);
+    let record = ecu.lock(|e| e.borrow().machine().fault_log().iter().next().copied());
+    assert_eq!(
+        record.map(|r| (r.fault, r.detail)),
+        Some((Fault::BusOff, 248))
+    );
+}
