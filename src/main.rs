@@ -42,7 +42,7 @@ mod firmware {
     use embassy_stm32::peripherals::CAN1;
     use embassy_stm32::spi::{self, Spi};
     use embassy_stm32::time::Hertz;
-    use embassy_time::{Duration, Instant, Ticker, Timer};
+    use embassy_time::{Duration, Ticker, Timer};
     use static_cell::StaticCell;
     use steering_ecu::amt20;
     use steering_ecu::can::{Frame, StandardId};
@@ -298,7 +298,7 @@ mod firmware {
         #[cfg(feature = "drive-epos4")]
         let ecu: &'static SharedEcu = {
             let config = safety::epos4_config();
-            let now = Instant::now().as_micros();
+            let now = embassy_time::Instant::now().as_micros();
             let link = defmt::unwrap!(Epos4Link::new(config, now).ok());
             defmt::info!("drive: EPOS4 node {=u8}, CSP", config.node.raw());
             ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(
