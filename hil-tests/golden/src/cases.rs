@@ -30,7 +30,7 @@ impl Rng {
         Rng(seed | 1)
     }
 
-    pub fn next(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         self.0 ^= self.0 >> 12;
         self.0 ^= self.0 << 25;
         self.0 ^= self.0 >> 27;
@@ -38,12 +38,12 @@ impl Rng {
     }
 
     pub fn below(&mut self, n: u32) -> u32 {
-        ((self.next() >> 32) % u64::from(n.max(1))) as u32
+        ((self.next_u64() >> 32) % u64::from(n.max(1))) as u32
     }
 
     /// Any bit pattern half the time (NaN, infinities, subnormals), else uniform in +-`span`.
     pub fn f32(&mut self, span: f32) -> f32 {
-        let bits = self.next();
+        let bits = self.next_u64();
         if bits & 1 == 0 {
             f32::from_bits((bits >> 32) as u32)
         } else {
@@ -52,7 +52,7 @@ impl Rng {
     }
 
     pub fn bytes(&mut self) -> [u8; 8] {
-        self.next().to_le_bytes()
+        self.next_u64().to_le_bytes()
     }
 }
 
@@ -209,46 +209,42 @@ fn arbitrary_frame(rng: &mut Rng, id: StandardId) -> Frame {
     Frame::new(id, &data[..len]).unwrap_or(Frame::from_bytes(id, data))
 }
 
-fn reference_case(rng: &mut Rng, w: &mut CaseWriter) {
-    let cfg = ProtocolConfig::DEFAULT;
-    let frame = match rng.below(3) {
-        0 => {
-            let reference = Reference {
-                angle: SteeringDeg(rng.f32(200.0)),
-                as_state: as_state(rng.below(8)),
-                counter: AliveCounter::wrapping(rng.below(256) as u8),
-                clear_faults: rng.below(2) == 1,
-            };
-            cfg.encode_reference(&reference)
-        }
-        1 => arbitrary_frame(rng, cfg.reference_id),
+/// A third each: an encoded message, any payload on the codec's own ID, anything on any ID.
+fn codec_frame(rng: &mut Rng, own_id: StandardId, encode: fn(&mut Rng) -> Frame) -> Frame {
+    match rng.below(3) {
+        0 => encode(rng),
+        1 => arbitrary_frame(rng, own_id),
         _ => {
             let raw = rng.below(0x800);
             arbitrary_frame(rng, id(raw))
         }
-    };
+    }
+}
+
+fn reference_case(rng: &mut Rng, w: &mut CaseWriter) {
+    let cfg = ProtocolConfig::DEFAULT;
+    let frame = codec_frame(rng, cfg.reference_id, |rng| {
+        ProtocolConfig::DEFAULT.encode_reference(&Reference {
+            angle: SteeringDeg(rng.f32(200.0)),
+            as_state: as_state(rng.below(8)),
+            counter: AliveCounter::wrapping(rng.below(256) as u8),
+            clear_faults: rng.below(2) == 1,
+        })
+    });
     out!(w, frame, cfg.decode_reference(&frame));
 }
 
 fn status_case(rng: &mut Rng, w: &mut CaseWriter) {
     let cfg = ProtocolConfig::DEFAULT;
-    let frame = match rng.below(3) {
-        0 => {
-            let status = Status {
-                angle: SteeringDeg(rng.f32(400.0)),
-                current: Amps(rng.f32(60.0)),
-                ecu_state: rng.below(256) as u8,
-                faults: rng.below(0x1_0000) as u16,
-                counter: AliveCounter::wrapping(rng.below(256) as u8),
-            };
-            cfg.encode_status(&status)
-        }
-        1 => arbitrary_frame(rng, cfg.status_id),
-        _ => {
-            let raw = rng.below(0x800);
-            arbitrary_frame(rng, id(raw))
-        }
-    };
+    let frame = codec_frame(rng, cfg.status_id, |rng| {
+        ProtocolConfig::DEFAULT.encode_status(&Status {
+            angle: SteeringDeg(rng.f32(400.0)),
+            current: Amps(rng.f32(60.0)),
+            ecu_state: rng.below(256) as u8,
+            faults: rng.below(0x1_0000) as u16,
+            counter: AliveCounter::wrapping(rng.below(256) as u8),
+        })
+    });
     out!(w, frame, cfg.decode_status(&frame));
 }
 
@@ -413,11 +409,11 @@ fn arbitrary_cascade_cases(cases: u32, rng: &mut Rng, done: &mut impl FnMut(u32,
     for i in 0..cases {
         let mut w = CaseWriter::new();
         for k in 0..1000u32 {
-            match rng.next() % 8 {
+            match rng.next_u64() % 8 {
                 0 => out!(w, c.push_reference(SteeringDeg(rng.f32(120.0)))),
-                1 => out!(w, c.position_step(rng.next() as i32)),
+                1 => out!(w, c.position_step(rng.next_u64() as i32)),
                 2 => out!(w, c.position_step_at(MotorRad(rng.f32(200.0)))),
-                3 if k % 500 == 3 => c.reset(rng.next() as i32),
+                3 if k % 500 == 3 => c.reset(rng.next_u64() as i32),
                 4 if k % 500 == 4 => {
                     let mut g = EposGains::PAPER;
                     g.position_kd_ma_s_per_rad = rng.f32(1000.0);
