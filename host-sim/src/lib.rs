@@ -4,6 +4,7 @@ pub mod analysis;
 pub mod canbus;
 pub mod epos4_sim;
 pub mod gap;
+pub mod golden;
 pub mod logfmt;
 pub mod plant;
 pub mod plot;

@@ -77,6 +77,13 @@ enum Command {
     Gap(host_sim::gap::cli::GapArgs),
     /// The nine parameters of Table 4 fitted to a log by nonlinear least squares (sec. 4.3).
     Identify(host_sim::gap::cli::IdentifyArgs),
+    /// Golden vectors for the emulated Cortex-M4F suite (hil-tests/emulated): a sweep and a
+    /// track window of the closed loop, and the codec and state-machine cases.
+    Golden {
+        /// Write the files into this directory (the stored ones: hil-tests/vectors).
+        #[arg(long, value_name = "DIR")]
+        write: PathBuf,
+    },
 }
 
 #[derive(Args, Debug)]
@@ -200,6 +207,12 @@ fn dispatch(command: Command) -> Result<()> {
         Command::Bench { repeats, json } => bench(repeats.max(1), json.as_deref()),
         Command::Gap(args) => host_sim::gap::cli::gap(&args),
         Command::Identify(args) => host_sim::gap::cli::identify(&args),
+        Command::Golden { write } => {
+            for v in host_sim::golden::write(&write)? {
+                say!("{}: {} B", write.join(v.name).display(), v.bytes.len());
+            }
+            Ok(())
+        }
     }
 }
 

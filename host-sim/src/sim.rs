@@ -10,14 +10,15 @@
 use crate::logfmt::{Log, Row};
 use crate::plant::{Actuator, LinearPlant, PlantError, PlantParams};
 use steering_ecu::control::AntiWindup;
-use steering_ecu::control::current::CurrentStatus;
-use steering_ecu::control::position::PositionStatus;
+use steering_ecu::control::current::{CurrentOutput, CurrentStatus};
+use steering_ecu::control::position::{PositionOutput, PositionStatus};
 use steering_ecu::gains::{EposGains, GainError};
 use steering_ecu::gearing::Gearing;
 use steering_ecu::paper_mode::{
     CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, Cascade, POSITION_LOOP_HZ,
     POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ,
 };
+use steering_ecu::reference::ReferenceError;
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
 use steering_ecu::units::{Amps, MotorRad, SteeringDeg, Volts};
 
@@ -105,9 +106,37 @@ impl std::fmt::Display for SimError {
 
 impl std::error::Error for SimError {}
 
+/// Sees every input the cascade gets and every output it gives, in call order (the golden
+/// vectors of `golden.rs` are recorded through it).
+pub trait Tap {
+    /// The cascade was reset to this Hall count, before the first sample.
+    fn reset(&mut self, hall: i32);
+    fn reference(&mut self, deg: f32, result: Result<(), ReferenceError>);
+    fn position(&mut self, hall: i32, out: &PositionOutput);
+    fn current(&mut self, measured: Amps, out: &CurrentOutput);
+}
+
+struct NoTap;
+
+impl Tap for NoTap {
+    fn reset(&mut self, _: i32) {}
+    fn reference(&mut self, _: f32, _: Result<(), ReferenceError>) {}
+    fn position(&mut self, _: i32, _: &PositionOutput) {}
+    fn current(&mut self, _: Amps, _: &CurrentOutput) {}
+}
+
 /// Run the closed loop over a reference sampled at 100 Hz (deg at the wheel; sample `n` at
 /// `t = n / 100 s`), starting at rest at the first sample.
 pub fn run(reference_deg: &[f64], cfg: &RunConfig) -> Result<Run, SimError> {
+    run_tapped(reference_deg, cfg, &mut NoTap)
+}
+
+/// [`run`], with every cascade call shown to `tap` (Hall feedback only: the tap sees Hall counts).
+pub fn run_tapped(
+    reference_deg: &[f64],
+    cfg: &RunConfig,
+    tap: &mut impl Tap,
+) -> Result<Run, SimError> {
     let first = *reference_deg.first().ok_or(SimError::EmptyReference)?;
     let log_every = match cfg.log_rate_hz {
         0 => None,
@@ -142,6 +171,7 @@ pub fn run(reference_deg: &[f64], cfg: &RunConfig) -> Result<Run, SimError> {
 
     plant.set_at_rest(first.to_radians());
     cascade.reset(hall_from_motor(plant.motor_rad()));
+    tap.reset(hall_from_motor(plant.motor_rad()));
 
     let mut log = match log_every {
         Some(_) => Log::with_extra_columns(&SIM_EXTRA_COLUMNS),
@@ -154,13 +184,17 @@ pub fn run(reference_deg: &[f64], cfg: &RunConfig) -> Result<Run, SimError> {
     let dt_position = 1.0 / POSITION_LOOP_HZ as f64;
 
     for &sample in reference_deg {
-        if cascade.push_reference(SteeringDeg(sample as f32)).is_err() {
+        let pushed = cascade.push_reference(SteeringDeg(sample as f32));
+        tap.reference(sample as f32, pushed);
+        if pushed.is_err() {
             summary.rejected_references += 1;
         }
         for _ in 0..POSITION_TICKS_PER_REFERENCE {
             let hall = hall_from_motor(plant.motor_rad());
             let pos = if cfg.hall_feedback {
-                cascade.position_step(hall)
+                let pos = cascade.position_step(hall);
+                tap.position(hall, &pos);
+                pos
             } else {
                 cascade.position_step_at(MotorRad(plant.motor_rad() as f32))
             };
@@ -169,7 +203,9 @@ pub fn run(reference_deg: &[f64], cfg: &RunConfig) -> Result<Run, SimError> {
             }
             let mut voltage = 0.0f64;
             for _ in 0..CURRENT_TICKS_PER_POSITION_TICK {
-                let out = cascade.current_step(Amps(plant.current_a() as f32));
+                let measured = Amps(plant.current_a() as f32);
+                let out = cascade.current_step(measured);
+                tap.current(measured, &out);
                 if matches!(
                     out.status,
                     CurrentStatus::Saturated | CurrentStatus::CurrentLimited
