@@ -615,6 +615,13 @@ impl SteeringStateMachine {
         self.output()
     }
 
+    /// An over-current run is open: the last current sample was beyond the threshold (or not
+    /// a number), so the next sample must go through [`SteeringStateMachine::on_current`]
+    /// even if it is within.
+    pub fn overcurrent_pending(&self) -> bool {
+        self.overcurrent_count > 0 || self.active.contains(Fault::OverCurrent)
+    }
+
     /// The drive is off (or has no reference): no tracking error can be present.
     pub fn on_not_tracking(&mut self, now_us: u64) -> Output {
         self.advance(now_us);
