@@ -19,7 +19,7 @@
 
 use crate::can::Frame;
 use crate::paper_mode::Cascade;
-use crate::protocol::{AliveCounter, E2eChecker, E2eVerdict, ProtocolConfig, Status};
+use crate::protocol::{AliveCounter, E2eChecker, E2eVerdict, MotorStatus, ProtocolConfig, Status};
 use crate::sensors::motor_from_hall;
 use crate::steering::{Config, DriveDemand, Output, SteeringStateMachine};
 use crate::units::{Amps, SteeringDeg, Volts};
@@ -36,6 +36,10 @@ pub struct Ecu {
     column: SteeringDeg,
     current: Amps,
     clear_refusals: u16,
+    motor_counter: AliveCounter,
+    /// Measured current summed since the last motor frame, A, and the number of samples.
+    current_sum: f32,
+    current_samples: u32,
 }
 
 impl Ecu {
@@ -55,6 +59,9 @@ impl Ecu {
             column: SteeringDeg(f32::NAN),
             current: Amps(f32::NAN),
             clear_refusals: 0,
+            motor_counter: AliveCounter::wrapping(0),
+            current_sum: 0.0,
+            current_samples: 0,
         })
     }
 
@@ -162,6 +169,8 @@ impl Ecu {
     /// measured current also feeds the over-current check.
     pub fn current_tick(&mut self, now_us: u64, measured: Amps) -> Option<Volts> {
         self.current = measured;
+        self.current_sum += measured.0;
+        self.current_samples = self.current_samples.saturating_add(1);
         let out = self.machine.on_current(now_us, measured);
         let out = self.apply(out);
         match out.demand {
@@ -181,6 +190,25 @@ impl Ecu {
             ecu_state: self.last.state.code(),
             faults: self.last.faults.bits(),
             counter: self.status_counter,
+        })
+    }
+
+    /// The next motor frame (call once per status period, after [`Ecu::status_frame`]): the
+    /// motor angle of the last position tick and the mean measured current since the last
+    /// motor frame (NaN when no current sample came, or one was not a number).
+    pub fn motor_frame(&mut self) -> Frame {
+        self.motor_counter = self.motor_counter.next();
+        let current_mean = if self.current_samples == 0 {
+            Amps(f32::NAN)
+        } else {
+            Amps(self.current_sum / self.current_samples as f32)
+        };
+        self.current_sum = 0.0;
+        self.current_samples = 0;
+        self.protocol.encode_motor(&MotorStatus {
+            angle: motor_from_hall(self.hall_count),
+            current_mean,
+            counter: self.motor_counter,
         })
     }
 }
