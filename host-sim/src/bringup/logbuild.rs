@@ -1,0 +1,232 @@
+//! A recording (reference, status and motor frames with their times) as a log in the project's
+//! format: one row per reference period, `t,ref_sw_deg,sw_deg,motor_rad,current_a`, plus
+//! `as_state`, `ecu_state` and `faults` columns.
+//!
+//! Timing, so that a log means what a simulated one means (`host-sim gap` runs the log's
+//! reference through the model and compares each 10 ms period's mean output with the log):
+//!
+//! - The time axis is the reference grid: reference `k` (counted from the first, lost frames
+//!   leave a gap) is the row at `t = k x 10 ms + 5 ms`, the middle of the period it is in
+//!   force, whatever the jitter of the sender.
+//! - The ECU pushes a sample into its interpolator when the frame arrives, one frame time
+//!   after it was sent ([`BUS_LATENCY_US`]), and the model averages over the period after the
+//!   push. Each signal is read from the ECU's frames at the moment the model's average is
+//!   centred on, and each frame's value is dated when the ECU measured it rather than when
+//!   the frame arrived:
+//!
+//! ```text
+//! signal      | frame | measured at                          | model's period mean centred
+//! ------------+-------+--------------------------------------+------------------------------
+//! sw_deg      | 0x101 | the previous 2 ms encoder tick:      | push + 5.25 ms (sampled after
+//!             |       | 2 ms before the frame (the status    | each 0.5 ms position tick)
+//!             |       | task runs first at the shared tick)  |
+//! motor_rad   | 0x102 | the last 0.5 ms position tick:       | push + 4.75 ms (sampled before
+//!             |       | 0.25 ms before on average            | each position tick)
+//! current_a   | 0x102 | mean over the 10 ms status period:   | push + 5 ms
+//!             |       | its middle, 5 ms before              |
+//! ```
+//!
+//! Without motor frames (an older firmware), `motor_rad` is `nan` and the current comes from
+//! the status frame (one sample, 20 mA); the notes say so.
+
+use super::decode::{Decoded, Decoder};
+use super::{BringupError, Stamped};
+use crate::logfmt::{Log, Row};
+use steering_ecu::as_state::AsState;
+use steering_ecu::protocol::PERIOD_US;
+
+/// One 8-byte frame on the bus at 1 Mbit/s with stuff bits, µs.
+pub const BUS_LATENCY_US: u64 = 130;
+/// Age of the column-encoder sample in a status frame, µs (one 2 ms encoder period).
+pub const ENCODER_AGE_US: u64 = 2_000;
+/// Age of the motor angle in a motor frame, µs (half the 0.5 ms position period).
+pub const MOTOR_AGE_US: u64 = 250;
+/// Age of the mean current in a motor frame, µs (half the 10 ms status period).
+pub const CURRENT_AGE_US: u64 = PERIOD_US as u64 / 2;
+/// Where the model's period means are centred after the push, µs (see the table above).
+const SW_CENTRE_US: f64 = 5_250.0;
+const MOTOR_CENTRE_US: f64 = 4_750.0;
+const CURRENT_CENTRE_US: f64 = 5_000.0;
+
+/// Which reference periods become rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rows {
+    /// Every reference frame.
+    All,
+    /// Only frames claiming AS Ready or Driving (the drive may be powered).
+    Active,
+}
+
+/// The log and what went into it.
+#[derive(Debug, Clone)]
+pub struct Built {
+    pub log: Log,
+    pub references: usize,
+    pub invalid_frames: usize,
+    /// Rows dropped at the ends, outside the span the ECU's frames cover.
+    pub uncovered: usize,
+    pub notes: Vec<String>,
+}
+
+/// A time series of one signal, sample times in µs, sorted.
+#[derive(Debug, Default)]
+struct Series {
+    t: Vec<f64>,
+    v: Vec<f64>,
+}
+
+impl Series {
+    fn push(&mut self, t_us: u64, age_us: u64, v: f64) {
+        let t = t_us as f64 - age_us as f64;
+        // Frames come in order; a late one (bus delay) is kept out of order-sensitive search.
+        if self.t.last().is_none_or(|last| t > *last) {
+            self.t.push(t);
+            self.v.push(v);
+        }
+    }
+
+    fn covers(&self, t: f64) -> bool {
+        matches!((self.t.first(), self.t.last()), (Some(a), Some(b)) if *a <= t && t <= *b)
+    }
+
+    /// Linear interpolation; `None` outside the span.
+    fn at(&self, t: f64) -> Option<f64> {
+        if !self.covers(t) {
+            return None;
+        }
+        let j = self.t.partition_point(|x| *x < t);
+        if j == 0 {
+            return Some(self.v[0]);
+        }
+        let (t0, t1) = (self.t[j - 1], self.t[j]);
+        let s = if t1 > t0 { (t - t0) / (t1 - t0) } else { 1.0 };
+        Some(self.v[j - 1] + s * (self.v[j] - self.v[j - 1]))
+    }
+
+    /// The last sample at or before `t` (states and fault bits are not interpolated).
+    fn before(&self, t: f64) -> Option<f64> {
+        let j = self.t.partition_point(|x| *x <= t);
+        (j > 0).then(|| self.v[j - 1])
+    }
+}
+
+/// The log of `frames` (in time order), rows per `rows`.
+pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built, BringupError> {
+    let mut refs: Vec<(u64, f64, AsState)> = Vec::new();
+    let (mut sw, mut status_current, mut state, mut faults) = (
+        Series::default(),
+        Series::default(),
+        Series::default(),
+        Series::default(),
+    );
+    let (mut motor, mut current) = (Series::default(), Series::default());
+    let mut invalid = 0;
+    for f in frames {
+        match decoder.decode(&f.frame) {
+            Decoded::Reference(Ok(r)) => refs.push((f.t_us, f64::from(r.angle.0), r.as_state)),
+            Decoded::Status(Ok(s)) => {
+                let sent = f.t_us.saturating_sub(BUS_LATENCY_US);
+                sw.push(sent, ENCODER_AGE_US, f64::from(s.angle.0));
+                status_current.push(sent, 0, f64::from(s.current.0));
+                state.push(sent, 0, f64::from(s.ecu_state));
+                faults.push(sent, 0, f64::from(s.faults));
+            }
+            Decoded::Motor(Ok(m)) => {
+                let sent = f.t_us.saturating_sub(BUS_LATENCY_US);
+                motor.push(sent, MOTOR_AGE_US, f64::from(m.angle.0));
+                current.push(sent, CURRENT_AGE_US, f64::from(m.current_mean.0));
+            }
+            Decoded::Reference(Err(_)) | Decoded::Status(Err(_)) | Decoded::Motor(Err(_)) => {
+                invalid += 1
+            }
+            _ => {}
+        }
+    }
+    if sw.t.is_empty() {
+        return Err(BringupError::Log {
+            reason: "no valid status frame (0x101) in the recording".into(),
+        });
+    }
+    if refs.is_empty() {
+        return Err(BringupError::Log {
+            reason: "no valid reference frame (0x100) in the recording".into(),
+        });
+    }
+    let mut notes = Vec::new();
+    let have_motor = !motor.t.is_empty();
+    if !have_motor {
+        notes.push(
+            "no motor frame (0x102): motor_rad is nan and current_a is the status frame's \
+             single sample (20 mA); update the ECU firmware"
+                .to_string(),
+        );
+    }
+    let period = PERIOD_US as f64;
+    let mut log = Log::with_extra_columns(&["as_state", "ecu_state", "faults"]);
+    let first_us = refs[0].0 as f64;
+    let mut last_k: Option<u64> = None;
+    let mut origin_k: Option<u64> = None;
+    let mut uncovered = 0;
+    for &(t_us, angle, as_state) in &refs {
+        if rows == Rows::Active && !as_state.actuator_may_be_powered() {
+            continue;
+        }
+        // The period this sample belongs to, on the sender's 10 ms grid.
+        let k = ((t_us as f64 - first_us) / period).round().max(0.0) as u64;
+        if last_k.is_some_and(|last| k <= last) {
+            continue; // two frames in one period: the first one counts
+        }
+        let push = t_us as f64 + BUS_LATENCY_US as f64;
+        let values = if have_motor {
+            (
+                sw.at(push + SW_CENTRE_US),
+                motor.at(push + MOTOR_CENTRE_US),
+                current.at(push + CURRENT_CENTRE_US),
+            )
+        } else {
+            (
+                sw.at(push + SW_CENTRE_US),
+                Some(f64::NAN),
+                status_current.at(push + CURRENT_CENTRE_US),
+            )
+        };
+        let (Some(sw_deg), Some(motor_rad), Some(current_a)) = values else {
+            uncovered += 1;
+            continue;
+        };
+        last_k = Some(k);
+        let k0 = *origin_k.get_or_insert(k);
+        let mid = push + CURRENT_CENTRE_US;
+        log.push(
+            Row {
+                t: ((k - k0) as f64 * period + period / 2.0) * 1e-6,
+                ref_sw_deg: angle,
+                sw_deg,
+                motor_rad,
+                current_a,
+            },
+            &[
+                f64::from(as_state.code()),
+                state.before(mid).unwrap_or(f64::NAN),
+                faults.before(mid).unwrap_or(f64::NAN),
+            ],
+        );
+    }
+    if log.is_empty() {
+        return Err(BringupError::Log {
+            reason: match rows {
+                Rows::Active => {
+                    "no reference in AS Ready or Driving while the ECU was reporting".into()
+                }
+                Rows::All => "no reference while the ECU was reporting".into(),
+            },
+        });
+    }
+    Ok(Built {
+        log,
+        references: refs.len(),
+        invalid_frames: invalid,
+        uncovered,
+        notes,
+    })
+}
