@@ -49,11 +49,13 @@ const SETTLE_S: f64 = 0.5;
 const FINISH_S: f64 = 0.2;
 
 /// What the ready check saw.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Ready {
     pub status: Status,
     /// A motor frame (0x102) came too: the log will have `motor_rad`.
     pub motor_frames: bool,
+    /// The frames seen while checking: the start of the recording.
+    pub frames: Vec<Stamped>,
 }
 
 /// Waits for the ECU and checks it may be driven.
@@ -65,7 +67,9 @@ pub fn ready_check(
     let mut status = None;
     let mut motor = false;
     let mut other_sender = false;
+    let mut frames = Vec::new();
     pump(transport, start + READY_WAIT_US, |rx| {
+        frames.push(*rx);
         match decoder.decode(&rx.frame) {
             Decoded::Status(Ok(s)) => status = Some(s),
             Decoded::Motor(Ok(_)) => motor = true,
@@ -114,6 +118,7 @@ pub fn ready_check(
     Ok(Ready {
         status,
         motor_frames: motor,
+        frames,
     })
 }
 
@@ -249,7 +254,7 @@ impl Campaign {
         let plan = self.plan(f64::from(ready.status.angle.0));
         let mut sender = ReferenceSender::default();
         let mut monitor = Monitor::new(*decoder);
-        let mut frames: Vec<Stamped> = Vec::new();
+        let mut frames: Vec<Stamped> = ready.frames.clone();
         let start = transport.now_us();
         let at_s = |t: u64| (t.saturating_sub(start)) as f64 * 1e-6;
         let mut last_status_us = start;

@@ -61,10 +61,12 @@ impl Profile {
         let samples = raw
             .iter()
             .map(|&v| {
-                let next = prev + (v - prev).clamp(-step, step);
-                if next != v {
+                let next = if (v - prev).abs() <= step {
+                    v
+                } else {
                     limited += 1;
-                }
+                    prev + (v - prev).clamp(-step, step)
+                };
                 prev = next;
                 next
             })
