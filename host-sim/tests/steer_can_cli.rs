@@ -92,6 +92,30 @@ fn send_step_moves_the_wheel_and_ends_with_the_drive_disabled() {
 }
 
 #[test]
+fn send_without_finish_leaves_the_ecu_to_time_out() {
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "send",
+        "--as-state",
+        "driving",
+        "--no-finish",
+        "step",
+        "--amplitude-deg",
+        "0",
+        "--duration-s",
+        "0.5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("state faulted, faults: reference timeout"),
+        "{out}"
+    );
+    assert!(out.contains("reference 0x100"), "own frames counted: {out}");
+}
+
+#[test]
 fn send_needs_the_as_state_said() {
     let o = steer_can(&["--iface", "sim", "send", "sine"]);
     assert!(!o.status.success());

@@ -69,6 +69,9 @@ pub enum Command {
         /// The AS state the frames claim: off, ready, driving, finished, emergency, manual.
         #[arg(long, value_parser = parse_as_state)]
         as_state: Option<AsState>,
+        /// Stop sending at the end instead of 0.2 s of AS Finished (to see the timeout fault).
+        #[arg(long)]
+        no_finish: bool,
         #[command(subcommand)]
         profile: SendProfile,
     },
@@ -294,9 +297,13 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
             say!("{}", report.text().trim_end());
             Ok(ExitCode::SUCCESS)
         }
-        Command::Send { as_state, profile } => {
+        Command::Send {
+            as_state,
+            no_finish,
+            profile,
+        } => {
             let mut t = open(&cli)?;
-            send(t.as_mut(), &dec, *as_state, profile)?;
+            send(t.as_mut(), &dec, *as_state, !*no_finish, profile)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Record { out, duration_s } => {
@@ -603,6 +610,7 @@ fn send(
     t: &mut dyn Transport,
     dec: &Decoder,
     as_state: Option<AsState>,
+    finish: bool,
     which: &SendProfile,
 ) -> Result<(), BringupError> {
     let stop = stop_flag();
@@ -656,7 +664,12 @@ fn send(
             eprintln!("\ninterrupted");
             break;
         }
-        t.send(&sender.frame(angle, as_state, clear))?;
+        let frame = sender.frame(angle, as_state, clear);
+        t.send(&frame)?;
+        m.on_frame(&super::Stamped {
+            t_us: t.now_us(),
+            frame,
+        });
         last = angle;
         let (column, current, faults) = m
             .last_status
@@ -672,7 +685,7 @@ fn send(
         next = next.max(t.now_us()) + PERIOD_US as u64;
     }
     eprintln!();
-    if as_state.actuator_may_be_powered() {
+    if finish && as_state.actuator_may_be_powered() {
         // Leave the drive disabled rather than timing out: 0.2 s of AS Finished.
         for _ in 0..20 {
             pump(t, next, |rx| {
@@ -684,7 +697,9 @@ fn send(
         }
         eprintln!("AS Finished sent for 0.2 s: the drive is disabled");
     }
-    pump(t, next + 3 * PERIOD_US as u64, |rx| {
+    // Without the finish, long enough for the reference timeout to latch (30 + 100 ms).
+    let tail = if finish { 3 } else { 20 };
+    pump(t, next + tail * PERIOD_US as u64, |rx| {
         m.on_frame(rx);
         true
     })?;
