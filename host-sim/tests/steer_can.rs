@@ -282,3 +282,34 @@ fn monitor_counts_frames_crc_errors_and_lost_frames() {
     );
     assert!(m.summary().contains("faults: none"));
 }
+
+#[test]
+fn track_campaign_from_csv_runs_the_profile_it_was_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("track.csv");
+    // 3 s: hold, a 15 deg turn over 1 s, hold; sampled at 50 Hz (resampled to 100 Hz).
+    let mut text = String::from("t,ref_sw_deg\n");
+    for k in 0..=150 {
+        let t = k as f64 * 0.02;
+        let a = 15.0 * ((t - 1.0).clamp(0.0, 1.0));
+        text.push_str(&format!("{t:.2},{a:.4}\n"));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let mut sim = SimEcu::paper();
+    let dec = decoder();
+    let ready = campaign::ready_check(&mut sim, &dec).unwrap();
+    let c = campaign(profile::track(Some(&csv)).unwrap());
+    assert_eq!(c.profile.rate_limited, 0, "15 deg/s is far below 400 deg/s");
+    let run = c.run(&mut sim, &dec, &ready, |_| {}).unwrap();
+    assert_eq!(run.aborted, None);
+    assert_eq!(run.profile_samples_sent, c.profile.samples.len());
+    let built = run.log(&dec).unwrap();
+    let end = built.log.len() - 1;
+    assert!((built.log.ref_sw_deg[end] - 15.0).abs() < 1e-3);
+    assert!(
+        (built.log.sw_deg[end] - 15.0).abs() < 0.3,
+        "column at the end {} deg",
+        built.log.sw_deg[end]
+    );
+    assert_eq!(sim.output().demand, DriveDemand::Disabled);
+}

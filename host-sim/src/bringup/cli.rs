@@ -249,13 +249,12 @@ fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     }
 }
 
-fn decoder(node: NodeId) -> Decoder {
+fn decoder(node: NodeId) -> Result<Decoder, BringupError> {
     let counts = Epos4Config::paper(node).counts_per_rev;
-    let scale = PositionScale::new(counts).unwrap_or_else(|| {
-        // 84 increments per revolution is a non-zero constant of the paper configuration.
-        unreachable!("the paper configuration has a non-zero resolution")
-    });
-    Decoder::new(node, scale)
+    let scale = PositionScale::new(counts).ok_or_else(|| BringupError::Epos {
+        reason: format!("{counts} position increments per revolution"),
+    })?;
+    Ok(Decoder::new(node, scale))
 }
 
 fn stop_flag() -> Arc<AtomicBool> {
@@ -270,7 +269,7 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
     let node = NodeId::new(cli.node).ok_or_else(|| BringupError::Profile {
         reason: format!("--node {}: a CANopen node ID is 1 to 127", cli.node),
     })?;
-    let dec = decoder(node);
+    let dec = decoder(node)?;
     match &cli.command {
         Command::Convert {
             candump: path,

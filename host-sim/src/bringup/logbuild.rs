@@ -26,8 +26,10 @@
 //!             |       | its middle, 5 ms before              |
 //! ```
 //!
-//! Without motor frames (an older firmware), `motor_rad` is `nan` and the current comes from
-//! the status frame (one sample, 20 mA); the notes say so.
+//! Without motor frames, in EPOS4 mode, the motor angle and current are the drive's TPDO1
+//! position (0x6064) and TPDO2 current (0x30D1), dated when they arrived (the drive samples
+//! them at the SYNC just before). Without either (an older firmware), `motor_rad` is `nan` and
+//! the current comes from the status frame (one sample, 20 mA). The notes say which.
 
 use super::decode::{Decoded, Decoder};
 use super::{BringupError, Stamped};
@@ -120,6 +122,8 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
         Series::default(),
     );
     let (mut motor, mut current) = (Series::default(), Series::default());
+    // EPOS4 mode: the drive's own position (TPDO1) and current (TPDO2), if no motor frame.
+    let (mut epos_motor, mut epos_current) = (Series::default(), Series::default());
     let mut invalid = 0;
     for f in frames {
         match decoder.decode(&f.frame) {
@@ -135,6 +139,12 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
                 let sent = f.t_us.saturating_sub(BUS_LATENCY_US);
                 motor.push(sent, MOTOR_AGE_US, f64::from(m.angle.0));
                 current.push(sent, CURRENT_AGE_US, f64::from(m.current_mean.0));
+            }
+            Decoded::EposTpdo1 { motor_rad, .. } => {
+                epos_motor.push(f.t_us.saturating_sub(BUS_LATENCY_US), 0, motor_rad)
+            }
+            Decoded::EposTpdo2 { current_a } => {
+                epos_current.push(f.t_us.saturating_sub(BUS_LATENCY_US), 0, current_a)
             }
             Decoded::Reference(Err(_)) | Decoded::Status(Err(_)) | Decoded::Motor(Err(_)) => {
                 invalid += 1
@@ -153,11 +163,21 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
         });
     }
     let mut notes = Vec::new();
+    let from_epos = motor.t.is_empty() && !epos_motor.t.is_empty() && !epos_current.t.is_empty();
+    if from_epos {
+        notes.push(
+            "no motor frame (0x102): motor_rad and current_a are the EPOS4's TPDO1 position \
+             and TPDO2 current (EPOS4 mode), dated when they arrived"
+                .to_string(),
+        );
+        motor = epos_motor;
+        current = epos_current;
+    }
     let have_motor = !motor.t.is_empty();
     if !have_motor {
         notes.push(
-            "no motor frame (0x102): motor_rad is nan and current_a is the status frame's \
-             single sample (20 mA); update the ECU firmware"
+            "no motor frame (0x102) and no EPOS4 PDOs: motor_rad is nan and current_a is the \
+             status frame's single sample (20 mA); update the ECU firmware"
                 .to_string(),
         );
     }
@@ -229,4 +249,77 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
         uncovered,
         notes,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use steering_ecu::can::{Frame, StandardId};
+    use steering_ecu::canopen::NodeId;
+    use steering_ecu::canopen::epos4::PositionScale;
+    use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference, Status};
+    use steering_ecu::units::{Amps, SteeringDeg};
+
+    fn frames(with_epos: bool) -> Vec<Stamped> {
+        let cfg = ProtocolConfig::DEFAULT;
+        let mut out = Vec::new();
+        for k in 0..20u64 {
+            let c = AliveCounter::wrapping(k as u8);
+            out.push(Stamped {
+                t_us: k * 10_000,
+                frame: cfg.encode_reference(&Reference {
+                    angle: SteeringDeg(1.0),
+                    as_state: AsState::Driving,
+                    counter: c,
+                    clear_faults: false,
+                }),
+            });
+            out.push(Stamped {
+                t_us: k * 10_000 + 3_000,
+                frame: cfg.encode_status(&Status {
+                    angle: SteeringDeg(1.0),
+                    current: Amps(0.5),
+                    ecu_state: 2,
+                    faults: 0,
+                    counter: c,
+                }),
+            });
+            if with_epos {
+                let mut tpdo1 = vec![0x37, 0x02];
+                tpdo1.extend_from_slice(&42i32.to_le_bytes()); // half a turn at 84 inc/rev
+                let tpdo2 = 1500i32.to_le_bytes(); // mA
+                for (id, data) in [(0x181u16, &tpdo1[..]), (0x281, &tpdo2[..])] {
+                    out.push(Stamped {
+                        t_us: k * 10_000 + 1_000,
+                        frame: Frame::new(StandardId::new(id).unwrap(), data).unwrap(),
+                    });
+                }
+            }
+        }
+        out.sort_by_key(|f| f.t_us);
+        out
+    }
+
+    fn decoder() -> Decoder {
+        Decoder::new(NodeId::new(1).unwrap(), PositionScale::new(84).unwrap())
+    }
+
+    #[test]
+    fn epos4_pdos_stand_in_for_the_motor_frame() {
+        let built = build(&frames(true), &decoder(), Rows::Active).unwrap();
+        assert!(built.notes[0].contains("TPDO1"), "{:?}", built.notes);
+        assert!(built.log.len() > 15);
+        for (m, i) in built.log.motor_rad.iter().zip(&built.log.current_a) {
+            assert!((m - std::f64::consts::PI).abs() < 1e-6, "{m}");
+            assert!((i - 1.5).abs() < 1e-6, "{i}"); // mA through f32
+        }
+    }
+
+    #[test]
+    fn without_motor_frames_or_pdos_the_log_says_so() {
+        let built = build(&frames(false), &decoder(), Rows::Active).unwrap();
+        assert!(built.notes[0].contains("nan"), "{:?}", built.notes);
+        assert!(built.log.motor_rad.iter().all(|m| m.is_nan()));
+        assert!(built.log.current_a.iter().all(|i| (i - 0.5).abs() < 1e-6));
+    }
 }
