@@ -7,7 +7,8 @@
 //!
 //! - The time axis is the reference grid: reference `k` (counted from the first, lost frames
 //!   leave a gap) is the row at `t = k x 10 ms + 5 ms`, the middle of the period it is in
-//!   force, whatever the jitter of the sender.
+//!   force, whatever the jitter of the sender (rows after the first 1 µs later, so that the
+//!   diagnosis's binning puts each in its own period).
 //! - The ECU pushes a sample into its interpolator when the frame arrives, one frame time
 //!   after it was sent ([`BUS_LATENCY_US`]), and the model averages over the period after the
 //!   push. Each signal is read from the ECU's frames at the moment the model's average is
@@ -47,6 +48,8 @@ pub const MOTOR_AGE_US: u64 = 250;
 pub const CURRENT_AGE_US: u64 = PERIOD_US as u64 / 2;
 /// Where the model's period means are centred after the push, µs (see the table above).
 const SW_CENTRE_US: f64 = 5_250.0;
+/// Rows after the first are written this long after their grid point (see `build`), µs.
+const GRID_NUDGE_US: f64 = 1.0;
 const MOTOR_CENTRE_US: f64 = 4_750.0;
 const CURRENT_CENTRE_US: f64 = 5_000.0;
 
@@ -217,9 +220,14 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
         last_k = Some(k);
         let k0 = *origin_k.get_or_insert(k);
         let mid = push + CURRENT_CENTRE_US;
+        // `host-sim gap` bins rows by floor((t - t_first) / 10 ms): a row exactly on the grid
+        // sits on a bin edge, where float rounding (0.03 / 0.01 = 2.9999999999999996) would
+        // put one row in ten into the bin before. One µs after the grid point keeps each row in
+        // its own bin and moves the reference the diagnosis reads by 0.01 % of a step.
+        let nudge_us = if k > k0 { GRID_NUDGE_US } else { 0.0 };
         log.push(
             Row {
-                t: ((k - k0) as f64 * period + period / 2.0) * 1e-6,
+                t: ((k - k0) as f64 * period + period / 2.0 + nudge_us) * 1e-6,
                 ref_sw_deg: angle,
                 sw_deg,
                 motor_rad,

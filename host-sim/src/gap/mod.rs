@@ -78,10 +78,7 @@ impl Record {
             let mut sum = vec![0.0; n];
             let mut cnt = vec![0usize; n];
             for (ti, yi) in t.iter().zip(y) {
-                // A log on the grid itself (100 Hz rows, as steer-can writes) puts every row on
-                // a bin edge, where float rounding (0.03 / 0.01 = 2.9999999999999996) would drop
-                // about one row in ten into the bin before; the nudge is 1e-9 of a bin.
-                let k = ((ti - t0) / dt + 1e-9).floor();
+                let k = ((ti - t0) / dt).floor();
                 if k >= 0.0 && (k as usize) < n {
                     sum[k as usize] += yi;
                     cnt[k as usize] += 1;
