@@ -57,6 +57,15 @@ pub const fn sector_of(code: u8) -> Option<u8> {
     }
 }
 
+/// (high leg, low leg) for positive torque per sector (the table in the module docs).
+const POSITIVE_TORQUE: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1)];
+
+/// The Hall code of a sector (the inverse of [`sector_of`]), taken modulo 6.
+pub const fn code_of(sector: u8) -> u8 {
+    const CODES: [u8; 6] = [0b001, 0b011, 0b010, 0b110, 0b100, 0b101];
+    CODES[(sector % 6) as usize]
+}
+
 /// Tracks the multi-turn Hall count (6 per electrical revolution; 84 per motor revolution on
 /// the EC 60 flat) from successive samples.
 #[derive(Debug, Clone)]
@@ -109,6 +118,36 @@ impl HallDecoder {
         Ok(self.count)
     }
 
+    /// The current of the winding pair the sector drives, from the three phase currents
+    /// (positive into the motor): the current of the leg that positive torque drives high in
+    /// this sector. Positive means positive torque whichever way the bridge drives it. `None`
+    /// without a valid sector. A non-finite phase current passes through (the over-current
+    /// check counts it).
+    pub fn winding_current(&self, phases: [f32; 3]) -> Option<f32> {
+        let (high, _) = self.driven_legs()?;
+        Some(phases[high])
+    }
+
+    /// The (high, low) legs positive torque drives in the current sector; `None` without a
+    /// valid sector.
+    pub fn driven_legs(&self) -> Option<(usize, usize)> {
+        let sector = self.sector?;
+        Some(POSITIVE_TORQUE[((sector + self.phase_offset) % 6) as usize])
+    }
+
+    /// The terminal voltage a bridge command puts across the winding pair of the current
+    /// sector: +duty x supply when it drives positive torque, -duty x supply when it drives
+    /// negative torque, `None` when the bridge is off or the command does not match the sector
+    /// (the inverse of [`HallDecoder::commutate`]; host-sim's bridge model uses it).
+    pub fn terminal_voltage(&self, command: &BridgeCommand, supply: f32) -> Option<f32> {
+        let (high, low) = self.driven_legs()?;
+        match (command[high], command[low]) {
+            (Leg::Pwm(duty), Leg::Low) => Some(duty * supply),
+            (Leg::Low, Leg::Pwm(duty)) => Some(-duty * supply),
+            _ => None,
+        }
+    }
+
     /// Bridge legs for a terminal voltage at a supply voltage, six-step: the voltage's sign
     /// picks the direction, its magnitude the duty (clamped to 0..1). Without a valid sector,
     /// or with a non-finite or non-positive supply, the bridge is off.
@@ -120,9 +159,7 @@ impl HallDecoder {
             return BRIDGE_OFF;
         }
         let duty = (voltage.abs() / supply).clamp(0.0, 1.0);
-        // (high leg, low leg) for positive torque per sector.
-        const TABLE: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1)];
-        let (mut high, mut low) = TABLE[((sector + self.phase_offset) % 6) as usize];
+        let (mut high, mut low) = POSITIVE_TORQUE[((sector + self.phase_offset) % 6) as usize];
         if voltage < 0.0 {
             core::mem::swap(&mut high, &mut low);
         }
@@ -185,6 +222,31 @@ mod tests {
             let off = legs.iter().filter(|l| **l == Leg::Off).count();
             assert_eq!(off, 1, "sector {i}: one floating leg in {legs:?}");
         }
+    }
+
+    #[test]
+    fn winding_current_and_terminal_voltage_invert_commutation_in_every_sector() {
+        for offset in 0..6u8 {
+            for sector in 0..6u8 {
+                let mut d = HallDecoder::new(offset);
+                assert_eq!(sector_of(code_of(sector)), Some(sector));
+                d.update(code_of(sector)).unwrap();
+                for v in [-18.0f32, -3.0, 0.5, 12.0] {
+                    let cmd = d.commutate(v, 24.0);
+                    let back = d.terminal_voltage(&cmd, 24.0).unwrap();
+                    assert!((back - v).abs() < 1e-5, "sector {sector}: {v} -> {back}");
+                }
+                // 5 A of positive torque: into the high leg, out of the low leg.
+                let (high, low) = POSITIVE_TORQUE[((sector + offset) % 6) as usize];
+                let mut phases = [0.0; 3];
+                phases[high] = 5.0;
+                phases[low] = -5.0;
+                assert_eq!(d.winding_current(phases), Some(5.0));
+            }
+        }
+        let d = HallDecoder::new(0);
+        assert_eq!(d.winding_current([1.0, -1.0, 0.0]), None, "no sector yet");
+        assert_eq!(d.terminal_voltage(&BRIDGE_OFF, 24.0), None);
     }
 
     #[test]

@@ -3,8 +3,9 @@
 //! firmware's tasks and interrupts call these methods (under a critical-section mutex);
 //! host-sim calls the same ones from its tasks in virtual time.
 //!
-//! This is the "direct" drive mode, where the ECU runs the cascade itself. The demand decides
-//! what the fast loops may do:
+//! Two drive modes ([`Drive`]):
+//!
+//! **Direct**: the ECU runs the cascade itself. The demand decides what the fast loops may do:
 //!
 //! ```text
 //! demand    | position tick              | current tick
@@ -16,26 +17,104 @@
 //!
 //! When the demand leaves `Disabled`, the cascade is reset to the measured motor angle first,
 //! so it starts where the motor is, with empty integrators.
+//!
+//! **EPOS4** (the paper's car): the drive runs the loops in cyclic synchronous position mode;
+//! the ECU's [`Epos4Link`] brings it up and sends the target every SYNC. The demand maps onto
+//! the drive's power stage:
+//!
+//! ```text
+//! demand    | EPOS4
+//! ----------+---------------------------------------------------------------
+//! Disabled  | power stage off ("disable voltage"), the target follows the motor
+//! Hold      | Operation enabled, target = the last reference sample
+//! Track     | Operation enabled, target = each new reference sample (motor inc)
+//! ```
+//!
+//! The link's frames come back from [`Ecu::drive_poll`] and [`Ecu::on_drive_frame`], and a
+//! demand change made anywhere else (a timeout seen by [`Ecu::tick`], an encoder fault) leaves
+//! its frame in a small queue that the next of those two calls returns; the drive task calls
+//! `drive_poll` every millisecond, so a disable is on the bus within 1 ms. Link failures latch
+//! faults: heartbeat lost or TPDOs missing -> `HeartbeatLost`, anything else (EMCY, statusword
+//! fault, SDO abort or time-out, gain read-back mismatch) -> `EposFault` with the code of
+//! [`link_fault_code`]. A failed link is reset automatically once a second while the vehicle
+//! reports AS Off (the driver steers, nothing is powered); when it is back in Standby the
+//! cause is gone and the clear request in AS Off clears the latched fault.
 
+use crate::as_state::AsState;
 use crate::can::Frame;
+use crate::canopen::epos4::{Epos4Link, LinkError, Outbox, Phase};
+use crate::gearing::Gearing;
 use crate::paper_mode::Cascade;
 use crate::protocol::{AliveCounter, E2eChecker, E2eVerdict, MotorStatus, ProtocolConfig, Status};
 use crate::sensors::motor_from_hall;
 use crate::steering::{Config, DriveDemand, Output, SteeringStateMachine};
-use crate::units::{Amps, SteeringDeg, Volts};
+use crate::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts};
+
+/// How the motor is driven; see the module docs.
+#[derive(Debug, Clone)]
+// One per ECU, made once: the size difference does not matter.
+#[allow(clippy::large_enum_variant)]
+pub enum Drive {
+    /// The ECU runs the cascade on its own bridge.
+    Direct(Cascade),
+    /// An EPOS4 in cyclic synchronous position mode runs the loops.
+    Epos4(Epos4Link),
+}
+
+/// Frames a demand change left for the drive task; a disable is one frame, so 4 is room for
+/// several changes within one drive-task period.
+const PENDING_DEPTH: usize = 4;
+
+/// What one drive call puts on the bus: the pending demand-change frames and the link's.
+pub type DriveFrames = heapless::Vec<Frame, { PENDING_DEPTH + 4 }>;
+
+/// Time between automatic resets of a failed EPOS4 link in AS Off, us.
+pub const LINK_RESET_INTERVAL_US: u64 = 1_000_000;
+
+/// The code a link failure is latched with (the fault log's detail): the EMCY error code or
+/// the statusword where the drive gave one, else 0xFF00 + the kind.
+pub fn link_fault_code(error: LinkError) -> u16 {
+    match error {
+        LinkError::Emcy { error_code, .. } => error_code,
+        LinkError::DriveFault { statusword } | LinkError::LeftOperationEnabled { statusword } => {
+            statusword
+        }
+        LinkError::Cia402Stuck { .. } => 0xFF01,
+        LinkError::SdoTimeout { .. } => 0xFF02,
+        LinkError::SdoAborted { .. } => 0xFF03,
+        LinkError::SdoUnexpected { .. } => 0xFF04,
+        LinkError::ReadBackMismatch { .. } => 0xFF05,
+        LinkError::NodeDidNotStart { .. } => 0xFF06,
+        LinkError::NodeLeftOperational { .. } => 0xFF07,
+        LinkError::HeartbeatLost { .. } => 0xFF08,
+        LinkError::PdoTimeout { .. } => 0xFF09,
+    }
+}
 
 #[derive(Debug, Clone)]
 pub struct Ecu {
     protocol: ProtocolConfig,
     e2e: E2eChecker,
     machine: SteeringStateMachine,
-    cascade: Cascade,
+    drive: Drive,
+    gearing: Gearing,
     last: Output,
     status_counter: AliveCounter,
     hall_count: i32,
     column: SteeringDeg,
     current: Amps,
     clear_refusals: u16,
+    /// EPOS4 mode: frames from demand changes, for the next drive call.
+    pending: heapless::Vec<Frame, PENDING_DEPTH>,
+    /// Pending frames that did not fit (saturating); the link's supervision covers a lost one.
+    pending_overflow: u16,
+    /// EPOS4 mode: the link was up (Standby, Disabling or Cyclic) at the last supervision.
+    link_up: bool,
+    link_error: Option<LinkError>,
+    last_link_reset_us: Option<u64>,
+    current_seen_us: u64,
+    /// The last reference sample the drive was given (wheel deg), for the tracking check.
+    reference: Option<SteeringDeg>,
     motor_counter: AliveCounter,
     /// Measured current summed since the last motor frame, A, and the number of samples.
     current_sum: f32,
@@ -43,31 +122,82 @@ pub struct Ecu {
 }
 
 impl Ecu {
-    /// An ECU with these settings; `None` if the protocol configuration is refused.
+    /// A direct-drive ECU with these settings; `None` if the protocol configuration is refused.
     pub fn new(protocol: ProtocolConfig, config: Config, cascade: Cascade) -> Option<Self> {
+        Self::with_drive(protocol, config, Drive::Direct(cascade))
+    }
+
+    /// An ECU driving the motor as `drive` says; `None` if the protocol configuration is
+    /// refused.
+    pub fn with_drive(protocol: ProtocolConfig, config: Config, drive: Drive) -> Option<Self> {
         let e2e = E2eChecker::new(protocol).ok()?;
+        let gearing = config.gearing();
         let mut machine = SteeringStateMachine::new(config);
         let last = machine.tick(0);
         Some(Ecu {
             protocol,
             e2e,
             machine,
-            cascade,
+            drive,
+            gearing,
             last,
             status_counter: AliveCounter::wrapping(0),
             hall_count: 0,
             column: SteeringDeg(f32::NAN),
             current: Amps(f32::NAN),
             clear_refusals: 0,
+            pending: heapless::Vec::new(),
+            pending_overflow: 0,
+            link_up: false,
+            link_error: None,
+            last_link_reset_us: None,
+            current_seen_us: 0,
+            reference: None,
             motor_counter: AliveCounter::wrapping(0),
             current_sum: 0.0,
             current_samples: 0,
         })
     }
 
-    /// The paper's actuator, the default protocol and state-machine settings.
+    /// The paper's actuator driven directly, the default protocol and state-machine settings.
     pub fn paper() -> Option<Self> {
         Self::new(ProtocolConfig::default(), Config::DEFAULT, Cascade::paper())
+    }
+
+    /// The paper's car: an EPOS4 with the link's settings, the default protocol and
+    /// state-machine settings.
+    pub fn paper_epos4(link: Epos4Link) -> Option<Self> {
+        Self::with_drive(
+            ProtocolConfig::default(),
+            Config::DEFAULT,
+            Drive::Epos4(link),
+        )
+    }
+
+    pub fn drive(&self) -> &Drive {
+        &self.drive
+    }
+
+    /// The EPOS4 link, in EPOS4 mode.
+    pub fn link(&self) -> Option<&Epos4Link> {
+        match &self.drive {
+            Drive::Epos4(link) => Some(link),
+            Drive::Direct(_) => None,
+        }
+    }
+
+    /// The motor angle the ECU believes: the Hall count of the last position tick (direct) or
+    /// the EPOS4's last position actual.
+    pub fn motor_angle(&self) -> MotorRad {
+        match &self.drive {
+            Drive::Direct(_) => motor_from_hall(self.hall_count),
+            Drive::Epos4(link) => link.motor_position(),
+        }
+    }
+
+    /// Frames from demand changes that did not fit the pending queue (saturating).
+    pub fn pending_overflow(&self) -> u16 {
+        self.pending_overflow
     }
 
     pub fn output(&self) -> Output {
@@ -91,12 +221,44 @@ impl Ecu {
         self.clear_refusals
     }
 
-    fn apply(&mut self, out: Output) -> Output {
+    fn apply(&mut self, now_us: u64, out: Output) -> Output {
         if out.drive_just_enabled {
-            self.cascade.reset(self.hall_count);
+            // The first reference sample after enabling is the one to track.
+            self.reference = None;
+        }
+        match &mut self.drive {
+            Drive::Direct(cascade) => {
+                if out.drive_just_enabled {
+                    cascade.reset(self.hall_count);
+                }
+            }
+            Drive::Epos4(link) => {
+                let frames = link.set_power(out.demand != DriveDemand::Disabled, now_us);
+                for f in frames {
+                    if self.pending.push(f).is_err() {
+                        self.pending_overflow = self.pending_overflow.saturating_add(1);
+                    }
+                }
+            }
         }
         self.last = out;
         out
+    }
+
+    fn push_reference(&mut self, angle: SteeringDeg) {
+        self.reference = Some(angle);
+        match &mut self.drive {
+            // The E2E check already bounds the angle to the cascade's range; a refusal here
+            // keeps the ramp in progress, which is the documented outcome.
+            Drive::Direct(cascade) => {
+                let _ = cascade.push_reference(angle);
+            }
+            Drive::Epos4(link) => {
+                let motor = self.gearing.motor_from_steering(SteeringRad::from(angle));
+                // Out of the increment range (impossible within +-90 deg): the target stays.
+                let _ = link.set_target(motor);
+            }
+        }
     }
 
     /// A frame routed to the reference consumer: checked end to end, then handed on.
@@ -111,11 +273,9 @@ impl Ecu {
                     }
                     out = self.machine.tick(now_us);
                 }
-                let out = self.apply(out);
+                let out = self.apply(now_us, out);
                 if out.demand == DriveDemand::Track {
-                    // The E2E check already bounds the angle to the cascade's range; a refusal
-                    // here keeps the ramp in progress, which is the documented outcome.
-                    let _ = self.cascade.push_reference(reference.angle);
+                    self.push_reference(reference.angle);
                 }
                 return out;
             }
@@ -124,65 +284,168 @@ impl Ecu {
                 .machine
                 .on_invalid_frames_fault(now_us, u16::from(invalid_in_row)),
         };
-        self.apply(out)
+        self.apply(now_us, out)
     }
 
     /// Time passes (call at least every reference period): timeouts are found here.
     pub fn tick(&mut self, now_us: u64) -> Output {
         let out = self.machine.tick(now_us);
-        self.apply(out)
+        self.apply(now_us, out)
     }
 
     /// A column-encoder sample, checked against the motor angle of the last position tick.
     pub fn on_encoder(&mut self, now_us: u64, column: SteeringDeg) -> Output {
         self.column = column;
-        let out = self
-            .machine
-            .on_encoder(now_us, column, motor_from_hall(self.hall_count));
-        self.apply(out)
+        let motor = self.motor_angle();
+        let out = self.machine.on_encoder(now_us, column, motor);
+        let out = match (out.demand, self.reference) {
+            (DriveDemand::Track | DriveDemand::Hold, Some(reference)) => {
+                self.machine.on_tracking(now_us, reference, column)
+            }
+            _ => self.machine.on_not_tracking(now_us),
+        };
+        self.apply(now_us, out)
     }
 
     /// The encoder did not answer or flagged its reading.
     pub fn on_encoder_error(&mut self, now_us: u64, code: u16) -> Output {
         self.column = SteeringDeg(f32::NAN);
         let out = self.machine.on_encoder_fault(now_us, code);
-        self.apply(out)
+        self.apply(now_us, out)
+    }
+
+    /// The motor's Hall sensors gave bad samples in a row (direct mode; see
+    /// [`crate::direct`] for the codes).
+    pub fn on_hall_fault(&mut self, now_us: u64, code: u16) -> Output {
+        let out = self.machine.on_encoder_fault(now_us, code);
+        self.apply(now_us, out)
     }
 
     pub fn on_bus_off(&mut self, now_us: u64, tec: u8) -> Output {
         let out = self.machine.on_bus_off(now_us, tec);
-        self.apply(out)
+        self.apply(now_us, out)
     }
 
-    /// Position-loop tick (2 kHz): the current set-point, 0 A unless the drive is enabled.
+    /// Position-loop tick (2 kHz, direct mode): the current set-point, 0 A unless the drive
+    /// is enabled. In EPOS4 mode nothing runs here: 0 A.
     pub fn position_tick(&mut self, hall_count: i32) -> Amps {
         self.hall_count = hall_count;
+        let Drive::Direct(cascade) = &mut self.drive else {
+            return Amps::ZERO;
+        };
         match self.last.demand {
             DriveDemand::Disabled => Amps::ZERO,
-            DriveDemand::Hold | DriveDemand::Track => {
-                self.cascade.position_step(hall_count).current
-            }
+            DriveDemand::Hold | DriveDemand::Track => cascade.position_step(hall_count).current,
         }
     }
 
-    /// Current-loop tick (20 kHz): the voltage to apply, or `None` for bridge off. The
-    /// measured current also feeds the over-current check.
+    /// Current-loop tick (20 kHz, direct mode): the voltage to apply, or `None` for bridge off.
+    /// The measured current also feeds the over-current check. In EPOS4 mode: `None`.
     pub fn current_tick(&mut self, now_us: u64, measured: Amps) -> Option<Volts> {
+        if let Drive::Epos4(_) = self.drive {
+            return None;
+        }
         self.current = measured;
         self.current_sum += measured.0;
         self.current_samples = self.current_samples.saturating_add(1);
         let out = self.machine.on_current(now_us, measured);
-        let out = self.apply(out);
+        let out = self.apply(now_us, out);
+        let Drive::Direct(cascade) = &mut self.drive else {
+            return None;
+        };
         match out.demand {
             DriveDemand::Disabled => None,
-            DriveDemand::Hold | DriveDemand::Track => {
-                Some(self.cascade.current_step(measured).voltage)
+            DriveDemand::Hold | DriveDemand::Track => Some(cascade.current_step(measured).voltage),
+        }
+    }
+
+    /// EPOS4 mode, once at start: the link's first configuration frame. Empty in direct mode.
+    pub fn drive_start(&mut self, now_us: u64) -> DriveFrames {
+        let out = match &mut self.drive {
+            Drive::Epos4(link) => link.start(now_us),
+            Drive::Direct(_) => Outbox::new(),
+        };
+        self.after_link(now_us, out)
+    }
+
+    /// EPOS4 mode, often (every 1 ms): SYNC and RPDO on their period, SDO time-outs, the
+    /// heartbeat and TPDO supervision, the automatic reset of a failed link in AS Off. Returns
+    /// the frames to send, the pending demand-change frames first. Empty in direct mode.
+    pub fn drive_poll(&mut self, now_us: u64) -> DriveFrames {
+        let as_off = self.machine.as_state() == Some(AsState::Off);
+        let reset_due = self
+            .last_link_reset_us
+            .is_none_or(|t| now_us.saturating_sub(t) >= LINK_RESET_INTERVAL_US);
+        let out = match &mut self.drive {
+            Drive::Epos4(link) if link.error().is_some() && as_off && reset_due => {
+                self.last_link_reset_us = Some(now_us);
+                link.request_fault_reset(now_us)
+            }
+            Drive::Epos4(link) => link.poll(now_us),
+            Drive::Direct(_) => Outbox::new(),
+        };
+        self.after_link(now_us, out)
+    }
+
+    /// EPOS4 mode: a frame routed to the drive (PDO, SDO answer, heartbeat, EMCY). Returns the
+    /// frames to send. Ignored in direct mode.
+    pub fn on_drive_frame(&mut self, now_us: u64, frame: &Frame) -> DriveFrames {
+        let out = match &mut self.drive {
+            Drive::Epos4(link) => link.on_frame(frame, now_us),
+            Drive::Direct(_) => Outbox::new(),
+        };
+        self.after_link(now_us, out)
+    }
+
+    /// The link's news into the state machine, then the frames to send: pending ones first.
+    fn after_link(&mut self, now_us: u64, link_out: Outbox) -> DriveFrames {
+        let Drive::Epos4(link) = &self.drive else {
+            // Direct mode has no link: nothing came out of it.
+            return DriveFrames::new();
+        };
+        let error = link.error();
+        let up = matches!(
+            link.phase(),
+            Phase::Standby | Phase::Disabling | Phase::Cyclic
+        );
+        let feedback = link.feedback();
+        let current = link.motor_current();
+        let mut out = self.last;
+        if feedback.current_updated_us != self.current_seen_us {
+            self.current_seen_us = feedback.current_updated_us;
+            self.current = current;
+            out = self.machine.on_current(now_us, current);
+        }
+        if error != self.link_error {
+            self.link_error = error;
+            out = match error {
+                Some(LinkError::HeartbeatLost { .. } | LinkError::PdoTimeout { .. }) => {
+                    self.machine.on_heartbeat_lost(now_us)
+                }
+                Some(e) => self.machine.on_epos_fault(now_us, link_fault_code(e)),
+                None => out,
+            };
+        }
+        if up && !self.link_up {
+            // Back in Standby (or further) after a start or a reset: the causes are gone.
+            let _ = self.machine.on_heartbeat(now_us);
+            out = self.machine.on_epos_fault_gone(now_us);
+        }
+        self.link_up = up;
+        let _ = self.apply(now_us, out);
+        let mut frames = DriveFrames::new();
+        for f in self.pending.iter().chain(link_out.iter()) {
+            if frames.push(*f).is_err() {
+                self.pending_overflow = self.pending_overflow.saturating_add(1);
             }
         }
+        self.pending.clear();
+        frames
     }
 
     /// The next status frame (call once per status period).
     pub fn status_frame(&mut self) -> Frame {
+        // In EPOS4 mode the current is the drive's last TPDO2 (see `after_link`).
         self.status_counter = self.status_counter.next();
         self.protocol.encode_status(&Status {
             angle: self.column,
@@ -194,19 +457,22 @@ impl Ecu {
     }
 
     /// The next motor frame (call once per status period, after [`Ecu::status_frame`]): the
-    /// motor angle of the last position tick and the mean measured current since the last
-    /// motor frame (NaN when no current sample came, or one was not a number).
+    /// motor angle the ECU believes ([`Ecu::motor_angle`]) and the mean measured current since
+    /// the last motor frame. In EPOS4 mode no current tick runs here, so the current is the
+    /// drive's last TPDO2; NaN when no sample came (or one was not a number).
     pub fn motor_frame(&mut self) -> Frame {
         self.motor_counter = self.motor_counter.next();
-        let current_mean = if self.current_samples == 0 {
-            Amps(f32::NAN)
-        } else {
+        let current_mean = if self.current_samples > 0 {
             Amps(self.current_sum / self.current_samples as f32)
+        } else if let Drive::Epos4(_) = self.drive {
+            self.current
+        } else {
+            Amps(f32::NAN)
         };
         self.current_sum = 0.0;
         self.current_samples = 0;
         self.protocol.encode_motor(&MotorStatus {
-            angle: motor_from_hall(self.hall_count),
+            angle: self.motor_angle(),
             current_mean,
             counter: self.motor_counter,
         })

@@ -1,13 +1,15 @@
 //! The steering ECU's faults: what can go wrong ([`Fault`]), the latched set as it goes into the
 //! CAN status frame ([`FaultSet`]), and a fixed-size ring of fault records ([`FaultLog`]) that
-//! a diagnostic request reads back over CAN.
+//! keeps the detail of each (the code, the value that tripped it) for the defmt log and the
+//! debugger; it is not sent over CAN yet (the status frame carries the bits only).
 //!
 //! Detection, latching and clearing live in [`crate::steering`]; this module only names the
 //! faults and stores them. The bit positions below are the wire format of the status frame's
 //! fault bits: they never move, a new fault takes a free bit.
 //!
-//! A panic is not in the list: the firmware's panic handler turns the bridge off (EPOS4
-//! disabled, PWM outputs low) and resets the MCU, so no code of this crate runs after it.
+//! A panic is not in the list: the firmware's panic handler turns the drive off (EPOS4
+//! "disable voltage", PWM outputs low) and halts the MCU, so no code of this crate runs after
+//! it (see `src/firmware/safety.rs`).
 
 use heapless::Deque;
 
@@ -44,11 +46,16 @@ pub enum Fault {
     HeartbeatLost = 7,
     /// Bit 8. The CAN controller went bus-off. Detail: the transmit error counter if known.
     BusOff = 8,
+    /// Bit 9. The column is further from the reference than the tracking window for longer
+    /// than its persistence time while the drive is on: the actuator does not do what it is
+    /// told (a current-sense offset, a wrong commutation, a jammed or slipping mechanism).
+    /// Detail: the error, centi-degrees at the wheel.
+    TrackingError = 9,
 }
 
 impl Fault {
     /// Every fault, in bit order.
-    pub const ALL: [Fault; 9] = [
+    pub const ALL: [Fault; 10] = [
         Fault::ReferenceTimeout,
         Fault::InvalidFrames,
         Fault::Encoder,
@@ -58,6 +65,7 @@ impl Fault {
         Fault::EposFault,
         Fault::HeartbeatLost,
         Fault::BusOff,
+        Fault::TrackingError,
     ];
 
     /// Bit position in [`FaultSet`] and in the status frame.
@@ -77,6 +85,7 @@ impl Fault {
             6 => Some(Fault::EposFault),
             7 => Some(Fault::HeartbeatLost),
             8 => Some(Fault::BusOff),
+            9 => Some(Fault::TrackingError),
             _ => None,
         }
     }
@@ -98,7 +107,7 @@ pub enum EncoderFaultDetail {
     SensorReported = 0x1_0000,
 }
 
-/// A set of faults as a `u16` bitset; bit `n` is the fault with [`Fault::bit`] `n`. Bits 9 to
+/// A set of faults as a `u16` bitset; bit `n` is the fault with [`Fault::bit`] `n`. Bits 10 to
 /// 15 are free and always zero.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -251,23 +260,24 @@ mod tests {
             (Fault::EposFault, 6),
             (Fault::HeartbeatLost, 7),
             (Fault::BusOff, 8),
+            (Fault::TrackingError, 9),
         ];
         for (fault, bit) in expected {
             assert_eq!(fault.bit(), bit);
             assert_eq!(Fault::from_bit(bit), Some(fault));
             assert_eq!(FaultSet::from(fault).bits(), 1 << bit);
         }
-        for bit in 9..=255u8 {
+        for bit in 10..=255u8 {
             assert_eq!(Fault::from_bit(bit), None);
         }
-        assert_eq!(FaultSet::VALID_BITS, 0x01FF);
+        assert_eq!(FaultSet::VALID_BITS, 0x03FF);
     }
 
     #[test]
     fn fault_set_drops_free_bits_and_iterates_in_bit_order() {
         let set = FaultSet::from_bits(0xFFFF);
-        assert_eq!(set.bits(), 0x01FF);
-        assert_eq!(set.iter().count(), 9);
+        assert_eq!(set.bits(), 0x03FF);
+        assert_eq!(set.iter().count(), 10);
         let mut s = FaultSet::EMPTY;
         assert!(s.insert(Fault::BusOff));
         assert!(!s.insert(Fault::BusOff), "second insert is not new");

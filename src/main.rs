@@ -15,6 +15,17 @@ fn main() {
     );
 }
 
+#[cfg(all(
+    target_os = "none",
+    not(any(feature = "drive-epos4", feature = "drive-direct"))
+))]
+compile_error!("pick the drive mode: feature `drive-epos4` (default) or `drive-direct`");
+#[cfg(all(target_os = "none", feature = "drive-epos4", feature = "drive-direct"))]
+compile_error!(
+    "features `drive-epos4` and `drive-direct` exclude each other: build the direct mode with \
+     `--no-default-features --features stm32f446re,drive-direct`"
+);
+
 #[cfg(target_os = "none")]
 mod firmware {
     use core::cell::RefCell;
@@ -31,15 +42,20 @@ mod firmware {
     use embassy_stm32::peripherals::CAN1;
     use embassy_stm32::spi::{self, Spi};
     use embassy_stm32::time::Hertz;
-    use embassy_time::{Duration, Instant, Ticker, Timer};
-    use panic_probe as _;
+    use embassy_time::{Duration, Ticker, Timer};
     use static_cell::StaticCell;
     use steering_ecu::amt20;
     use steering_ecu::can::{Frame, StandardId};
+    #[cfg(feature = "drive-epos4")]
+    use steering_ecu::canopen::epos4::Epos4Link;
     use steering_ecu::ecu::Ecu;
     use steering_ecu::ports::{BusError, CanRx, CanTx, ColumnEncoderPort, EncoderError};
     use steering_ecu::sensors::ColumnEncoder;
-    use steering_ecu::tasks::{self, FrameQueue, Route, RouterCounters, SharedEcu, route_frames};
+    use steering_ecu::tasks::{self, FrameQueue, Route, RouterCounters, SharedEcu};
+
+    #[cfg(feature = "drive-direct")]
+    mod bridge;
+    mod safety;
 
     /// The ECU's shared state, made once at start-up.
     static ECU: StaticCell<SharedEcu> = StaticCell::new();
@@ -149,6 +165,12 @@ mod firmware {
     #[embassy_executor::task]
     async fn status_task(ecu: &'static SharedEcu) {
         tasks::status_task(TX_FRAMES.sender(), ecu).await
+    }
+
+    #[cfg(feature = "drive-epos4")]
+    #[embassy_executor::task]
+    async fn drive_task(ecu: &'static SharedEcu) {
+        tasks::drive_task(DRIVE_FRAMES.receiver(), TX_FRAMES.sender(), ecu).await
     }
 
     #[embassy_executor::task]
@@ -273,10 +295,42 @@ mod firmware {
         spawner.spawn(defmt::unwrap!(heartbeat()));
 
         // Start-up only: the defaults are valid by construction (tested on the host).
-        let ecu: &'static SharedEcu =
-            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(Ecu::paper()))));
+        #[cfg(feature = "drive-epos4")]
+        let ecu: &'static SharedEcu = {
+            let config = safety::epos4_config();
+            let now = embassy_time::Instant::now().as_micros();
+            let link = defmt::unwrap!(Epos4Link::new(config, now).ok());
+            defmt::info!("drive: EPOS4 node {=u8}, CSP", config.node.raw());
+            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(
+                Ecu::paper_epos4(link)
+            ))))
+        };
+        #[cfg(feature = "drive-direct")]
+        let ecu: &'static SharedEcu = {
+            defmt::info!("drive: direct, three-phase bridge on TIM1");
+            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(Ecu::paper()))))
+        };
         spawner.spawn(defmt::unwrap!(reference_task(ecu)));
         spawner.spawn(defmt::unwrap!(status_task(ecu)));
+        #[cfg(feature = "drive-epos4")]
+        spawner.spawn(defmt::unwrap!(drive_task(ecu)));
+        #[cfg(feature = "drive-direct")]
+        bridge::start(
+            ecu,
+            bridge::Pins {
+                tim: peripherals.TIM1,
+                ch1: peripherals.PA8,
+                ch1n: peripherals.PB13,
+                ch2: peripherals.PA9,
+                ch2n: peripherals.PB14,
+                ch3: peripherals.PA10,
+                ch3n: peripherals.PB15,
+                enable: peripherals.PC9,
+                hall: (peripherals.PC6, peripherals.PC7, peripherals.PC8),
+                adc: peripherals.ADC1,
+                sense: (peripherals.PA0, peripherals.PA1, peripherals.PA4),
+            },
+        );
 
         // AMT20 on SPI1: PA5 SCK, PA6 MISO, PA7 MOSI (Arduino D13/D12/D11), CS on PB6 (D10).
         let mut spi_config = spi::Config::default();
@@ -312,13 +366,16 @@ mod firmware {
         let receive = async {
             let mut counters = RouterCounters::default();
             let queues = [REFERENCE_FRAMES.sender(), DRIVE_FRAMES.sender()];
-            let end = route_frames(&mut rx, &FirmwareRoutes, &queues, &mut counters).await;
-            defmt::error!("CAN receive stopped: {}", end);
-            let tec = embassy_stm32::pac::CAN1.esr().read().tec();
-            let now = Instant::now().as_micros();
-            ecu.lock(|e| {
-                let _ = e.borrow_mut().on_bus_off(now, tec);
-            });
+            let end = tasks::receive_task(
+                &mut rx,
+                &FirmwareRoutes,
+                &queues,
+                &mut counters,
+                ecu,
+                || embassy_stm32::pac::CAN1.esr().read().tec(),
+            )
+            .await;
+            defmt::error!("CAN receive stopped: {} (faults latched)", end);
         };
         let transmit = async {
             loop {

@@ -2,11 +2,16 @@
 //! `main.rs`, host-sim implements them over the simulated plant and an in-memory CAN bus, so
 //! the tasks themselves are the same code in both places.
 //!
+//! The clock is embassy-time's (`Instant`, `Timer`, `Ticker`): the firmware's time driver on
+//! the chip, the mock driver in host-sim.
+//!
 //! Async methods: the firmware runs one thread-mode executor (plus interrupts for the fast
 //! loops), so no `Send` bound is needed on the futures.
 #![allow(async_fn_in_trait)]
 
 use crate::can::Frame;
+use crate::commutation::BridgeCommand;
+use crate::units::Amps;
 
 /// Why the CAN peripheral could not deliver or take a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -42,4 +47,23 @@ pub enum EncoderError {
     NoResponse,
     /// The encoder answered but flagged its reading invalid (or the framing was wrong).
     InvalidReading,
+}
+
+/// The three Hall sensors of the motor, sampled together: bits H3 H2 H1 (see
+/// [`crate::commutation`]). Read in the current-loop interrupt, so not async.
+pub trait HallInputs {
+    fn read(&mut self) -> u8;
+}
+
+/// The phase-current sensing, sampled synchronously with the PWM (the ADC conversion is
+/// triggered by the PWM timer at the centre of the on-time): phases A, B, C, positive into
+/// the motor. A failed conversion reads NaN, which the over-current check counts.
+pub trait CurrentSense {
+    fn phase_currents(&mut self) -> [Amps; 3];
+}
+
+/// The three-phase bridge: complementary PWM with hardware dead time.
+pub trait Bridge {
+    /// Apply the legs from the next PWM period on.
+    fn apply(&mut self, command: &BridgeCommand);
 }

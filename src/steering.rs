@@ -84,6 +84,7 @@
 //! | `EposFault` | statusword fault bit or an EMCY from the EPOS4 | the firmware reports the EPOS4 fault reset done |
 //! | `HeartbeatLost` | the CANopen consumer-heartbeat time of the EPOS4 elapsed | a heartbeat arrives |
 //! | `BusOff` | the CAN controller reports bus-off | bus recovered, or a valid frame arrives |
+//! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s | a sample within the window, or the drive off |
 //!
 //! The plausibility checks (jump, disagreement, current) run in every AS state: a broken
 //! sensor is found in AS Off, before the car is handed to the autonomous system.
@@ -123,6 +124,17 @@
 //!   (measured peak 19.95 A in host-sim), so 10 % above it means the loop has lost control of
 //!   the current (bridge fault, sensor, EPOS4). 20 samples are 1 ms at 20 kHz or 10 ms at
 //!   2 kHz: long enough to ignore a single spike, short against the winding's thermal time.
+//! - Tracking error 20 deg for 200 ms without 30 deg/s of progress ([`DEFAULT_TRACKING_DEG`],
+//!   [`DEFAULT_TRACKING_PERSIST_US`], [`DEFAULT_TRACKING_PROGRESS_DPS`]): the other checks
+//!   compare sensors with each other; this one compares the actuator with its order. host-sim
+//!   found the case: a current-sense amplifier reading 30 A high makes the current loop drive
+//!   -10 A for ever, the column runs to the end stop, and neither the over-current check (the
+//!   measured current is within 20 A) nor the disagreement check (column and motor agree) sees
+//!   it. Normal errors stay below it: 10.7 deg at most on the track run, and in the 10 deg
+//!   sweep the error changes sign faster than 200 ms. An error the actuator is closing (a
+//!   large reference step, a ramp at the 400 deg/s the protocol allows against the motor's
+//!   306 deg/s) is not a fault: the column must move toward the reference by less than
+//!   30 deg/s over the 200 ms, i.e. stand still (jammed) or run away (lost control).
 
 use crate::as_state::AsState;
 use crate::faults::{EncoderFaultDetail, Fault, FaultLog, FaultRecord, FaultSet};
@@ -147,6 +159,12 @@ pub const DEFAULT_DISAGREEMENT_PERSIST_US: u32 = 20_000;
 pub const DEFAULT_OVERCURRENT: Amps = Amps(22.0);
 /// Consecutive over-current samples that latch the fault.
 pub const DEFAULT_OVERCURRENT_SAMPLES: u16 = 20;
+/// |column - reference| beyond this is a tracking error candidate, deg at the wheel.
+pub const DEFAULT_TRACKING_DEG: f32 = 20.0;
+/// ... for this long, µs ...
+pub const DEFAULT_TRACKING_PERSIST_US: u32 = 200_000;
+/// ... while the column closes the gap slower than this, deg/s.
+pub const DEFAULT_TRACKING_PROGRESS_DPS: f32 = 30.0;
 
 /// What the drive must do from this call on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -240,6 +258,9 @@ pub struct Config {
     disagreement_persist_us: u32,
     overcurrent: Amps,
     overcurrent_samples: u16,
+    tracking_deg: f32,
+    tracking_persist_us: u32,
+    tracking_progress_dps: f32,
     gearing: Gearing,
 }
 
@@ -269,6 +290,9 @@ impl Config {
         disagreement_persist_us: DEFAULT_DISAGREEMENT_PERSIST_US,
         overcurrent: DEFAULT_OVERCURRENT,
         overcurrent_samples: DEFAULT_OVERCURRENT_SAMPLES,
+        tracking_deg: DEFAULT_TRACKING_DEG,
+        tracking_persist_us: DEFAULT_TRACKING_PERSIST_US,
+        tracking_progress_dps: DEFAULT_TRACKING_PROGRESS_DPS,
         gearing: Gearing::PAPER,
     };
 
@@ -320,6 +344,21 @@ impl Config {
     ) -> Result<Self, ConfigError> {
         self.disagreement_deg = positive(window.0, "disagreement_deg")?;
         self.disagreement_persist_us = persist_us;
+        Ok(self)
+    }
+
+    /// Tracking-error window (finite, positive, deg at the wheel), persistence (µs) and the
+    /// progress toward the reference below which the error is a fault (finite, positive,
+    /// deg/s).
+    pub fn with_tracking(
+        mut self,
+        window: SteeringDeg,
+        persist_us: u32,
+        progress_dps: f32,
+    ) -> Result<Self, ConfigError> {
+        self.tracking_deg = positive(window.0, "tracking_deg")?;
+        self.tracking_progress_dps = positive(progress_dps, "tracking_progress_dps")?;
+        self.tracking_persist_us = persist_us;
         Ok(self)
     }
 
@@ -399,6 +438,8 @@ pub struct SteeringStateMachine {
     /// Previous plausible-or-not column sample, for the jump check: (time, deg).
     previous_column: Option<(u64, f32)>,
     disagreement_since_us: Option<u64>,
+    /// Start of the current tracking-error interval: (time, column deg).
+    tracking_since: Option<(u64, f32)>,
     overcurrent_count: u16,
     latched: FaultSet,
     /// Faults whose cause is present now (latched or not yet).
@@ -437,6 +478,7 @@ impl SteeringStateMachine {
             last_encoder_us: None,
             previous_column: None,
             disagreement_since_us: None,
+            tracking_since: None,
             overcurrent_count: 0,
             latched: FaultSet::EMPTY,
             active: FaultSet::EMPTY,
@@ -540,6 +582,47 @@ impl SteeringStateMachine {
         self.output()
     }
 
+    /// A column sample against the reference the drive is following (call while the drive is
+    /// on; see the tracking-error row of the module docs). Non-finite values count as beyond
+    /// the window with no progress.
+    pub fn on_tracking(
+        &mut self,
+        now_us: u64,
+        reference: SteeringDeg,
+        column: SteeringDeg,
+    ) -> Output {
+        let now = self.advance(now_us);
+        let error = reference.0 - column.0;
+        if error.abs() <= self.config.tracking_deg {
+            self.tracking_since = None;
+            self.active.remove(Fault::TrackingError);
+            return self.output();
+        }
+        self.active.insert(Fault::TrackingError);
+        let (since, column_then) = *self.tracking_since.get_or_insert((now, column.0));
+        let elapsed_us = now.saturating_sub(since);
+        if elapsed_us >= u64::from(self.config.tracking_persist_us) {
+            let toward = (column.0 - column_then) * error.signum();
+            let progress_dps = toward / (elapsed_us as f32 * 1e-6);
+            // NaN compares false: no progress anyone can vouch for.
+            if progress_dps >= self.config.tracking_progress_dps {
+                // Closing the gap: start a new interval from here.
+                self.tracking_since = Some((now, column.0));
+            } else {
+                self.raise(now, Fault::TrackingError, centideg_detail(error));
+            }
+        }
+        self.output()
+    }
+
+    /// The drive is off (or has no reference): no tracking error can be present.
+    pub fn on_not_tracking(&mut self, now_us: u64) -> Output {
+        self.advance(now_us);
+        self.tracking_since = None;
+        self.active.remove(Fault::TrackingError);
+        self.output()
+    }
+
     /// The column encoder reported an error (`code` is the firmware's, e.g. a status bit).
     pub fn on_encoder_fault(&mut self, now_us: u64, code: u16) -> Output {
         let now = self.advance(now_us);
@@ -634,6 +717,7 @@ impl SteeringStateMachine {
         self.latched = FaultSet::EMPTY;
         self.overcurrent_count = 0;
         self.disagreement_since_us = None;
+        self.tracking_since = None;
         Ok(())
     }
 
@@ -1125,6 +1209,60 @@ mod tests {
         }
         assert!(out.faults.contains(Fault::OverCurrent));
         assert_eq!(sm.fault_log().get(0).map(|r| r.detail), Some(i32::MIN));
+    }
+
+    #[test]
+    fn tracking_error_latches_when_the_column_stands_still_or_runs_away() {
+        for (name, column_dps) in [("jammed", 0.0f32), ("running away", -50.0)] {
+            let (mut sm, t0) = tracking();
+            let mut t = t0;
+            let mut out = sm.tick(t);
+            let mut latched_at = None;
+            while t < t0 + 500 * MS {
+                t += 2 * MS;
+                let column = column_dps * (t - t0) as f32 * 1e-6;
+                if (t - t0).is_multiple_of(10 * MS) {
+                    let _ = sm.on_reference(t, AsState::Driving);
+                }
+                let _ = sm.on_encoder(t, SteeringDeg(column), motor_at(column));
+                out = sm.on_tracking(t, SteeringDeg(30.0), SteeringDeg(column));
+                if latched_at.is_none() && out.faults.contains(Fault::TrackingError) {
+                    latched_at = Some(t - t0);
+                }
+            }
+            let at = latched_at.unwrap_or_else(|| panic!("{name}: never latched"));
+            assert!((200 * MS..=210 * MS).contains(&at), "{name}: at {at} us");
+            assert_eq!(out.demand, DriveDemand::Disabled, "{name}");
+        }
+    }
+
+    #[test]
+    fn a_gap_the_actuator_is_closing_is_no_tracking_error() {
+        // The reference ramps at the protocol's 400 deg/s to 90 deg, the column follows at the
+        // motor's 306 deg/s: the error grows to 21 deg and beyond, but the column makes progress.
+        let (mut sm, t0) = tracking();
+        let mut t = t0;
+        while t < t0 + 600 * MS {
+            t += 2 * MS;
+            let s = (t - t0) as f32 * 1e-6;
+            let reference = (400.0 * s).min(90.0);
+            let column = (306.0 * s).min(90.0);
+            if (t - t0).is_multiple_of(10 * MS) {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            let _ = sm.on_encoder(t, SteeringDeg(column), motor_at(column));
+            let out = sm.on_tracking(t, SteeringDeg(reference), SteeringDeg(column));
+            assert!(
+                out.faults.is_empty(),
+                "at {} ms: {:?}",
+                (t - t0) / MS,
+                out.faults
+            );
+        }
+        // And the drive being switched off clears the cause.
+        let _ = sm.on_tracking(t, SteeringDeg(90.0), SteeringDeg(0.0));
+        let _ = sm.on_not_tracking(t + MS);
+        assert!(sm.active.is_empty());
     }
 
     #[test]

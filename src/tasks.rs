@@ -11,7 +11,7 @@ use core::cell::RefCell;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::{Channel, Receiver, Sender};
-use embassy_time::{Duration, Instant, Ticker, with_timeout};
+use embassy_time::{Duration, Instant, Ticker, with_deadline, with_timeout};
 
 /// The ECU state shared by the tasks and the fast-loop interrupts: each takes the lock for one
 /// pure method call, so the longest hold is one state-machine step.
@@ -92,6 +92,49 @@ pub async fn encoder_task(
     }
 }
 
+/// How often the drive task polls the EPOS4 link: the bound on SYNC jitter and on the time a
+/// disable waits before it goes on the bus.
+pub const DRIVE_POLL_PERIOD: Duration = Duration::from_millis(1);
+
+/// The EPOS4 link (EPOS4 mode): the drive's frames in, SYNC, RPDO and SDO requests out, and
+/// the link polled every [`DRIVE_POLL_PERIOD`] even while frames keep coming. A full transmit
+/// queue drops the frame rather than stalling the link; the link's SDO retries and TPDO
+/// supervision notice a lost one. In direct mode the ECU returns no frames and the task only
+/// idles.
+pub async fn drive_task(frames: FrameReceiver<'_>, tx: FrameSender<'_>, ecu: &SharedEcu) -> ! {
+    let start = ecu.lock(|e| e.borrow_mut().drive_start(now_us()));
+    for f in start {
+        let _ = tx.try_send(f);
+    }
+    let mut next_poll = Instant::now();
+    loop {
+        let received = with_deadline(next_poll, frames.receive()).await;
+        let now = Instant::now();
+        let out = ecu.lock(|e| {
+            let mut e = e.borrow_mut();
+            let mut out: heapless::Vec<Frame, 16> = heapless::Vec::new();
+            // 16 holds both calls' frames (8 each at most); `extend_from_slice` refuses
+            // rather than panics.
+            if let Ok(frame) = received {
+                let _ = out.extend_from_slice(&e.on_drive_frame(now.as_micros(), &frame));
+            }
+            if now >= next_poll {
+                let _ = out.extend_from_slice(&e.drive_poll(now.as_micros()));
+            }
+            out
+        });
+        if now >= next_poll {
+            next_poll += DRIVE_POLL_PERIOD;
+            if next_poll <= now {
+                next_poll = now + DRIVE_POLL_PERIOD;
+            }
+        }
+        for f in out {
+            let _ = tx.try_send(f);
+        }
+    }
+}
+
 /// Which consumer a received frame belongs to.
 pub trait Route {
     /// `Some(i)` for the i-th consumer, `None` to drop the frame (not ours).
@@ -134,6 +177,26 @@ pub async fn route_frames<R: Route>(
             Err(_) => counters.bus_errors = counters.bus_errors.saturating_add(1),
         }
     }
+}
+
+/// The receive side of the bus: [`route_frames`] until the controller reports bus-off, then
+/// the bus-off fault into the state machine (`tec`: the transmit error counter, if the
+/// caller's peripheral gives one). Returns so the caller can keep the bus down.
+pub async fn receive_task<R: Route>(
+    rx: &mut impl CanRx,
+    routes: &R,
+    queues: &[FrameSender<'_>],
+    counters: &mut RouterCounters,
+    ecu: &SharedEcu,
+    tec: impl FnOnce() -> u8,
+) -> BusError {
+    let end = route_frames(rx, routes, queues, counters).await;
+    let now = now_us();
+    let tec = tec();
+    ecu.lock(|e| {
+        let _ = e.borrow_mut().on_bus_off(now, tec);
+    });
+    end
 }
 
 #[cfg(test)]

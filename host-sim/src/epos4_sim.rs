@@ -273,6 +273,12 @@ impl Epos4Sim {
         self.plant.current_a()
     }
 
+    /// The steering-column angle of the simulated actuator, rad (what the ECU's column
+    /// encoder reads).
+    pub fn column_rad(&self) -> f64 {
+        self.plant.column_rad()
+    }
+
     /// Raw value of an object (for tests).
     pub fn object(&self, object: ObjectAddress) -> Option<u32> {
         self.od.get(&object).map(|e| e.value)
@@ -759,6 +765,8 @@ mod tests {
                     .unwrap(),
                 now: 0,
             };
+            // The tests here want the power stage on (the ECU's state machine decides that).
+            let _ = rig.link.set_power(true, 0);
             // Drive boots first; the ECU starts once it saw the boot-up.
             rig.step();
             let out = rig.link.start(rig.now);
@@ -839,6 +847,81 @@ mod tests {
         let reported = rig.link.motor_position().0 as f64;
         assert!((reported - 7.5).abs() < 0.2, "TPDO says {reported} rad");
         assert_eq!(rig.sim.rejected_targets(), 0);
+    }
+
+    #[test]
+    fn power_off_goes_to_standby_at_once_and_back_on_without_a_jump() {
+        let mut rig = Rig::new(11);
+        rig.bring_up();
+        rig.link.set_target(MotorRad(4.0)).unwrap();
+        rig.run_for(600_000);
+        let off_at = rig.now;
+        let out = rig.link.set_power(false, rig.now);
+        assert_eq!(out.len(), 1, "the disable goes out in the same call");
+        rig.send_ecu(out.into_iter());
+        rig.run_until(5_000, |r| r.sim.cia402_state() == State::SwitchOnDisabled);
+        assert_eq!(rig.sim.cia402_state(), State::SwitchOnDisabled);
+        eprintln!("power stage off {} us after the request", rig.now - off_at);
+        rig.run_for(100_000);
+        assert_eq!(rig.link.phase(), Phase::Standby);
+        // Standby still watches the drive: TPDOs keep coming.
+        let seen = rig.link.feedback().updated_us;
+        assert!(
+            rig.now - seen < 20_000,
+            "last TPDO at {seen} us, now {}",
+            rig.now
+        );
+        let held = rig.sim.motor_rad();
+        let _ = rig.link.set_power(true, rig.now);
+        rig.bring_up();
+        rig.run_for(200_000);
+        assert!(
+            (rig.sim.motor_rad() - held).abs() < 0.2,
+            "re-enabled at {held} rad, now {}",
+            rig.sim.motor_rad()
+        );
+        assert!(rig.sim.refusals().is_empty(), "{:?}", rig.sim.refusals());
+    }
+
+    #[test]
+    fn without_power_the_link_stops_in_standby_with_the_drive_off() {
+        let mut config = Epos4Config::paper(node());
+        config.max_missed_tpdos = 5;
+        let mut rig = Rig::with_config(12, config);
+        let _ = rig.link.set_power(false, rig.now);
+        rig.run_until(2_000_000, |r| {
+            matches!(r.link.phase(), Phase::Standby | Phase::Failed(_))
+        });
+        assert_eq!(rig.link.phase(), Phase::Standby);
+        rig.run_for(300_000);
+        assert_eq!(rig.link.phase(), Phase::Standby);
+        assert_eq!(rig.sim.cia402_state(), State::SwitchOnDisabled);
+        assert_eq!(rig.sim.nmt_state(), NmtState::Operational);
+    }
+
+    #[test]
+    fn a_drive_fault_in_standby_is_reported() {
+        let mut rig = Rig::new(13);
+        let _ = rig.link.set_power(false, rig.now);
+        rig.run_until(2_000_000, |r| r.link.phase() == Phase::Standby);
+        rig.sim.inject_fault(0x3210); // over-voltage
+        for f in rig.sim.advance(rig.now) {
+            rig.bus.send(rig.drive, f, rig.now);
+        }
+        rig.run_until(100_000, |r| r.link.error().is_some());
+        assert!(
+            matches!(
+                rig.link.error(),
+                Some(
+                    LinkError::Emcy {
+                        error_code: 0x3210,
+                        ..
+                    } | LinkError::DriveFault { .. }
+                )
+            ),
+            "{:?}",
+            rig.link.error()
+        );
     }
 
     #[test]

@@ -8,8 +8,9 @@
 //! small single-threaded executor here (a no-op waker, every task polled every step), with
 //! embassy-time's mock driver advanced by the step. Polling every step costs nothing at this
 //! rate and lets the host code call in and out (`recv_until`) instead of handing control to
-//! embassy's `Executor::run_until`. The fast loops (position 2 kHz, current 20 kHz) are called
-//! as the firmware's timer interrupts call them, as in `tests/firmware_tasks.rs`.
+//! embassy's `Executor::run_until`. The direct-drive fast loop (`steering_ecu::direct::
+//! FastLoop`: Hall commutation, current sense, bridge; position 2 kHz, current 20 kHz) runs as
+//! the firmware's ADC interrupt runs it, as in `tests/firmware_tasks.rs`.
 //!
 //! The mock clock is global to the process, so one `SimEcu` lives at a time: `new` waits for
 //! the previous one to be dropped.
@@ -20,7 +21,8 @@
 //!                                          -> host port: inbox
 //!                 poll the three tasks; status/motor frames from the TX queue onto the bus
 //!                 EPOS4 advance (heartbeat, its own loops)
-//!                 position tick (every 10th step), current tick, plant step, encoder value
+//!                 fast loop (Hall code, phase currents -> bridge command; position tick
+//!                 every 10th step), plant step, encoder value
 //!                 mock clock += 50 µs
 //! ```
 
@@ -39,18 +41,20 @@ use std::task::{Context, Waker};
 use steering_ecu::can::Frame;
 use steering_ecu::canopen::NodeId;
 use steering_ecu::canopen::epos4::{Epos4Config, PositionScale};
+use steering_ecu::commutation::{HallDecoder, code_of};
+use steering_ecu::direct::FastLoop;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
 use steering_ecu::protocol::REFERENCE_ID;
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
 use steering_ecu::steering::Output;
 use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
-use steering_ecu::units::Amps;
+use steering_ecu::units::{Amps, Volts};
 
 /// Simulation step, µs (the current loop's 20 kHz).
 pub const STEP_US: u64 = 50;
-/// Position ticks every this many steps (2 kHz).
-const STEPS_PER_POSITION_TICK: u64 = 10;
+/// The bridge's DC supply, V (Table 2: 24 V).
+pub const SUPPLY_V: f64 = 24.0;
 /// Frame time on the bus, µs (8 bytes at 1 Mbit/s, about 130 bit times).
 pub const BUS_LATENCY_US: u64 = 130;
 /// The EPOS4's node on the simulated bus (the firmware's default).
@@ -114,9 +118,9 @@ pub struct SimEcu {
     epos_port: Port,
     host_port: Port,
     plant: LinearPlant,
+    fast: FastLoop,
     epos: Epos4Sim,
     now_us: u64,
-    steps: u64,
     inbox: VecDeque<Stamped>,
     current_offset: f64,
     scheduled: Vec<(u64, Injection)>,
@@ -183,9 +187,9 @@ impl SimEcu {
             epos_port,
             host_port,
             plant,
+            fast: FastLoop::new(0, Volts(SUPPLY_V as f32)),
             epos,
             now_us: 0,
-            steps: 0,
             inbox: VecDeque::new(),
             current_offset: 0.0,
             scheduled: Vec::new(),
@@ -282,27 +286,31 @@ impl SimEcu {
         for frame in self.epos.advance(now) {
             self.bus.send(self.epos_port, frame, now);
         }
-        // The fast loops, as the firmware's timer interrupts run them.
-        let hall = hall_from_motor(self.plant.motor_rad());
-        let measured = Amps((self.plant.current_a() + self.current_offset) as f32);
-        let steps = self.steps;
-        let voltage = self.ecu.lock(|e| {
-            let mut e = e.borrow_mut();
-            if steps.is_multiple_of(STEPS_PER_POSITION_TICK) {
-                e.position_tick(hall);
-            }
-            e.current_tick(now, measured)
-        });
+        // The fast loop, as the firmware's ADC interrupt runs it (`steering_ecu::direct`): the
+        // Hall code and phase currents from the plant, the bridge command back to a terminal
+        // voltage.
+        let sector = hall_from_motor(self.plant.motor_rad()).rem_euclid(6) as u8;
+        let mut truth = HallDecoder::new(0);
+        let _ = truth.update(code_of(sector));
+        let mut phases = [Amps::ZERO; 3];
+        if let Some((high, low)) = truth.driven_legs() {
+            let measured = (self.plant.current_a() + self.current_offset) as f32;
+            phases[high] = Amps(measured);
+            phases[low] = Amps(-measured);
+        }
+        let fast = &mut self.fast;
+        let command = self
+            .ecu
+            .lock(|e| fast.step(&mut e.borrow_mut(), now, code_of(sector), phases));
         // Bridge off: the winding is left to its back-EMF, the current dies out.
-        let v = match voltage {
-            Some(v) => f64::from(v.0),
+        let v = match truth.terminal_voltage(&command, SUPPLY_V as f32) {
+            Some(v) => f64::from(v),
             None => PlantParams::PAPER.ke * self.plant.state()[state::W_ROT],
         };
         self.plant.step(v);
         self.encoder.column_rad.set(self.plant.column_rad());
         MockDriver::get().advance(Duration::from_micros(STEP_US));
         self.now_us += STEP_US;
-        self.steps += 1;
     }
 }
 

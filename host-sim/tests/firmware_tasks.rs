@@ -1,5 +1,6 @@
 //! The firmware's own tasks (reference receiver, status sender, encoder reader) and its
-//! direct-drive fast loops, running against the simulated actuator in virtual time: the
+//! direct-drive fast loop (`steering_ecu::direct::FastLoop`: Hall commutation, current sense,
+//! the cascade), running against the simulated actuator in virtual time: the
 //! steering rules, end to end. Own test binary: the mock clock and task pools are global.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
@@ -10,44 +11,98 @@ use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
+use steering_ecu::commutation::{BRIDGE_OFF, BridgeCommand, HallDecoder, code_of};
+use steering_ecu::direct::FastLoop;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
-use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
+use steering_ecu::ports::{Bridge, ColumnEncoderPort, CurrentSense, EncoderError, HallInputs};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
 use steering_ecu::steering::{DriveDemand, EcuState};
 use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
-use steering_ecu::units::{Amps, SteeringDeg};
+use steering_ecu::units::{Amps, SteeringDeg, Volts};
 
 static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
 static TX_FRAMES: FrameQueue = FrameQueue::new();
 /// The column angle the simulated encoder reads, rad (written by the harness each step).
 static COLUMN_RAD: StdMutex<f64> = StdMutex::new(0.0);
+/// A sensor fault the scenario injects (set from `at_period`).
+static INJECT: StdMutex<Inject> = StdMutex::new(Inject::None);
+/// One scenario at a time: the mock clock and the queues are shared by the whole binary.
+static SERIAL: StdMutex<()> = StdMutex::new(());
+/// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
+const RUNS: usize = 6;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Inject {
+    None,
+    /// The column encoder does not answer.
+    EncoderSilent,
+    /// The column encoder reads this much more than the column, deg (a slipping coupling).
+    EncoderOffsetDeg(f64),
+    /// The current sense reads this much more than the winding carries, A (an amplifier
+    /// offset).
+    CurrentBiasA(f32),
+}
+
+fn inject() -> Inject {
+    INJECT.lock().map(|v| *v).unwrap_or(Inject::None)
+}
+
+/// The bridge's DC supply, V (Table 2: 24 V).
+const SUPPLY_V: f64 = 24.0;
+
+struct SimHall(u8);
+impl HallInputs for SimHall {
+    fn read(&mut self) -> u8 {
+        self.0
+    }
+}
+
+struct SimSense([Amps; 3]);
+impl CurrentSense for SimSense {
+    fn phase_currents(&mut self) -> [Amps; 3] {
+        self.0
+    }
+}
+
+struct SimBridge(BridgeCommand);
+impl Bridge for SimBridge {
+    fn apply(&mut self, command: &BridgeCommand) {
+        self.0 = *command;
+    }
+}
 
 struct SimEncoder;
 impl ColumnEncoderPort for SimEncoder {
     async fn read(&mut self) -> Result<u16, EncoderError> {
         let rad = COLUMN_RAD.lock().map(|v| *v).unwrap_or(f64::NAN);
-        Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad))
+        match inject() {
+            Inject::EncoderSilent => Err(EncoderError::NoResponse),
+            Inject::EncoderOffsetDeg(d) => {
+                Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad + d.to_radians()))
+            }
+            _ => Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad)),
+        }
     }
 }
 
-#[embassy_executor::task]
+#[embassy_executor::task(pool_size = RUNS)]
 async fn reference(ecu: &'static SharedEcu) {
     tasks::reference_task(REFERENCE_FRAMES.receiver(), ecu).await
 }
 
-#[embassy_executor::task]
+#[embassy_executor::task(pool_size = RUNS)]
 async fn status(ecu: &'static SharedEcu) {
     tasks::status_task(TX_FRAMES.sender(), ecu).await
 }
 
-#[embassy_executor::task]
+#[embassy_executor::task(pool_size = RUNS)]
 async fn encoder(ecu: &'static SharedEcu) {
     tasks::encoder_task(&mut SimEncoder, ColumnEncoder { zero_raw: 0 }, ecu).await
 }
 
-#[embassy_executor::task]
+#[embassy_executor::task(pool_size = RUNS)]
 async fn keep_awake() {
     loop {
         embassy_futures::yield_now().await;
@@ -78,7 +133,13 @@ struct Sample {
 /// Runs the tasks for `script.len()` periods of 10 ms; `at_period` may act on the ECU (the
 /// clear request, which has no frame yet).
 fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample> {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     MockDriver::get().reset();
+    while REFERENCE_FRAMES.try_receive().is_ok() {}
+    while TX_FRAMES.try_receive().is_ok() {}
+    if let Ok(mut i) = INJECT.lock() {
+        *i = Inject::None;
+    }
     let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(
         Ecu::paper().unwrap(),
     ))));
@@ -87,6 +148,7 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
     let mut plant = LinearPlant::new(PlantParams::PAPER, 50e-6).unwrap();
     let mut counter = AliveCounter::wrapping(0);
     let mut samples = Vec::new();
+    let mut fast = FastLoop::new(0, Volts(SUPPLY_V as f32));
     let mut tick: u64 = 0; // 50 us steps
     let end = script.len() as u64 * 200;
     let script = script.to_vec();
@@ -141,18 +203,32 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
                 }
                 while TX_FRAMES.try_receive().is_ok() {}
             }
-            // The fast loops, as the firmware's timer interrupts run them.
-            let hall = hall_from_motor(plant.motor_rad());
-            let voltage = ecu.lock(|e| {
-                let mut e = e.borrow_mut();
-                if tick.is_multiple_of(10) {
-                    e.position_tick(hall);
-                }
-                e.current_tick(now_us, Amps(plant.current_a() as f32))
+            // The fast loop, as the firmware's ADC interrupt runs it: Hall code and phase
+            // currents from the plant, the bridge command back to a terminal voltage.
+            let sector = hall_from_motor(plant.motor_rad()).rem_euclid(6) as u8;
+            let mut truth = HallDecoder::new(0);
+            let _ = truth.update(code_of(sector));
+            let (high, low) = truth.driven_legs().unwrap();
+            let mut phases = [Amps::ZERO; 3];
+            let bias = match inject() {
+                Inject::CurrentBiasA(a) => a,
+                _ => 0.0,
+            };
+            phases[high] = Amps(plant.current_a() as f32 + bias);
+            phases[low] = Amps(-plant.current_a() as f32 - bias);
+            let mut bridge = SimBridge(BRIDGE_OFF);
+            ecu.lock(|e| {
+                fast.run(
+                    &mut e.borrow_mut(),
+                    now_us,
+                    &mut SimHall(code_of(sector)),
+                    &mut SimSense(phases),
+                    &mut bridge,
+                )
             });
             // Bridge off: the winding is left to its back-EMF, the current dies out.
-            let v = match voltage {
-                Some(v) => v.0 as f64,
+            let v = match truth.terminal_voltage(&bridge.0, SUPPLY_V as f32) {
+                Some(v) => v as f64,
                 None => PlantParams::PAPER.ke * plant.state()[state::W_ROT],
             };
             plant.step(v);
@@ -240,4 +316,109 @@ fn steering_rules_end_to_end_on_the_firmware_tasks() {
     assert!(at(136).faults & (1 << Fault::InvalidFrames.bit()) != 0);
     assert_eq!(at(139).demand, DriveDemand::Disabled);
     assert!(s.iter().all(|x| x.current_a.abs() <= 20.0));
+}
+
+#[test]
+fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
+    // 0-9 AS Off, 10-99 AS Driving 5 deg; the fault is injected from period 30 on.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 5.0); 90]);
+    /// (what breaks, the injection for a period, the fault that must latch)
+    type Case = (&'static str, fn(usize) -> Inject, Fault);
+    let cases: [Case; 4] = [
+        ("encoder silent", |_| Inject::EncoderSilent, Fault::Encoder),
+        (
+            "encoder jumps 40 deg",
+            |_| Inject::EncoderOffsetDeg(40.0),
+            Fault::EncoderJump,
+        ),
+        (
+            // 0.4 deg per 10 ms = 40 deg/s: slower than the jump check; past the 15 deg
+            // window (on top of the belt's own lag) after about 0.4 s.
+            "coupling slips slowly",
+            |p| Inject::EncoderOffsetDeg(0.4 * (p - 29) as f64),
+            Fault::EncoderMotorDisagreement,
+        ),
+        (
+            // The current loop regulates the measured current within 20 A, so the winding
+            // carries -10 A and the column runs away: only the tracking check sees it (and
+            // then, with the bridge off, the over-current check sees the 30 A offset).
+            "current sense reads 30 A high",
+            |_| Inject::CurrentBiasA(30.0),
+            Fault::TrackingError,
+        ),
+    ];
+    for (name, injection, fault) in cases {
+        let s = run(&script, |period, _, _| {
+            if period >= 30
+                && let Ok(mut i) = INJECT.lock()
+            {
+                *i = injection(period);
+            }
+        });
+        assert_eq!(s[29].demand, DriveDemand::Track, "{name}: tracking before");
+        assert_eq!(s[29].faults, 0, "{name}: no fault before");
+        let at = (30..s.len())
+            .find(|&p| s[p].faults != 0)
+            .unwrap_or_else(|| panic!("{name}: nothing latched: {:?}", s[99]));
+        assert!(
+            s[at].faults & (1 << fault.bit()) != 0,
+            "{name}: {fault:?} is among the first faults latched: {:#x}",
+            s[at].faults
+        );
+        eprintln!(
+            "{name}: {fault:?} latched {} ms after the injection, column at {:.1} deg",
+            (at - 30) * 10,
+            s[at].column_deg
+        );
+        assert_eq!(s[at].demand, DriveDemand::Disabled, "{name}");
+        assert_eq!(s[99].state, EcuState::Faulted, "{name}: stays latched");
+        assert!(s[99].current_a.abs() < 0.5, "{name}: current taken to zero");
+    }
+}
+
+/// The receive side of the bus: bus-off ends routing and latches the fault.
+#[test]
+fn bus_off_ends_reception_and_latches_the_fault() {
+    use steering_ecu::can::StandardId;
+    use steering_ecu::ports::{BusError, CanRx};
+    use steering_ecu::tasks::{Route, RouterCounters};
+
+    struct Script(std::vec::IntoIter<Result<Frame, BusError>>);
+    impl CanRx for Script {
+        async fn receive(&mut self) -> Result<Frame, BusError> {
+            self.0.next().unwrap_or(Err(BusError::BusOff))
+        }
+    }
+    struct AllToReference;
+    impl Route for AllToReference {
+        fn route(&self, _: &Frame) -> Option<usize> {
+            Some(0)
+        }
+    }
+
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let ecu = SharedEcu::new(RefCell::new(Ecu::paper().unwrap()));
+    let queue = FrameQueue::new();
+    let frame = Frame::new(StandardId::new(0x100).unwrap(), &[0; 8]).unwrap();
+    let mut rx = Script(vec![Ok(frame), Err(BusError::Overrun)].into_iter());
+    let mut counters = RouterCounters::default();
+    let end = embassy_futures::block_on(tasks::receive_task(
+        &mut rx,
+        &AllToReference,
+        &[queue.sender()],
+        &mut counters,
+        &ecu,
+        || 248,
+    ));
+    assert_eq!(end, BusError::BusOff);
+    assert_eq!((counters.routed, counters.bus_errors), (1, 1));
+    let out = ecu.lock(|e| e.borrow().output());
+    assert!(out.faults.contains(Fault::BusOff), "{:?}", out.faults);
+    assert_eq!(out.demand, DriveDemand::Disabled);
+    let record = ecu.lock(|e| e.borrow().machine().fault_log().iter().next().copied());
+    assert_eq!(
+        record.map(|r| (r.fault, r.detail)),
+        Some((Fault::BusOff, 248))
+    );
 }

@@ -190,6 +190,20 @@ pub fn gain_words(gains: &EposGains) -> Result<[(ObjectAddress, u32); 7], GainWo
     ])
 }
 
+/// The SDO request that writes controlword "disable voltage" (0x0000) to `node`: the power
+/// stage off from any state. Sent without waiting for an answer by the link after a failure and
+/// by the firmware's panic handler.
+pub fn disable_voltage_frame(node: NodeId) -> Option<Frame> {
+    super::sdo::request_frame(
+        node,
+        &SdoRequest::Download(SdoWrite {
+            object: od::CONTROLWORD,
+            value: Command::DisableVoltage.controlword() as u32,
+            width: Width::U16,
+        }),
+    )
+}
+
 /// Everything [`Epos4Link`] needs to know.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -311,10 +325,17 @@ pub enum Phase {
     },
     /// NMT start sent, waiting for an Operational heartbeat.
     Starting,
-    /// CiA 402 walk to Operation enabled.
+    /// CiA 402 walk (SDO) to Operation enabled, or to Switch on disabled when power is not
+    /// wanted; a pending fault reset is done first.
     Enabling,
     /// Operation enabled: SYNC + RPDO every cycle.
     Cyclic,
+    /// Power off requested: controlword "disable voltage" sent, waiting for its confirmation.
+    /// SYNC and the PDOs keep running.
+    Disabling,
+    /// Power stage off (Switch on disabled), NMT Operational, SYNC + PDOs running: the link
+    /// watches the drive (heartbeat, statusword, position) and the motor turns freely.
+    Standby,
     Failed(LinkError),
 }
 
@@ -327,6 +348,8 @@ pub struct Feedback {
     pub current_ma: i32,
     /// When TPDO1 last arrived (`now_us` of `on_frame`).
     pub updated_us: u64,
+    /// When TPDO2 (the current) last arrived.
+    pub current_updated_us: u64,
 }
 
 /// Frames to put on the bus, in order.
@@ -370,14 +393,23 @@ const MAX_START_ATTEMPTS: u8 = 3;
 ///      v
 ///  Enabling (SDO: read 0x6041 -> next controlword; before "enable operation" the target
 ///      |      0x607A is set to the actual position 0x6064, so enabling never jumps)
-///      v
-///  Cyclic: each cycle RPDO1 (0x607A) then SYNC; TPDO1 (0x6041, 0x6064), TPDO2 (0x30D1)
+///      |  power wanted                     power not wanted
+///      v                                        v
+///  Cyclic: each cycle RPDO1 (0x607A)       Standby: power stage off (Switch on disabled),
+///      then SYNC; TPDO1 (0x6041, 0x6064),     the same SYNC / PDO cycle, target = actual
+///      TPDO2 (0x30D1)                           ^        |
+///      |  set_power(false): "disable voltage"   |        | set_power(true): Enabling
+///      +--> Disabling (SDO confirmed) ----------+        |
 ///      |
 ///      +--> Failed(error): SDO timeout after retries / abort / read-back mismatch /
 ///           heartbeat lost / EMCY / statusword fault / TPDOs missing
 ///           request_fault_reset(): drive faults -> Enabling with fault reset (0x00, 0x80)
 ///                                  link faults  -> Configuring from the start
+///           set_power(false) while failed: one best-effort "disable voltage" SDO
 /// ```
+///
+/// The power stage is off until [`Epos4Link::set_power`] asks for it: the ECU's steering state
+/// machine decides, and the link follows in the same call (a disable goes on the bus at once).
 ///
 /// The caller passes a monotonic `now_us` to [`Epos4Link::poll`] (often, e.g. every 1 ms) and
 /// every received frame to [`Epos4Link::on_frame`], and sends what both return.
@@ -405,6 +437,10 @@ pub struct Epos4Link {
     tpdo2: StandardId,
     rpdo1: StandardId,
     started: bool,
+    /// Power stage wanted on ([`Epos4Link::set_power`]); off at start.
+    power: bool,
+    /// The one best-effort "disable voltage" after a failure was sent.
+    failsafe_sent: bool,
 }
 
 impl Epos4Link {
@@ -458,6 +494,8 @@ impl Epos4Link {
             tpdo2,
             rpdo1,
             started: false,
+            power: false,
+            failsafe_sent: false,
         })
     }
 
@@ -599,6 +637,60 @@ impl Epos4Link {
     /// Leave `Failed`: drive faults (EMCY, statusword fault, left Operation enabled) go back to
     /// the CiA 402 walk with a fault reset; anything else restarts the whole bring-up.
     /// Returns no frames (and does nothing) when the link has not failed.
+    /// Whether the power stage is wanted on. Off is acted on at once: from Enabling or Cyclic
+    /// the "disable voltage" controlword goes out in the returned frames; when the link has
+    /// failed, one best-effort "disable voltage" is sent (nothing confirms it). On is acted on
+    /// from Standby at the next [`Epos4Link::poll`].
+    pub fn set_power(&mut self, on: bool, now_us: u64) -> Outbox {
+        let mut out = Outbox::new();
+        let was = self.power;
+        self.power = on;
+        if on || was == on && !matches!(self.phase, Phase::Failed(_)) {
+            return out;
+        }
+        match self.phase {
+            Phase::Enabling | Phase::Cyclic => {
+                self.sdo.cancel();
+                self.enter_disabling(now_us, &mut out);
+            }
+            Phase::Failed(_) if !self.failsafe_sent => {
+                self.failsafe_sent = true;
+                if let Some(f) = disable_voltage_frame(self.config.node) {
+                    let _ = out.push(f);
+                }
+            }
+            _ => {}
+        }
+        out
+    }
+
+    /// Whether the power stage is wanted on.
+    pub fn power_wanted(&self) -> bool {
+        self.power
+    }
+
+    fn enter_disabling(&mut self, now_us: u64, out: &mut Outbox) {
+        self.phase = Phase::Disabling;
+        self.attempts = 0;
+        self.send(
+            SdoRequest::Download(SdoWrite {
+                object: od::CONTROLWORD,
+                value: Command::DisableVoltage.controlword() as u32,
+                width: Width::U16,
+            }),
+            now_us,
+            out,
+        );
+    }
+
+    fn enter_standby(&mut self, now_us: u64) {
+        self.phase = Phase::Standby;
+        self.missed_tpdos = 0;
+        self.next_sync_us = now_us;
+        self.heartbeat.rearm(now_us);
+        self.target_inc = self.feedback.position_inc;
+    }
+
     pub fn request_fault_reset(&mut self, now_us: u64) -> Outbox {
         let mut out = Outbox::new();
         let Phase::Failed(error) = self.phase else {
@@ -628,6 +720,7 @@ impl Epos4Link {
     fn fail(&mut self, error: LinkError) {
         self.sdo.cancel();
         self.phase = Phase::Failed(error);
+        self.failsafe_sent = false;
     }
 
     fn send(&mut self, request: SdoRequest, now_us: u64, out: &mut Outbox) {
@@ -716,8 +809,11 @@ impl Epos4Link {
             }
             self.send(request, now_us, &mut out);
         }
-        let supervised = matches!(self.phase, Phase::Enabling | Phase::Cyclic)
-            || (self.phase == Phase::Starting && self.heartbeat.last_state().is_some());
+        let supervised = matches!(
+            self.phase,
+            Phase::Enabling | Phase::Cyclic | Phase::Disabling | Phase::Standby
+        ) || (self.phase == Phase::Starting
+            && self.heartbeat.last_state().is_some());
         if supervised && self.heartbeat.expired(now_us) {
             let silent_us = self.heartbeat.silent_us(now_us);
             self.fail(LinkError::HeartbeatLost { silent_us });
@@ -734,7 +830,14 @@ impl Epos4Link {
                     self.send_start(now_us, &mut out);
                 }
             }
-            Phase::Cyclic if now_us >= self.next_sync_us => {
+            Phase::Standby if self.power && self.sdo.is_idle() => {
+                self.enter_enabling(false, now_us, &mut out);
+            }
+            Phase::Cyclic | Phase::Disabling | Phase::Standby if now_us >= self.next_sync_us => {
+                if self.phase != Phase::Cyclic {
+                    // The motor is free: the target follows it, so enabling never jumps.
+                    self.target_inc = self.feedback.position_inc;
+                }
                 if self.missed_tpdos >= self.config.max_missed_tpdos {
                     let missed = self.missed_tpdos;
                     self.fail(LinkError::PdoTimeout { missed });
@@ -796,6 +899,7 @@ impl Epos4Link {
         if frame.id() == self.tpdo2 {
             if let Some(ma) = pdo::decode_i32(frame.data()) {
                 self.feedback.current_ma = ma;
+                self.feedback.current_updated_us = now_us;
             }
             return out;
         }
@@ -809,8 +913,11 @@ impl Epos4Link {
         self.heartbeat.on_heartbeat(state, now_us);
         match (self.phase, state) {
             (Phase::Starting, NmtState::Operational) => self.enter_enabling(false, now_us, out),
-            (Phase::Enabling | Phase::Cyclic, NmtState::Operational) => {}
-            (Phase::Enabling | Phase::Cyclic, other) => {
+            (
+                Phase::Enabling | Phase::Cyclic | Phase::Disabling | Phase::Standby,
+                NmtState::Operational,
+            ) => {}
+            (Phase::Enabling | Phase::Cyclic | Phase::Disabling | Phase::Standby, other) => {
                 self.fail(LinkError::NodeLeftOperational { state: other })
             }
             (Phase::Starting, NmtState::BootUp) if self.started => {
@@ -828,13 +935,18 @@ impl Epos4Link {
         self.feedback.position_inc = position;
         self.feedback.updated_us = now_us;
         self.missed_tpdos = 0;
-        if self.phase != Phase::Cyclic {
-            return;
-        }
-        if statusword & cia402::status::FAULT != 0 {
-            self.fail(LinkError::DriveFault { statusword });
-        } else if State::from_statusword(statusword) != Some(State::OperationEnabled) {
-            self.fail(LinkError::LeftOperationEnabled { statusword });
+        match self.phase {
+            Phase::Cyclic | Phase::Disabling | Phase::Standby
+                if statusword & cia402::status::FAULT != 0 =>
+            {
+                self.fail(LinkError::DriveFault { statusword });
+            }
+            Phase::Cyclic
+                if State::from_statusword(statusword) != Some(State::OperationEnabled) =>
+            {
+                self.fail(LinkError::LeftOperationEnabled { statusword });
+            }
+            _ => {}
         }
     }
 
@@ -879,6 +991,11 @@ impl Epos4Link {
                 self.run_script(now_us, out);
             }
             Phase::Enabling => self.on_enable_outcome(outcome, now_us, out),
+            Phase::Disabling => {
+                if let SdoOutcome::Written { .. } = outcome {
+                    self.enter_standby(now_us);
+                }
+            }
             _ => {}
         }
     }
@@ -888,7 +1005,17 @@ impl Epos4Link {
             (EnableStep::ReadStatus, SdoOutcome::Read { value, .. }) => {
                 let statusword = value as u16;
                 self.feedback.statusword = statusword;
-                match State::from_statusword(statusword) {
+                let state = State::from_statusword(statusword);
+                let faulted = matches!(state, Some(State::Fault | State::FaultReactionActive));
+                if !self.power && !faulted {
+                    // Power not wanted (any more): off, then watch from Standby.
+                    match state {
+                        Some(State::SwitchOnDisabled) => self.enter_standby(now_us),
+                        _ => self.enter_disabling(now_us, out),
+                    }
+                    return;
+                }
+                match state {
                     Some(State::OperationEnabled) => {
                         self.phase = Phase::Cyclic;
                         self.missed_tpdos = 0;
@@ -1067,6 +1194,7 @@ mod tests {
     fn link_in(phase: Phase) -> Epos4Link {
         let mut link = Epos4Link::new(Epos4Config::paper(node()), 0).unwrap();
         link.start(0);
+        let _ = link.set_power(true, 0);
         match phase {
             Phase::Enabling => {
                 let mut out = Outbox::new();
@@ -1074,6 +1202,11 @@ mod tests {
             }
             Phase::Cyclic => link.phase = Phase::Cyclic,
             Phase::Starting => link.phase = Phase::Starting,
+            Phase::Standby => link.phase = Phase::Standby,
+            Phase::Disabling => {
+                link.phase = Phase::Cyclic;
+                let _ = link.set_power(false, 0);
+            }
             _ => {}
         }
         link
@@ -1085,7 +1218,7 @@ mod tests {
         #[test]
         fn decoders_and_link_accept_any_frame(
             frames in proptest::collection::vec(prop_oneof![any_frame(), near_frame()], 1..12),
-            phase in 0u8..4,
+            phase in 0u8..6,
             dts in proptest::collection::vec(0u64..30_000, 12),
         ) {
             let n = node();
@@ -1109,6 +1242,8 @@ mod tests {
                 0 => Phase::Configuring { step: 0, total: 0 },
                 1 => Phase::Starting,
                 2 => Phase::Enabling,
+                3 => Phase::Standby,
+                4 => Phase::Disabling,
                 _ => Phase::Cyclic,
             };
             let mut link = link_in(phase);
@@ -1119,7 +1254,9 @@ mod tests {
                 prop_assert!(out.len() <= 4);
                 let _ = link.poll(t);
                 if link.error().is_some() {
+                    let _ = link.set_power(false, t);
                     let _ = link.request_fault_reset(t);
+                    let _ = link.set_power(true, t);
                 }
             }
         }

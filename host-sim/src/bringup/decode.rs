@@ -176,6 +176,7 @@ pub fn fault_words(fault: Fault) -> &'static str {
         Fault::EposFault => "EPOS4 fault",
         Fault::HeartbeatLost => "EPOS4 heartbeat lost",
         Fault::BusOff => "CAN bus-off",
+        Fault::TrackingError => "tracking error",
     }
 }
 

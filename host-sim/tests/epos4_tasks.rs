@@ -1,0 +1,400 @@
+//! EPOS4 mode end to end: the firmware's own tasks (reference receiver, status sender, encoder
+//! reader, EPOS4 link) in virtual time, on one in-memory CAN bus with the vehicle computer and
+//! the strict simulated EPOS4 (which refuses illegal CiA 402 transitions and runs the paper's
+//! cascade against the plant). The bus can drop, delay and corrupt frames. Own test binary:
+//! the mock clock and the task pools are global.
+#![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+
+use embassy_executor::{Executor, Spawner};
+use embassy_time::{Duration, MockDriver};
+use host_sim::canbus::{CanBus, RandomFaults};
+use host_sim::epos4_sim::Epos4Sim;
+use std::cell::RefCell;
+use std::sync::Mutex as StdMutex;
+use steering_ecu::as_state::AsState;
+use steering_ecu::can::Frame;
+use steering_ecu::canopen::NodeId;
+use steering_ecu::canopen::cia402::State;
+use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale};
+use steering_ecu::ecu::Ecu;
+use steering_ecu::faults::Fault;
+use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
+use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
+use steering_ecu::sensors::ColumnEncoder;
+use steering_ecu::steering::{DriveDemand, EcuState};
+use steering_ecu::tasks::{self, FrameQueue, Route, SharedEcu};
+use steering_ecu::units::SteeringDeg;
+
+static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
+static DRIVE_FRAMES: FrameQueue = FrameQueue::new();
+static TX_FRAMES: FrameQueue = FrameQueue::new();
+/// The column angle the simulated encoder reads, rad (written by the harness each step).
+static COLUMN_RAD: StdMutex<f64> = StdMutex::new(0.0);
+/// One scenario at a time: the mock clock and the queues are shared by the whole binary.
+static SERIAL: StdMutex<()> = StdMutex::new(());
+
+const STEP_US: u64 = 50;
+/// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
+const RUNS: usize = 8;
+const PERIOD_STEPS: u64 = 10_000 / STEP_US;
+
+fn node() -> NodeId {
+    NodeId::new(1).unwrap()
+}
+
+struct SimEncoder;
+impl ColumnEncoderPort for SimEncoder {
+    async fn read(&mut self) -> Result<u16, EncoderError> {
+        let rad = COLUMN_RAD.lock().map(|v| *v).unwrap_or(f64::NAN);
+        Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad))
+    }
+}
+
+#[embassy_executor::task(pool_size = RUNS)]
+async fn reference(ecu: &'static SharedEcu) {
+    tasks::reference_task(REFERENCE_FRAMES.receiver(), ecu).await
+}
+
+#[embassy_executor::task(pool_size = RUNS)]
+async fn status(ecu: &'static SharedEcu) {
+    tasks::status_task(TX_FRAMES.sender(), ecu).await
+}
+
+#[embassy_executor::task(pool_size = RUNS)]
+async fn encoder(ecu: &'static SharedEcu) {
+    tasks::encoder_task(&mut SimEncoder, ColumnEncoder { zero_raw: 0 }, ecu).await
+}
+
+#[embassy_executor::task(pool_size = RUNS)]
+async fn drive(ecu: &'static SharedEcu) {
+    tasks::drive_task(DRIVE_FRAMES.receiver(), TX_FRAMES.sender(), ecu).await
+}
+
+#[embassy_executor::task(pool_size = RUNS)]
+async fn keep_awake() {
+    loop {
+        embassy_futures::yield_now().await;
+    }
+}
+
+/// The firmware's routing (`main.rs`): the vehicle's reference to the reference task, the
+/// EPOS4's EMCY, TPDOs, SDO answers and heartbeat to the drive task.
+struct Routes;
+impl Route for Routes {
+    fn route(&self, frame: &Frame) -> Option<usize> {
+        match frame.id().raw() {
+            tasks::VEHICLE_REFERENCE_ID => Some(0),
+            0x081..=0x0FF | 0x181..=0x4FF | 0x581..=0x5FF | 0x701..=0x77F => Some(1),
+            _ => None,
+        }
+    }
+}
+
+/// What happens in one 10 ms period.
+#[derive(Clone, Copy, Debug)]
+enum Event {
+    Ref(AsState, f32),
+    /// A reference frame with the clear-faults bit.
+    Clear(AsState, f32),
+    /// A drive error inside the EPOS4 (EMCY + statusword fault), with a reference frame.
+    DriveFault(AsState, f32),
+    /// The EPOS4 falls silent (no frame of it reaches the bus) from here on.
+    SilenceDrive(AsState, f32),
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Sample {
+    demand: DriveDemand,
+    state: EcuState,
+    faults: u16,
+    drive: State,
+    column_deg: f64,
+    current_a: f64,
+    /// The last status frame's current, A (what the vehicle computer sees).
+    status_current_a: f32,
+}
+
+struct Run {
+    samples: Vec<Sample>,
+    refusals: usize,
+    dropped: u64,
+    corrupted: u64,
+}
+
+fn run(script: &[Event], faults: RandomFaults, seed: u64) -> Run {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    MockDriver::get().reset();
+    while REFERENCE_FRAMES.try_receive().is_ok() {}
+    while DRIVE_FRAMES.try_receive().is_ok() {}
+    while TX_FRAMES.try_receive().is_ok() {}
+    let config = Epos4Config::paper(node());
+    let link = Epos4Link::new(config, 0).unwrap();
+    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(
+        Ecu::paper_epos4(link).unwrap(),
+    ))));
+    let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
+    let protocol = ProtocolConfig::default();
+    let mut bus = CanBus::new(seed, 130);
+    let vehicle = bus.attach();
+    let ecu_port = bus.attach();
+    let drive_port = bus.attach();
+    bus.set_random_faults(faults);
+    let mut sim =
+        Epos4Sim::new(node(), PositionScale::new(config.counts_per_rev).unwrap()).unwrap();
+    // The drive boots before the ECU's link starts: its boot-up message is on the bus first.
+    for f in sim.advance(0) {
+        bus.send(drive_port, f, 0);
+    }
+    let mut counter = AliveCounter::wrapping(0);
+    let mut samples = Vec::new();
+    let mut status_current = f32::NAN;
+    let mut tick: u64 = 0;
+    let end = script.len() as u64 * PERIOD_STEPS;
+    let script = script.to_vec();
+    executor.run_until(
+        |spawner: Spawner| {
+            spawner.spawn(reference(ecu).unwrap());
+            spawner.spawn(status(ecu).unwrap());
+            spawner.spawn(encoder(ecu).unwrap());
+            spawner.spawn(drive(ecu).unwrap());
+            spawner.spawn(keep_awake().unwrap());
+        },
+        || {
+            let now_us = tick * STEP_US;
+            if tick.is_multiple_of(PERIOD_STEPS) {
+                let period = (tick / PERIOD_STEPS) as usize;
+                let o = ecu.lock(|e| e.borrow().output());
+                samples.push(Sample {
+                    demand: o.demand,
+                    state: o.state,
+                    faults: o.faults.bits(),
+                    drive: sim.cia402_state(),
+                    column_deg: sim.column_rad().to_degrees(),
+                    current_a: sim.current_a(),
+                    status_current_a: status_current,
+                });
+                let (as_state, deg, clear) = match script.get(period) {
+                    Some(Event::Ref(a, d)) => (*a, *d, false),
+                    Some(Event::Clear(a, d)) => (*a, *d, true),
+                    Some(Event::DriveFault(a, d)) => {
+                        sim.inject_fault(0x2310);
+                        (*a, *d, false)
+                    }
+                    Some(Event::SilenceDrive(a, d)) => {
+                        bus.silence(drive_port, true);
+                        (*a, *d, false)
+                    }
+                    None => (AsState::Off, 0.0, false),
+                };
+                counter = counter.next();
+                let f = protocol.encode_reference(&Reference {
+                    angle: SteeringDeg(deg),
+                    as_state,
+                    counter,
+                    clear_faults: clear,
+                });
+                bus.send(vehicle, f, now_us);
+            }
+            for f in sim.advance(now_us) {
+                bus.send(drive_port, f, now_us);
+            }
+            while let Ok(f) = TX_FRAMES.try_receive() {
+                bus.send(ecu_port, f, now_us);
+            }
+            for (to, f) in bus.deliver(now_us) {
+                if to == drive_port {
+                    for r in sim.on_frame(&f) {
+                        bus.send(drive_port, r, now_us);
+                    }
+                } else if to == ecu_port {
+                    let queue = match Routes.route(&f) {
+                        Some(0) => Some(&REFERENCE_FRAMES),
+                        Some(_) => Some(&DRIVE_FRAMES),
+                        None => None,
+                    };
+                    if let Some(q) = queue {
+                        let _ = q.try_send(f);
+                    }
+                } else if to == vehicle
+                    && let Ok(status) = protocol.decode_status(&f)
+                {
+                    status_current = status.current.0;
+                }
+            }
+            if let Ok(mut c) = COLUMN_RAD.lock() {
+                *c = sim.column_rad();
+            }
+            MockDriver::get().advance(Duration::from_micros(STEP_US));
+            tick += 1;
+            tick >= end
+        },
+    );
+    let stats = bus.stats();
+    Run {
+        samples,
+        refusals: sim.refusals().len(),
+        dropped: stats.dropped,
+        corrupted: stats.corrupted,
+    }
+}
+
+fn bit(f: Fault) -> u16 {
+    1 << f.bit()
+}
+
+fn repeat(event: Event, n: usize) -> Vec<Event> {
+    vec![event; n]
+}
+
+#[test]
+fn the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference() {
+    use AsState::*;
+    // 10 ms per entry.
+    let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
+    script.extend(repeat(Event::Ref(Ready, 0.0), 10)); // 60-69
+    script.extend(repeat(Event::Ref(Driving, 10.0), 90)); // 70-159: tracks 10 deg
+    script.extend(repeat(Event::Ref(Finished, 10.0), 20)); // 160-179: off again
+    script.extend(repeat(Event::Ref(Driving, -5.0), 70)); // 180-249: on again
+    script.extend(repeat(Event::Ref(Emergency, -5.0), 10)); // 250-259: off at once
+    let r = run(&script, RandomFaults::default(), 1);
+    let s = &r.samples;
+    assert_eq!(s[59].demand, DriveDemand::Disabled);
+    assert_eq!(
+        s[59].drive,
+        State::SwitchOnDisabled,
+        "AS Off: power stage off after bring-up"
+    );
+    assert_eq!(s[59].faults, 0, "bring-up without faults");
+    assert_eq!(s[100].demand, DriveDemand::Track);
+    assert_eq!(s[100].drive, State::OperationEnabled);
+    assert!(
+        (s[159].column_deg - 10.0).abs() < 0.5,
+        "column at {:.2} deg",
+        s[159].column_deg
+    );
+    assert!(
+        s[159].status_current_a.is_finite(),
+        "the status frame carries the EPOS4's current"
+    );
+    // AS Finished: disabled within one period (the disable goes out within 1 ms).
+    assert_eq!(s[161].demand, DriveDemand::Disabled);
+    assert_eq!(s[162].drive, State::SwitchOnDisabled);
+    assert_eq!(s[179].state, EcuState::Idle);
+    assert_eq!(s[200].drive, State::OperationEnabled);
+    assert!(
+        (s[249].column_deg + 5.0).abs() < 0.5,
+        "column at {:.2} deg",
+        s[249].column_deg
+    );
+    assert_eq!(s[251].demand, DriveDemand::Disabled);
+    assert_eq!(s[252].drive, State::SwitchOnDisabled, "AS Emergency: off");
+    assert_eq!(r.refusals, 0, "no illegal CiA 402 transition");
+    assert!(s.iter().all(|x| x.current_a.abs() <= 20.0 + 1e-9));
+}
+
+#[test]
+fn a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered() {
+    use AsState::*;
+    let mut script = repeat(Event::Ref(Off, 0.0), 60);
+    script.extend(repeat(Event::Ref(Driving, 5.0), 50)); // 60-109
+    script.push(Event::DriveFault(Driving, 5.0)); // 110
+    script.extend(repeat(Event::Ref(Driving, 5.0), 29)); // 111-139: latched
+    script.push(Event::Clear(Driving, 5.0)); // 140: refused (not AS Off)
+    script.extend(repeat(Event::Ref(Off, 5.0), 99)); // 141-239: link reset, drive back
+    script.push(Event::Clear(Off, 5.0)); // 240: accepted
+    script.extend(repeat(Event::Ref(Off, 5.0), 9)); // 241-249
+    script.extend(repeat(Event::Ref(Driving, 0.0), 60)); // 250-309: steering again
+    let r = run(&script, RandomFaults::default(), 2);
+    let s = &r.samples;
+    assert_eq!(s[109].demand, DriveDemand::Track);
+    assert_eq!(s[112].demand, DriveDemand::Disabled);
+    assert!(
+        s[112].faults & bit(Fault::EposFault) != 0,
+        "{:#x}",
+        s[112].faults
+    );
+    assert_eq!(s[139].state, EcuState::Faulted);
+    assert_eq!(
+        s[145].faults, s[112].faults,
+        "the request while driving is refused"
+    );
+    assert_eq!(
+        s[239].drive,
+        State::SwitchOnDisabled,
+        "the link reset the drive's fault in AS Off and left it unpowered"
+    );
+    assert_eq!(s[242].faults, 0, "cleared on request in AS Off");
+    assert_eq!(s[280].demand, DriveDemand::Track);
+    assert_eq!(s[280].drive, State::OperationEnabled);
+    assert!(
+        s[309].column_deg.abs() < 0.5,
+        "column at {:.2} deg",
+        s[309].column_deg
+    );
+    assert_eq!(r.refusals, 0);
+}
+
+#[test]
+fn a_silent_drive_latches_heartbeat_lost() {
+    use AsState::*;
+    let mut script = repeat(Event::Ref(Off, 0.0), 60);
+    script.extend(repeat(Event::Ref(Driving, 5.0), 40)); // 60-99
+    script.push(Event::SilenceDrive(Driving, 5.0)); // 100
+    script.extend(repeat(Event::Ref(Driving, 5.0), 30)); // 101-130
+    let r = run(&script, RandomFaults::default(), 3);
+    let s = &r.samples;
+    assert_eq!(s[99].demand, DriveDemand::Track);
+    // TPDO supervision (5 missed SYNC periods) or the 100 ms heartbeat time-out.
+    let at = (100..s.len())
+        .find(|&i| s[i].faults & bit(Fault::HeartbeatLost) != 0)
+        .expect("heartbeat-lost fault latched");
+    assert!(
+        at <= 111,
+        "latched {} ms after the drive fell silent",
+        (at - 100) * 10
+    );
+    assert_eq!(s[at].demand, DriveDemand::Disabled);
+    assert_eq!(s[130].state, EcuState::Faulted);
+}
+
+#[test]
+fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault() {
+    use AsState::*;
+    let mut script = repeat(Event::Ref(Off, 0.0), 100);
+    script.extend(repeat(Event::Ref(Driving, 8.0), 100));
+    let mut tracked = 0;
+    for seed in 0..4u64 {
+        let r = run(
+            &script,
+            RandomFaults {
+                drop: 0.01,
+                corrupt: 0.005,
+                delay: 0.01,
+                max_delay_us: 1_000,
+            },
+            100 + seed,
+        );
+        assert!(r.dropped + r.corrupted > 0, "the bus did misbehave");
+        assert_eq!(r.refusals, 0, "seed {seed}: an illegal CiA 402 transition");
+        let last = r.samples.last().unwrap();
+        if last.demand == DriveDemand::Track {
+            assert!(
+                (last.column_deg - 8.0).abs() < 1.0,
+                "seed {seed}: column at {:.2} deg",
+                last.column_deg
+            );
+            tracked += 1;
+        } else {
+            // Either the lossy reference channel (invalid frames) or the link failed: named,
+            // latched, drive off.
+            assert_ne!(
+                last.faults, 0,
+                "seed {seed}: not tracking but no fault: {last:?}"
+            );
+            assert_eq!(last.demand, DriveDemand::Disabled);
+            assert_ne!(last.drive, State::OperationEnabled, "seed {seed}");
+        }
+    }
+    eprintln!("{tracked} of 4 lossy runs tracked");
+    assert!(tracked >= 2, "only {tracked} of 4 lossy runs tracked");
+}
