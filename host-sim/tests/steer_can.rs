@@ -311,5 +311,14 @@ fn track_campaign_from_csv_runs_the_profile_it_was_given() {
         "column at the end {} deg",
         built.log.sw_deg[end]
     );
+    // The motor frame (0x102) carries the motor angle: the column's through the gearing,
+    // within a Hall step (0.075 rad) and the torsion bar's twist.
+    let per = host_sim::plant::PlantParams::PAPER.motor_per_pinion();
+    let expected = built.log.sw_deg[end].to_radians() * per;
+    assert!(
+        (built.log.motor_rad[end] - expected).abs() < 0.15,
+        "motor {} rad, column x gearing {expected} rad",
+        built.log.motor_rad[end]
+    );
     assert_eq!(sim.output().demand, DriveDemand::Disabled);
 }
