@@ -12,7 +12,7 @@ use super::{BringupError, Transport, candump, epos, pump};
 use crate::scenario::Sweep;
 use crate::sim_ecu::{Injection, SimEcu};
 use clap::{Args, Parser, Subcommand};
-use std::io::{BufRead, IsTerminal, Write};
+use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -488,19 +488,9 @@ fn confirm(text: &str) -> Result<(), BringupError> {
     eprintln!("{text}");
     eprint!("type `yes` to start: ");
     let _ = std::io::stderr().flush();
-    let stdin = std::io::stdin();
-    if !stdin.is_terminal() {
-        // A script must say --yes; an empty pipe is not a yes.
-        let mut line = String::new();
-        let _ = stdin.lock().read_line(&mut line);
-        if line.trim() != "yes" {
-            eprintln!();
-            return Err(BringupError::NotConfirmed);
-        }
-        return Ok(());
-    }
     let mut line = String::new();
-    stdin
+    // A closed or empty stdin (a script without --yes) reads as no answer: not a yes.
+    std::io::stdin()
         .lock()
         .read_line(&mut line)
         .map_err(|source| BringupError::Io {
@@ -510,6 +500,7 @@ fn confirm(text: &str) -> Result<(), BringupError> {
     if line.trim() == "yes" {
         Ok(())
     } else {
+        eprintln!();
         Err(BringupError::NotConfirmed)
     }
 }

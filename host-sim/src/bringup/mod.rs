@@ -121,7 +121,10 @@ impl fmt::Display for BringupError {
             BringupError::Profile { reason } => write!(f, "profile: {reason}"),
             BringupError::Epos { reason } => write!(f, "EPOS4: {reason}"),
             BringupError::Log { reason } => write!(f, "log: {reason}"),
-            BringupError::NotConfirmed => write!(f, "not confirmed; nothing was sent"),
+            BringupError::NotConfirmed => write!(
+                f,
+                "not confirmed; nothing was sent (answer `yes`, or pass --yes in a script)"
+            ),
         }
     }
 }
