@@ -56,14 +56,17 @@ pub async fn reference_task(frames: FrameReceiver<'_>, ecu: &SharedEcu) -> ! {
     }
 }
 
-/// The 100 Hz status sender. A full transmit queue drops this period's frame (the counter
-/// shows the gap to the vehicle computer) rather than delaying the next one.
+/// The 100 Hz status sender: the status frame, then the motor frame. A full transmit queue
+/// drops this period's frame (the counter shows the gap to the vehicle computer) rather than
+/// delaying the next one.
 pub async fn status_task(tx: FrameSender<'_>, ecu: &SharedEcu) -> ! {
     let mut ticker = Ticker::every(REFERENCE_PERIOD);
     loop {
         ticker.next().await;
         let frame = ecu.lock(|e| e.borrow_mut().status_frame());
         let _ = tx.try_send(frame);
+        let motor = ecu.lock(|e| e.borrow_mut().motor_frame());
+        let _ = tx.try_send(motor);
     }
 }
 

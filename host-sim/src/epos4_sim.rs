@@ -31,6 +31,8 @@ use steering_ecu::sensors::hall_from_motor;
 use steering_ecu::units::{Amps, MotorRad, SteeringDeg};
 
 const TICK_US: u64 = 1_000_000 / CURRENT_LOOP_HZ as u64;
+/// Entries of the error history 0x1003.
+const ERROR_HISTORY_LEN: u8 = 5;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Access {
@@ -156,6 +158,12 @@ impl Epos4Sim {
             );
         };
         e(0x1001, 0, U8, Ro, 0);
+        // Error history (CiA 301 0x1003): sub 0 = number of entries (write 0 to clear),
+        // subs 1..=5 newest first, as the EPOS4 keeps five.
+        e(0x1003, 0, U8, Rw, 0);
+        for s in 1..=ERROR_HISTORY_LEN {
+            e(0x1003, s, U32, Ro, 0);
+        }
         e(0x1005, 0, U32, Const, 0x80);
         e(0x1014, 0, U32, Ro, 0x80 + n);
         e(0x1017, 0, U16, Rw, 0);
@@ -229,8 +237,19 @@ impl Epos4Sim {
         );
         self.set_raw(0x603F, 0, code as u32);
         self.set_raw(0x1001, 0, 0x01);
+        self.push_error_history(code);
         self.enter(State::Fault);
         self.emit_emcy(code, 0x01);
+    }
+
+    fn push_error_history(&mut self, code: u16) {
+        for s in (2..=ERROR_HISTORY_LEN).rev() {
+            let older = self.get_raw(0x1003, s - 1);
+            self.set_raw(0x1003, s, older);
+        }
+        self.set_raw(0x1003, 1, u32::from(code));
+        let n = (self.get_raw(0x1003, 0) + 1).min(u32::from(ERROR_HISTORY_LEN));
+        self.set_raw(0x1003, 0, n);
     }
 
     /// Controlwords the drive refused, in order.

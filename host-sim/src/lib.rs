@@ -1,6 +1,7 @@
 //! host-sim: the paper's steering actuator (plant of eqs. 1-8) under the firmware's own control
 //! core, with the scenarios, the analysis and the pictures around it.
 pub mod analysis;
+pub mod bringup;
 pub mod canbus;
 pub mod epos4_sim;
 pub mod gap;
@@ -11,3 +12,4 @@ pub mod plot;
 pub mod report;
 pub mod scenario;
 pub mod sim;
+pub mod sim_ecu;

@@ -57,9 +57,12 @@ fn ids_lengths_and_signal_sets_agree() {
     assert_eq!(status.id, MessageId::Standard(cfg.status_id.raw()));
     assert_eq!(reference.size, u64::from(FRAME_LEN));
     assert_eq!(status.size, u64::from(FRAME_LEN));
-    assert_eq!(dbc.messages.len(), 2);
+    let motor = message(&dbc, "EcuMotor");
+    assert_eq!(motor.id, MessageId::Standard(MOTOR_ID.raw()));
+    assert_eq!(motor.size, u64::from(FRAME_LEN));
+    assert_eq!(dbc.messages.len(), 3);
 
-    for m in [reference, status] {
+    for m in [reference, status, motor] {
         // Signals inside the frame and not overlapping.
         let mut used = 0u64;
         for s in &m.signals {
@@ -89,6 +92,15 @@ fn ids_lengths_and_signal_sets_agree() {
             "STA_SteeringAngle",
             "STA_EcuState",
             "STA_Faults"
+        ]
+    );
+    assert_eq!(
+        names(motor),
+        [
+            "MOT_Crc",
+            "MOT_Counter",
+            "MOT_MotorAngle",
+            "MOT_CurrentMean"
         ]
     );
 }
@@ -197,6 +209,63 @@ proptest! {
         }
         prop_assert_eq!(got.ecu_state, ecu_state);
         prop_assert_eq!(got.faults, faults);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(5_000))]
+
+    #[test]
+    fn dbc_decodes_motor_frames_as_the_codec_does(
+        raw_angle: i32,
+        raw_current: i16,
+        counter in 0u8..16,
+    ) {
+        let dbc = dbc_cached();
+        let cfg = ProtocolConfig::DEFAULT;
+        let m = message(dbc, "EcuMotor");
+        // The raw values through the codec's own scale, as the ECU would send them.
+        let angle = if raw_angle == MOTOR_ANGLE_NOT_AVAILABLE {
+            f32::NAN
+        } else {
+            (f64::from(raw_angle) * MOTOR_RAD_PER_BIT) as f32
+        };
+        let current = if raw_current == MOTOR_CURRENT_NOT_AVAILABLE {
+            f32::NAN
+        } else {
+            f32::from(raw_current) * MOTOR_CURRENT_A_PER_BIT
+        };
+        let sent = MotorStatus {
+            angle: MotorRad(angle),
+            current_mean: Amps(current),
+            counter: AliveCounter::new(counter).unwrap(),
+        };
+        let f = cfg.encode_motor(&sent);
+        let data = f.data();
+        let got = cfg.decode_motor(&f).unwrap();
+
+        prop_assert_eq!(f.id(), MOTOR_ID);
+        prop_assert_eq!(data[0], frame_crc(MOTOR_ID, data.try_into().unwrap()));
+        prop_assert_eq!(raw(signal(m, "MOT_Crc"), data), i64::from(data[0]));
+        prop_assert_eq!(raw(signal(m, "MOT_Counter"), data), i64::from(counter));
+        prop_assert_eq!(got.counter.raw(), counter);
+        prop_assert_eq!(data[1] >> 4, 0, "reserved bits sent 0");
+        prop_assert_eq!(raw(signal(m, "MOT_CurrentMean"), data), i64::from(raw_current));
+        if raw_angle == MOTOR_ANGLE_NOT_AVAILABLE {
+            prop_assert!(got.angle.0.is_nan());
+            prop_assert_eq!(raw(signal(m, "MOT_MotorAngle"), data), i64::from(i32::MIN));
+        } else {
+            // f32 carries 24 bits: the raw value survives to within one part in 2^23.
+            let dbc_angle = physical(signal(m, "MOT_MotorAngle"), data);
+            let tol = 1e-4_f64.max(dbc_angle.abs() * 2e-7);
+            prop_assert!((dbc_angle - f64::from(got.angle.0)).abs() <= tol, "{} {:?}", dbc_angle, got.angle);
+        }
+        if raw_current == MOTOR_CURRENT_NOT_AVAILABLE {
+            prop_assert!(got.current_mean.0.is_nan());
+        } else {
+            let dbc_current = physical(signal(m, "MOT_CurrentMean"), data);
+            prop_assert!((dbc_current - f64::from(got.current_mean.0)).abs() < 1e-5);
+        }
     }
 }
 

@@ -307,3 +307,77 @@ proptest! {
         }
     }
 }
+
+fn motor(angle: f32, current: f32, counter: u8) -> MotorStatus {
+    MotorStatus {
+        angle: MotorRad(angle),
+        current_mean: Amps(current),
+        counter: AliveCounter::wrapping(counter),
+    }
+}
+
+#[test]
+fn motor_frame_layout_is_the_documented_one() {
+    let cfg = ProtocolConfig::DEFAULT;
+    let frame = cfg.encode_motor(&motor(-1.2345, 12.5, 9));
+    assert_eq!(frame.id().raw(), 0x102);
+    // counter 9, reserved 0; -12345 = 0xFFFFCFC7 LE; 12500 = 0x30D4 LE.
+    assert_eq!(
+        &frame.data()[1..],
+        &[0x09, 0xC7, 0xCF, 0xFF, 0xFF, 0xD4, 0x30]
+    );
+    let got = cfg.decode_motor(&frame).unwrap();
+    assert!((got.angle.0 + 1.2345).abs() < 1e-6);
+    assert_eq!(got.current_mean, Amps(12.5));
+    assert_eq!(got.counter.raw(), 9);
+}
+
+#[test]
+fn motor_frame_marks_nan_and_saturates_out_of_range() {
+    let cfg = ProtocolConfig::DEFAULT;
+    let got = cfg
+        .decode_motor(&cfg.encode_motor(&motor(f32::NAN, f32::NAN, 0)))
+        .unwrap();
+    assert!(got.angle.0.is_nan() && got.current_mean.0.is_nan());
+    let got = cfg
+        .decode_motor(&cfg.encode_motor(&motor(-1e9, -100.0, 0)))
+        .unwrap();
+    assert!((got.angle.0 + 214_748.36).abs() < 0.1, "{:?}", got.angle);
+    assert!((got.current_mean.0 + 32.767).abs() < 1e-4);
+    let got = cfg
+        .decode_motor(&cfg.encode_motor(&motor(f32::INFINITY, f32::INFINITY, 0)))
+        .unwrap();
+    assert!(got.angle.0 > 214_748.0 && got.current_mean.0 > 32.7);
+}
+
+#[test]
+fn motor_frames_are_checked_like_status_frames() {
+    let cfg = ProtocolConfig::DEFAULT;
+    let frame = cfg.encode_motor(&motor(3.0, 1.0, 2));
+    // A status frame's bytes under the motor ID fail the CRC: the ID is folded in.
+    let status_frame = cfg.encode_status(&status(1.0, 2.0, 3, 4, 5));
+    let moved = Frame::new(MOTOR_ID, status_frame.data()).unwrap();
+    assert!(matches!(
+        cfg.decode_motor(&moved),
+        Err(FrameError::Crc { .. })
+    ));
+    assert!(matches!(
+        cfg.decode_motor(&status_frame),
+        Err(FrameError::WrongId { id }) if id == STATUS_ID
+    ));
+    let short = Frame::new(MOTOR_ID, &frame.data()[..6]).unwrap();
+    assert_eq!(
+        cfg.decode_motor(&short),
+        Err(FrameError::WrongLength { len: 6 })
+    );
+    for bit in 0..64 {
+        let mut bytes = [0u8; 8];
+        bytes.copy_from_slice(frame.data());
+        bytes[bit / 8] ^= 1 << (bit % 8);
+        let flipped = Frame::new(MOTOR_ID, &bytes).unwrap();
+        assert!(
+            matches!(cfg.decode_motor(&flipped), Err(FrameError::Crc { .. })),
+            "bit {bit} flipped went unnoticed"
+        );
+    }
+}

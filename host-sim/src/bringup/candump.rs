@@ -1,0 +1,265 @@
+//! candump log files (can-utils `candump -l`): `(1700000000.123456) can0 101#0011223344556677`,
+//! one frame a line. Read with line numbers in every error, written in the same form, so
+//! `steer-can record` files open in can-utils, SavvyCAN and cantools, and candump files from
+//! the car convert to the project's log format.
+//!
+//! Only what this bus carries is kept: classic data frames with 11-bit IDs. Extended IDs,
+//! remote frames and CAN FD frames are valid candump but not ours: they are skipped and
+//! counted, not errors.
+
+use super::{BringupError, Stamped};
+use std::io::{BufRead, Write};
+use std::path::Path;
+use steering_ecu::can::{Frame, StandardId};
+
+/// A candump file as frames with µs times relative to its first line.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CandumpFile {
+    /// Unix time of the first frame, s.
+    pub epoch_s: f64,
+    pub frames: Vec<Stamped>,
+    /// Lines that are valid candump but not classic 11-bit data frames.
+    pub skipped: usize,
+}
+
+/// One parsed line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Line {
+    Frame { t_s: f64, frame: Frame },
+    NotOurs,
+}
+
+fn parse_line(line: &str) -> Result<Line, String> {
+    let mut parts = line.split_whitespace();
+    let stamp = parts.next().ok_or_else(|| "empty line".to_string())?;
+    let seconds = stamp
+        .strip_prefix('(')
+        .and_then(|s| s.strip_suffix(')'))
+        .ok_or_else(|| {
+            format!("expected a time stamp like (1700000000.123456), found `{stamp}`")
+        })?;
+    let t_s: f64 = seconds
+        .parse()
+        .ok()
+        .filter(|t: &f64| t.is_finite())
+        .ok_or_else(|| format!("time stamp `{seconds}` is not a number of seconds"))?;
+    let _iface = parts
+        .next()
+        .ok_or_else(|| "missing interface name after the time stamp".to_string())?;
+    let body = parts
+        .next()
+        .ok_or_else(|| "missing frame `ID#DATA` after the interface name".to_string())?;
+    if let Some(extra) = parts.next() {
+        return Err(format!("unexpected `{extra}` after the frame"));
+    }
+    let (id_hex, data_hex) = body
+        .split_once('#')
+        .ok_or_else(|| format!("frame `{body}` has no `#` between ID and data"))?;
+    if id_hex.is_empty() || !id_hex.chars().all(|c| c.is_ascii_hexdigit()) {
+        return Err(format!("ID `{id_hex}` is not hexadecimal"));
+    }
+    if data_hex.starts_with('#') || data_hex.starts_with('R') || id_hex.len() == 8 {
+        // CAN FD (`##`), remote frame (`#R`), extended ID (8 digits): valid, not ours.
+        return Ok(Line::NotOurs);
+    }
+    if id_hex.len() != 3 {
+        return Err(format!(
+            "ID `{id_hex}` must have 3 hex digits (11-bit) or 8 (29-bit)"
+        ));
+    }
+    let raw = u16::from_str_radix(id_hex, 16).map_err(|e| format!("ID `{id_hex}`: {e}"))?;
+    let id = StandardId::new(raw).ok_or_else(|| format!("ID 0x{raw:03X} is above 0x7FF"))?;
+    let data_hex: String = data_hex.chars().filter(|c| *c != '.').collect();
+    if !data_hex.len().is_multiple_of(2) || data_hex.len() > 16 {
+        return Err(format!(
+            "data `{data_hex}` must be 0 to 8 bytes as pairs of hex digits"
+        ));
+    }
+    let mut data = Vec::with_capacity(8);
+    for i in (0..data_hex.len()).step_by(2) {
+        let pair = &data_hex[i..i + 2];
+        data.push(
+            u8::from_str_radix(pair, 16).map_err(|_| format!("data byte `{pair}` is not hex"))?,
+        );
+    }
+    let frame = Frame::new(id, &data).ok_or_else(|| "more than 8 data bytes".to_string())?;
+    Ok(Line::Frame { t_s, frame })
+}
+
+/// Reads a candump log; blank lines are skipped, anything else malformed is an error naming
+/// the line.
+pub fn read(path: &Path) -> Result<CandumpFile, BringupError> {
+    let file = std::fs::File::open(path).map_err(|source| BringupError::Io {
+        context: format!("cannot open candump file {}", path.display()),
+        source,
+    })?;
+    read_from(std::io::BufReader::new(file), path)
+}
+
+/// As [`read`], from any reader; `path` names it in errors.
+pub fn read_from(reader: impl BufRead, path: &Path) -> Result<CandumpFile, BringupError> {
+    let mut out = CandumpFile::default();
+    let mut first: Option<f64> = None;
+    let mut last_us = 0u64;
+    for (i, line) in reader.lines().enumerate() {
+        let line_no = i + 1;
+        let line = line.map_err(|source| BringupError::Io {
+            context: format!("{}:{line_no}", path.display()),
+            source,
+        })?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let err = |message: String| BringupError::Candump {
+            path: path.to_path_buf(),
+            line: line_no,
+            message,
+        };
+        match parse_line(&line).map_err(err)? {
+            Line::NotOurs => out.skipped += 1,
+            Line::Frame { t_s, frame } => {
+                let t0 = *first.get_or_insert(t_s);
+                let rel = t_s - t0;
+                if rel < -1e-6 {
+                    return Err(err(format!(
+                        "time stamp {t_s:.6} s is before the first line's {t0:.6} s"
+                    )));
+                }
+                // Round to the µs the file carries; never go backwards (equal stamps are fine).
+                let t_us = ((rel.max(0.0) * 1e6).round() as u64).max(last_us);
+                last_us = t_us;
+                out.frames.push(Stamped { t_us, frame });
+            }
+        }
+    }
+    out.epoch_s = first.unwrap_or(0.0);
+    Ok(out)
+}
+
+/// One candump line for `frame` at `epoch_s + t_us`.
+pub fn format_line(epoch_s: f64, iface: &str, stamped: &Stamped) -> String {
+    // Whole seconds and µs apart, so a large epoch keeps its µs exact.
+    let base_us = (epoch_s * 1e6).round() as u64;
+    let t = base_us + stamped.t_us;
+    let mut data = String::with_capacity(16);
+    for b in stamped.frame.data() {
+        data.push_str(&format!("{b:02X}"));
+    }
+    format!(
+        "({}.{:06}) {iface} {:03X}#{data}",
+        t / 1_000_000,
+        t % 1_000_000,
+        stamped.frame.id().raw()
+    )
+}
+
+/// Writes frames as a candump log.
+#[derive(Debug)]
+pub struct Writer<W: Write> {
+    out: W,
+    epoch_s: f64,
+    iface: String,
+}
+
+impl<W: Write> Writer<W> {
+    pub fn new(out: W, epoch_s: f64, iface: &str) -> Self {
+        Writer {
+            out,
+            epoch_s,
+            iface: iface.to_string(),
+        }
+    }
+
+    pub fn write(&mut self, stamped: &Stamped) -> std::io::Result<()> {
+        writeln!(
+            self.out,
+            "{}",
+            format_line(self.epoch_s, &self.iface, stamped)
+        )
+    }
+
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
+}
+
+/// Writes `frames` to `path` as a candump log.
+pub fn save(
+    path: &Path,
+    epoch_s: f64,
+    iface: &str,
+    frames: &[Stamped],
+) -> Result<(), BringupError> {
+    let io = |source| BringupError::Io {
+        context: format!("cannot write candump file {}", path.display()),
+        source,
+    };
+    let file = std::fs::File::create(path).map_err(io)?;
+    let mut w = Writer::new(std::io::BufWriter::new(file), epoch_s, iface);
+    for f in frames {
+        w.write(f).map_err(io)?;
+    }
+    w.flush().map_err(io)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<CandumpFile, BringupError> {
+        read_from(std::io::Cursor::new(text), Path::new("x.log"))
+    }
+
+    #[test]
+    fn lines_round_trip_with_their_microseconds() {
+        let text = "(1700000000.123456) can0 101#0011223344556677\n\
+                    (1700000000.133456) can0 100#\n\
+                    (1700000000.143457) can0 7FF#AB\n";
+        let f = parse(text).unwrap();
+        assert_eq!(f.frames.len(), 3);
+        assert_eq!(f.frames[1].t_us, 10_000);
+        assert_eq!(f.frames[2].t_us, 20_001);
+        let back: Vec<String> = f
+            .frames
+            .iter()
+            .map(|s| format_line(f.epoch_s, "can0", s))
+            .collect();
+        assert_eq!(back.join("\n") + "\n", text);
+    }
+
+    #[test]
+    fn malformed_lines_are_named_by_number() {
+        let text = "(1.0) can0 101#00\n\n(2.0) can0 10G#00\n";
+        match parse(text) {
+            Err(BringupError::Candump { line, message, .. }) => {
+                assert_eq!(line, 3);
+                assert!(message.contains("10G"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
+        for bad in [
+            "1.0 can0 101#00",
+            "(x) can0 101#00",
+            "(1.0) can0",
+            "(1.0) can0 101-00",
+            "(1.0) can0 101#0",
+            "(1.0) can0 101#001122334455667788",
+            "(1.0) can0 1#00",
+            "(1.0) can0 801#00",
+        ] {
+            assert!(
+                matches!(parse(bad), Err(BringupError::Candump { line: 1, .. })),
+                "{bad}"
+            );
+        }
+    }
+
+    #[test]
+    fn extended_remote_and_fd_frames_are_skipped_and_counted() {
+        let text =
+            "(1.0) can0 12345678#00\n(1.1) can0 101#R\n(1.2) can0 101##1AA\n(1.3) can0 101#01\n";
+        let f = parse(text).unwrap();
+        assert_eq!(f.skipped, 3);
+        assert_eq!(f.frames.len(), 1);
+    }
+}

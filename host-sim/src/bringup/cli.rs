@@ -1,0 +1,703 @@
+//! The `steer-can` command line: argument parsing, the confirmation prompt, Ctrl-C, progress
+//! on stderr, results on stdout. `--iface sim` runs every command against the simulated ECU
+//! (`crate::sim_ecu`) in virtual time: the tests use it, and a team can rehearse the bring-up
+//! on a laptop before the car is there.
+
+use super::campaign::{self, Campaign, Live};
+use super::decode::{Decoder, faults_in_words};
+use super::logbuild::{self, Rows};
+use super::monitor::Monitor;
+use super::profile::{self, Profile, ReferenceSender, parse_as_state};
+use super::{BringupError, Transport, candump, epos, pump};
+use crate::scenario::Sweep;
+use crate::sim_ecu::{Injection, SimEcu};
+use clap::{Args, Parser, Subcommand};
+use std::io::{BufRead, Write};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use steering_ecu::as_state::AsState;
+use steering_ecu::canopen::NodeId;
+use steering_ecu::canopen::epos4::{Epos4Config, PositionScale};
+use steering_ecu::protocol::PERIOD_US;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "steer-can",
+    version,
+    about = "CAN bring-up of the steering ECU on the car: monitor, EPOS4 check, reference \
+             profiles, the test campaign, recording"
+)]
+pub struct Cli {
+    /// SocketCAN interface (`can0`), or `sim` for the simulated ECU in virtual time.
+    #[arg(long, global = true, default_value = "can0")]
+    pub iface: String,
+    /// The EPOS4's CANopen node ID.
+    #[arg(long, global = true, default_value_t = 1)]
+    pub node: u8,
+    /// With `--iface sim`: inject a fault at a time, KIND@SECONDS (encoder, overcurrent, epos).
+    #[arg(long, global = true, hide = true, value_name = "KIND@S")]
+    pub sim_inject: Option<String>,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Live decode of the bus: reference, status, motor frame, EPOS4 PDOs, EMCY, heartbeat,
+    /// with counters, CRC errors and the fault bits in words.
+    Monitor {
+        /// Stop after this long, s (default: until Ctrl-C).
+        #[arg(long, value_name = "S")]
+        duration_s: Option<f64>,
+        /// Print every frame, decoded, besides the summary.
+        #[arg(long)]
+        each: bool,
+        /// Summary every this many seconds.
+        #[arg(long, default_value_t = 1.0, value_name = "S")]
+        refresh_s: f64,
+    },
+    /// The EPOS4 by SDO reads: NMT state, mode, the gains against ours, error register and
+    /// history.
+    Epos {
+        #[command(subcommand)]
+        what: EposCommand,
+    },
+    /// Send a reference profile at 100 Hz (counter, CRC) in the AS state you name.
+    Send {
+        /// The AS state the frames claim: off, ready, driving, finished, emergency, manual.
+        #[arg(long, value_parser = parse_as_state)]
+        as_state: Option<AsState>,
+        /// Stop sending at the end instead of 0.2 s of AS Finished (to see the timeout fault).
+        #[arg(long)]
+        no_finish: bool,
+        #[command(subcommand)]
+        profile: SendProfile,
+    },
+    /// The paper's test campaign: ready check, confirmation, run, abort on any fault, log.
+    Campaign {
+        #[command(subcommand)]
+        kind: CampaignKind,
+    },
+    /// Record the bus to a candump file (can-utils `-l` format).
+    Record {
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        /// Stop after this long, s (default: until Ctrl-C).
+        #[arg(long, value_name = "S")]
+        duration_s: Option<f64>,
+    },
+    /// Convert a candump log to the project's log format (for `host-sim gap`).
+    Convert {
+        /// The candump file (`candump -l` or `steer-can record`).
+        candump: PathBuf,
+        /// The log to write (`.csv` or `.csv.gz`).
+        #[arg(long, value_name = "LOG")]
+        out: PathBuf,
+        /// Keep every reference period, not only those in AS Ready or Driving.
+        #[arg(long)]
+        all_rows: bool,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+pub enum EposCommand {
+    /// Read and compare; nothing is written.
+    Check,
+}
+
+#[derive(Subcommand, Debug, Clone)]
+pub enum SendProfile {
+    /// A step at the wheel (sent as a ramp at the ECU's 400 deg/s).
+    Step {
+        #[arg(long, default_value_t = 2.0, value_name = "DEG")]
+        amplitude_deg: f64,
+        #[arg(long, default_value_t = 0.5, value_name = "S")]
+        at_s: f64,
+        #[arg(long, default_value_t = 2.0, value_name = "S")]
+        duration_s: f64,
+    },
+    /// A sine at the wheel.
+    Sine {
+        #[arg(long, default_value_t = 2.0, value_name = "DEG")]
+        amplitude_deg: f64,
+        #[arg(long, default_value_t = 1.0, value_name = "HZ")]
+        freq_hz: f64,
+        #[arg(long, default_value_t = 5.0, value_name = "S")]
+        duration_s: f64,
+    },
+    /// The paper's chirp (section 4.2).
+    Sweep(SweepArgs),
+    /// A track profile from a CSV `t,ref_sw_deg` (the built-in 120 s one without --csv).
+    Track(TrackArgs),
+    /// AS Off frames with the clear-faults bit, 100 ms: clears latched faults whose cause is
+    /// gone.
+    ClearFaults,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct SweepArgs {
+    #[arg(long, default_value_t = 10.0, value_name = "DEG")]
+    pub amplitude_deg: f64,
+    #[arg(long, default_value_t = 0.0, value_name = "HZ")]
+    pub f_start_hz: f64,
+    #[arg(long, default_value_t = 10.0, value_name = "HZ")]
+    pub f_end_hz: f64,
+    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    pub duration_s: f64,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct TrackArgs {
+    #[arg(long, value_name = "CSV")]
+    pub csv: Option<PathBuf>,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum CampaignKind {
+    /// The paper's sweep: 0-10 Hz chirp at 10 deg, 10 s (section 4.2).
+    Sweep {
+        #[command(flatten)]
+        sweep: SweepArgs,
+        #[command(flatten)]
+        common: CampaignArgs,
+    },
+    /// A track run (section 4.4): CSV `t,ref_sw_deg` or the built-in 120 s profile.
+    Track {
+        #[command(flatten)]
+        track: TrackArgs,
+        #[command(flatten)]
+        common: CampaignArgs,
+    },
+}
+
+#[derive(Args, Debug)]
+pub struct CampaignArgs {
+    /// The log to write (`.csv` or `.csv.gz`), ready for `host-sim gap`.
+    #[arg(long, value_name = "LOG")]
+    pub out: PathBuf,
+    /// The candump recording of the whole run (default: the log's name + `.candump`).
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<PathBuf>,
+    /// The AS state claimed while the profile runs.
+    #[arg(long, default_value = "driving", value_parser = parse_as_state)]
+    pub as_state: AsState,
+    /// Do not ask for confirmation.
+    #[arg(long)]
+    pub yes: bool,
+}
+
+/// `println!` that ends the program quietly when stdout is closed (`steer-can ... | head`).
+macro_rules! say {
+    ($($arg:tt)*) => {
+        emit(format_args!($($arg)*))
+    };
+}
+
+fn emit(args: std::fmt::Arguments<'_>) {
+    if let Err(e) = writeln!(std::io::stdout().lock(), "{args}") {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("steer-can: cannot write to stdout: {e}");
+        std::process::exit(1);
+    }
+}
+
+/// Exit code of a campaign that stopped on a fault or Ctrl-C (the log is still written).
+pub const EXIT_ABORTED: u8 = 3;
+
+/// Entry point of the binary.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("steer-can: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
+    if cli.iface == "sim" {
+        let mut sim = SimEcu::paper();
+        if let Some(spec) = &cli.sim_inject {
+            let bad = || BringupError::Profile {
+                reason: format!(
+                    "--sim-inject `{spec}`: expected KIND@SECONDS, KIND one of encoder, overcurrent, epos"
+                ),
+            };
+            let (kind, at) = spec.split_once('@').ok_or_else(bad)?;
+            let injection = Injection::parse(kind).ok_or_else(bad)?;
+            let at_s: f64 = at.parse().map_err(|_| bad())?;
+            sim.inject_at((at_s * 1e6) as u64, injection);
+        }
+        return Ok(Box::new(sim));
+    }
+    #[cfg(target_os = "linux")]
+    {
+        Ok(Box::new(super::socketcan::SocketCan::open(&cli.iface)?))
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        Err(BringupError::NoInterface {
+            iface: cli.iface.clone(),
+            detail: "SocketCAN exists on Linux only".into(),
+        })
+    }
+}
+
+fn decoder(node: NodeId) -> Result<Decoder, BringupError> {
+    let counts = Epos4Config::paper(node).counts_per_rev;
+    let scale = PositionScale::new(counts).ok_or_else(|| BringupError::Epos {
+        reason: format!("{counts} position increments per revolution"),
+    })?;
+    Ok(Decoder::new(node, scale))
+}
+
+fn stop_flag() -> Arc<AtomicBool> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let f = flag.clone();
+    // A second handler (tests calling twice) is refused; the first one stays, which is fine.
+    let _ = ctrlc::set_handler(move || f.store(true, Ordering::SeqCst));
+    flag
+}
+
+fn run(cli: Cli) -> Result<ExitCode, BringupError> {
+    let node = NodeId::new(cli.node).ok_or_else(|| BringupError::Profile {
+        reason: format!("--node {}: a CANopen node ID is 1 to 127", cli.node),
+    })?;
+    let dec = decoder(node)?;
+    match &cli.command {
+        Command::Convert {
+            candump: path,
+            out,
+            all_rows,
+        } => {
+            convert(path, out, &dec, *all_rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Monitor {
+            duration_s,
+            each,
+            refresh_s,
+        } => {
+            let mut t = open(&cli)?;
+            monitor(t.as_mut(), &dec, *duration_s, *each, *refresh_s)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Epos {
+            what: EposCommand::Check,
+        } => {
+            let mut t = open(&cli)?;
+            let report = epos::check(t.as_mut(), node)?;
+            say!("{}", report.text().trim_end());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Send {
+            as_state,
+            no_finish,
+            profile,
+        } => {
+            let mut t = open(&cli)?;
+            send(t.as_mut(), &dec, *as_state, !*no_finish, profile)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Record { out, duration_s } => {
+            let mut t = open(&cli)?;
+            record(t.as_mut(), &dec, out, *duration_s)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Campaign { kind } => {
+            let (profile, common) = match kind {
+                CampaignKind::Sweep { sweep, common } => (profile::sweep(to_sweep(sweep))?, common),
+                CampaignKind::Track { track, common } => {
+                    (profile::track(track.csv.as_deref())?, common)
+                }
+            };
+            let mut t = open(&cli)?;
+            campaign_cmd(t.as_mut(), &dec, profile, common)
+        }
+    }
+}
+
+fn to_sweep(a: &SweepArgs) -> Sweep {
+    Sweep {
+        amplitude_deg: a.amplitude_deg,
+        f_start_hz: a.f_start_hz,
+        f_end_hz: a.f_end_hz,
+        duration_s: a.duration_s,
+    }
+}
+
+fn convert(path: &Path, out: &Path, dec: &Decoder, all_rows: bool) -> Result<(), BringupError> {
+    let file = candump::read(path)?;
+    let rows = if all_rows { Rows::All } else { Rows::Active };
+    let built = logbuild::build(&file.frames, dec, rows)?;
+    campaign::save_log(&built.log, out)?;
+    say!(
+        "{}: {} frames ({} skipped: not classic 11-bit data), {} references, {} invalid frames",
+        path.display(),
+        file.frames.len(),
+        file.skipped,
+        built.references,
+        built.invalid_frames
+    );
+    for n in &built.notes {
+        say!("note: {n}");
+    }
+    say!(
+        "log written to {} ({} rows, {:.2} s)",
+        out.display(),
+        built.log.len(),
+        built.log.t.last().copied().unwrap_or(0.0)
+    );
+    Ok(())
+}
+
+fn monitor(
+    t: &mut dyn Transport,
+    dec: &Decoder,
+    duration_s: Option<f64>,
+    each: bool,
+    refresh_s: f64,
+) -> Result<(), BringupError> {
+    let stop = stop_flag();
+    let mut m = Monitor::new(*dec);
+    let start = t.now_us();
+    let end = duration_s.map(|d| start + (d * 1e6) as u64);
+    let refresh_us = (refresh_s.max(0.05) * 1e6) as u64;
+    let mut next = start + refresh_us;
+    let mut any = false;
+    loop {
+        let deadline = end.map_or(next, |e| e.min(next));
+        let mut lines = Vec::new();
+        pump(t, deadline, |rx| {
+            let d = m.on_frame(rx);
+            if each {
+                lines.push(m.line(rx, &d));
+            }
+            true
+        })?;
+        for l in lines {
+            say!("{l}");
+        }
+        if m.last_status.is_none() && t.now_us() >= start + campaign::READY_WAIT_US && !any {
+            eprintln!(
+                "steer-can: warning: {} — still listening",
+                BringupError::EcuSilent {
+                    waited_ms: campaign::READY_WAIT_US / 1000
+                }
+            );
+            any = true;
+        }
+        if t.now_us() >= next {
+            say!("--- {} ---\n{}", t.name(), m.summary().trim_end());
+            next += refresh_us;
+        }
+        if end.is_some_and(|e| t.now_us() >= e) || stop.load(Ordering::SeqCst) {
+            break;
+        }
+    }
+    say!("=== {} ===\n{}", t.name(), m.summary().trim_end());
+    if m.last_status.is_none() {
+        return Err(BringupError::EcuSilent {
+            waited_ms: (t.now_us() - start) / 1000,
+        });
+    }
+    Ok(())
+}
+
+fn record(
+    t: &mut dyn Transport,
+    dec: &Decoder,
+    out: &Path,
+    duration_s: Option<f64>,
+) -> Result<(), BringupError> {
+    let stop = stop_flag();
+    let io = |source| BringupError::Io {
+        context: format!("cannot write {}", out.display()),
+        source,
+    };
+    let file = std::fs::File::create(out).map_err(io)?;
+    let mut w = candump::Writer::new(std::io::BufWriter::new(file), t.epoch_s(), t.name());
+    let mut m = Monitor::new(*dec);
+    let start = t.now_us();
+    let end = duration_s.map(|d| start + (d * 1e6) as u64);
+    let mut n = 0u64;
+    loop {
+        let next = t.now_us() + 1_000_000;
+        let deadline = end.map_or(next, |e| e.min(next));
+        let mut err = None;
+        pump(t, deadline, |rx| {
+            m.on_frame(rx);
+            n += 1;
+            if let Err(e) = w.write(rx) {
+                err = Some(e);
+                return false;
+            }
+            true
+        })?;
+        if let Some(e) = err {
+            return Err(io(e));
+        }
+        eprint!(
+            "\rrecording {}: {n} frames, {:.1} s",
+            out.display(),
+            (t.now_us() - start) as f64 * 1e-6
+        );
+        if end.is_some_and(|e| t.now_us() >= e) || stop.load(Ordering::SeqCst) {
+            break;
+        }
+    }
+    w.flush().map_err(io)?;
+    eprintln!();
+    say!("{n} frames written to {}", out.display());
+    say!("{}", m.summary().trim_end());
+    Ok(())
+}
+
+/// The progress line on stderr, at most 10 times a second of the run.
+fn progress(l: &Live, profile_s: f64) {
+    if !l.sample.is_multiple_of(10) && l.sample != l.samples {
+        return;
+    }
+    let share = l.sample as f64 / l.samples.max(1) as f64;
+    let width = 24;
+    let filled = (share * width as f64).round() as usize;
+    let err = l.ref_deg - l.column_deg;
+    eprint!(
+        "\r[{}{}] {:3.0} % {:>7}  t {:6.2} s / {:.1} s  ref {:+7.2} deg  column {:+7.2} deg  \
+         error {:+6.2} deg  current {:+6.2} A ",
+        "#".repeat(filled),
+        "-".repeat(width - filled),
+        share * 100.0,
+        l.phase,
+        l.t_s,
+        profile_s,
+        l.ref_deg,
+        l.column_deg,
+        err,
+        l.current_a
+    );
+}
+
+fn confirm(text: &str) -> Result<(), BringupError> {
+    eprintln!("{text}");
+    eprint!("type `yes` to start: ");
+    let _ = std::io::stderr().flush();
+    let mut line = String::new();
+    // A closed or empty stdin (a script without --yes) reads as no answer: not a yes.
+    std::io::stdin()
+        .lock()
+        .read_line(&mut line)
+        .map_err(|source| BringupError::Io {
+            context: "reading the confirmation".into(),
+            source,
+        })?;
+    if line.trim() == "yes" {
+        Ok(())
+    } else {
+        eprintln!();
+        Err(BringupError::NotConfirmed)
+    }
+}
+
+fn campaign_cmd(
+    t: &mut dyn Transport,
+    dec: &Decoder,
+    profile: Profile,
+    args: &CampaignArgs,
+) -> Result<ExitCode, BringupError> {
+    let ready = campaign::ready_check(t, dec)?;
+    let plan = format!(
+        "campaign on {}: {}\n  AS state claimed: Ready for the lead-in, {} for the profile, \
+         Finished at the end\n  largest angle {:.2} deg, {:.1} s, {} samples limited to the \
+         ECU's 400 deg/s\n  the wheel is at {:+.2} deg; log -> {}",
+        t.name(),
+        profile.name,
+        super::decode::as_state_words(args.as_state),
+        profile.max_abs_deg(),
+        profile.duration_s(),
+        profile.rate_limited,
+        ready.status.angle.0,
+        args.out.display()
+    );
+    if args.yes {
+        eprintln!("{plan}");
+    } else {
+        confirm(&format!(
+            "{plan}\nThe actuator will move. Keep hands off the wheel; Ctrl-C stops with the \
+             drive disabled."
+        ))?;
+    }
+    if !ready.motor_frames {
+        eprintln!("steer-can: warning: no motor frame (0x102) from the ECU: motor_rad will be nan");
+    }
+    let c = Campaign {
+        profile,
+        as_state: args.as_state,
+        stop: stop_flag(),
+    };
+    let profile_s = c.profile.duration_s();
+    let run = c.run(t, dec, &ready, |l| progress(l, profile_s))?;
+    eprintln!();
+    let record_path = args.record.clone().unwrap_or_else(|| {
+        let mut p = args.out.clone().into_os_string();
+        p.push(".candump");
+        PathBuf::from(p)
+    });
+    candump::save(&record_path, t.epoch_s(), t.name(), &run.frames)?;
+    say!(
+        "recording written to {} ({} frames)",
+        record_path.display(),
+        run.frames.len()
+    );
+    let built = run.log(dec)?;
+    campaign::save_log(&built.log, &args.out)?;
+    for n in &built.notes {
+        say!("note: {n}");
+    }
+    say!(
+        "log written to {} ({} rows, {:.2} s); diagnose it with `host-sim gap {}`",
+        args.out.display(),
+        built.log.len(),
+        built.log.t.last().copied().unwrap_or(0.0),
+        args.out.display()
+    );
+    let fin = run
+        .final_status
+        .map(|s| {
+            format!(
+                "ECU {} with faults: {}",
+                super::decode::ecu_state_words(s.ecu_state),
+                faults_in_words(s.faults)
+            )
+        })
+        .unwrap_or_else(|| "no status frame at the end".into());
+    match run.aborted {
+        Some(reason) => {
+            say!(
+                "ABORTED: {reason}; {} of {} profile samples sent; AS Finished sent; {fin}",
+                run.profile_samples_sent,
+                c.profile.samples.len()
+            );
+            Ok(ExitCode::from(EXIT_ABORTED))
+        }
+        None => {
+            say!(
+                "completed: {} profile samples sent; AS Finished sent; {fin}",
+                run.profile_samples_sent
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn send(
+    t: &mut dyn Transport,
+    dec: &Decoder,
+    as_state: Option<AsState>,
+    finish: bool,
+    which: &SendProfile,
+) -> Result<(), BringupError> {
+    let stop = stop_flag();
+    let (profile, as_state, clear) = match which {
+        SendProfile::ClearFaults => (
+            Profile::new("clear faults".into(), vec![0.0; 10], 0.0)?,
+            AsState::Off,
+            true,
+        ),
+        other => {
+            let as_state = as_state.ok_or_else(|| BringupError::Profile {
+                reason: "say which AS state the frames claim: --as-state ready|driving|off|..."
+                    .into(),
+            })?;
+            let p = match other {
+                SendProfile::Step {
+                    amplitude_deg,
+                    at_s,
+                    duration_s,
+                } => profile::step(*amplitude_deg, *at_s, *duration_s)?,
+                SendProfile::Sine {
+                    amplitude_deg,
+                    freq_hz,
+                    duration_s,
+                } => profile::sine(*amplitude_deg, *freq_hz, *duration_s)?,
+                SendProfile::Sweep(s) => profile::sweep(to_sweep(s))?,
+                SendProfile::Track(tr) => profile::track(tr.csv.as_deref())?,
+                SendProfile::ClearFaults => unreachable!("handled above"),
+            };
+            (p, as_state, false)
+        }
+    };
+    eprintln!(
+        "sending {} in AS {} on {} ({} samples limited to the ECU's 400 deg/s)",
+        profile.name,
+        super::decode::as_state_words(as_state),
+        t.name(),
+        profile.rate_limited
+    );
+    let mut sender = ReferenceSender::default();
+    let mut m = Monitor::new(*dec);
+    let mut next = t.now_us();
+    let n = profile.samples.len();
+    let mut last = 0.0;
+    for (i, &angle) in profile.samples.iter().enumerate() {
+        pump(t, next, |rx| {
+            m.on_frame(rx);
+            true
+        })?;
+        if stop.load(Ordering::SeqCst) {
+            eprintln!("\ninterrupted");
+            break;
+        }
+        let frame = sender.frame(angle, as_state, clear);
+        t.send(&frame)?;
+        m.on_frame(&super::Stamped {
+            t_us: t.now_us(),
+            frame,
+        });
+        last = angle;
+        let (column, current, faults) = m
+            .last_status
+            .map(|(_, s)| (f64::from(s.angle.0), f64::from(s.current.0), s.faults))
+            .unwrap_or((f64::NAN, f64::NAN, 0));
+        if i % 10 == 9 || i + 1 == n {
+            eprint!(
+                "\r{:5.2} s  ref {angle:+7.2} deg  column {column:+7.2} deg  current {current:+6.2} A  faults: {} ",
+                (i + 1) as f64 / profile::RATE_HZ,
+                faults_in_words(faults)
+            );
+        }
+        next = next.max(t.now_us()) + PERIOD_US as u64;
+    }
+    eprintln!();
+    if finish && as_state.actuator_may_be_powered() {
+        // Leave the drive disabled rather than timing out: 0.2 s of AS Finished.
+        for _ in 0..20 {
+            pump(t, next, |rx| {
+                m.on_frame(rx);
+                true
+            })?;
+            t.send(&sender.frame(last, AsState::Finished, false))?;
+            next = next.max(t.now_us()) + PERIOD_US as u64;
+        }
+        eprintln!("AS Finished sent for 0.2 s: the drive is disabled");
+    }
+    // Without the finish, long enough for the reference timeout to latch (30 + 100 ms).
+    let tail = if finish { 3 } else { 20 };
+    pump(t, next + tail * PERIOD_US as u64, |rx| {
+        m.on_frame(rx);
+        true
+    })?;
+    say!("{}", m.summary().trim_end());
+    if m.last_status.is_none() {
+        return Err(BringupError::EcuSilent {
+            waited_ms: (profile.duration_s() * 1000.0) as u64,
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,245 @@
+//! What one frame on the car's bus is, per the DBC (reference 0x100, status 0x101, motor 0x102)
+//! and CANopen's predefined connection set for the EPOS4 node (TPDO1/2, RPDO1, SDO, EMCY,
+//! heartbeat) plus NMT and SYNC; and the fault bits and state codes in words.
+
+use steering_ecu::as_state::AsState;
+use steering_ecu::can::Frame;
+use steering_ecu::canopen::epos4::{PositionScale, amps_from_ma};
+use steering_ecu::canopen::nmt::{self, NmtState};
+use steering_ecu::canopen::{NodeId, emcy, function, node_of};
+use steering_ecu::faults::{Fault, FaultSet};
+use steering_ecu::protocol::{
+    FrameError, MOTOR_ID, MotorStatus, ProtocolConfig, REFERENCE_ID, Reference, STATUS_ID, Status,
+};
+use steering_ecu::steering::EcuState;
+
+/// One frame, decoded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Decoded {
+    Reference(Result<Reference, FrameError>),
+    Status(Result<Status, FrameError>),
+    Motor(Result<MotorStatus, FrameError>),
+    /// EPOS4 TPDO1 (0x6041 statusword, 0x6064 position actual), position in rad at the motor.
+    EposTpdo1 {
+        statusword: u16,
+        motor_rad: f64,
+    },
+    /// EPOS4 TPDO2 (0x30D1 current actual), A.
+    EposTpdo2 {
+        current_a: f64,
+    },
+    /// RPDO1 to the EPOS4 (0x607A target position), rad at the motor.
+    EposRpdo1 {
+        target_rad: f64,
+    },
+    /// A PDO of the node with an unexpected length.
+    EposPdoLength {
+        cob: u16,
+        len: usize,
+    },
+    Emcy {
+        error_code: u16,
+        error_register: u8,
+    },
+    Heartbeat(NmtState),
+    SdoRequest,
+    SdoResponse,
+    Nmt,
+    Sync,
+    Unknown,
+}
+
+impl Decoded {
+    /// A short name for counters, stable for scripts.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Decoded::Reference(_) => "reference 0x100",
+            Decoded::Status(_) => "status 0x101",
+            Decoded::Motor(_) => "motor 0x102",
+            Decoded::EposTpdo1 { .. } => "EPOS4 TPDO1",
+            Decoded::EposTpdo2 { .. } => "EPOS4 TPDO2",
+            Decoded::EposRpdo1 { .. } => "EPOS4 RPDO1",
+            Decoded::EposPdoLength { .. } => "EPOS4 PDO (bad length)",
+            Decoded::Emcy { .. } => "EPOS4 EMCY",
+            Decoded::Heartbeat(_) => "EPOS4 heartbeat",
+            Decoded::SdoRequest => "SDO request",
+            Decoded::SdoResponse => "SDO response",
+            Decoded::Nmt => "NMT",
+            Decoded::Sync => "SYNC",
+            Decoded::Unknown => "other",
+        }
+    }
+}
+
+/// Decodes frames of one bus: the ECU's protocol and one EPOS4 node.
+#[derive(Debug, Clone, Copy)]
+pub struct Decoder {
+    pub protocol: ProtocolConfig,
+    pub node: NodeId,
+    pub scale: PositionScale,
+}
+
+impl Decoder {
+    pub fn new(node: NodeId, scale: PositionScale) -> Self {
+        Decoder {
+            protocol: ProtocolConfig::DEFAULT,
+            node,
+            scale,
+        }
+    }
+
+    pub fn decode(&self, frame: &Frame) -> Decoded {
+        let id = frame.id();
+        let data = frame.data();
+        if id == REFERENCE_ID {
+            return Decoded::Reference(self.protocol.decode_reference(frame));
+        }
+        if id == STATUS_ID {
+            return Decoded::Status(self.protocol.decode_status(frame));
+        }
+        if id == MOTOR_ID {
+            return Decoded::Motor(self.protocol.decode_motor(frame));
+        }
+        if nmt::is_sync(frame) {
+            return Decoded::Sync;
+        }
+        if nmt::parse_command(frame).is_some() {
+            return Decoded::Nmt;
+        }
+        let ours = |base: u16| node_of(id, base) == Some(self.node);
+        if ours(function::TPDO1) {
+            if data.len() != 6 {
+                return Decoded::EposPdoLength {
+                    cob: id.raw(),
+                    len: data.len(),
+                };
+            }
+            let statusword = u16::from_le_bytes([data[0], data[1]]);
+            let inc = i32::from_le_bytes([data[2], data[3], data[4], data[5]]);
+            return Decoded::EposTpdo1 {
+                statusword,
+                motor_rad: f64::from(self.scale.motor_from_inc(inc).0),
+            };
+        }
+        if ours(function::TPDO2) {
+            if data.len() != 4 {
+                return Decoded::EposPdoLength {
+                    cob: id.raw(),
+                    len: data.len(),
+                };
+            }
+            let ma = i32::from_le_bytes([data[0], data[1], data[2], data[3]]);
+            return Decoded::EposTpdo2 {
+                current_a: f64::from(amps_from_ma(ma).0),
+            };
+        }
+        if ours(function::RPDO1) {
+            if data.len() != 4 {
+                return Decoded::EposPdoLength {
+                    cob: id.raw(),
+                    len: data.len(),
+                };
+            }
+            let inc = i32::from_le_bytes([data[0], data[1], data[2], data[3]]);
+            return Decoded::EposRpdo1 {
+                target_rad: f64::from(self.scale.motor_from_inc(inc).0),
+            };
+        }
+        if let Some(e) = emcy::parse(frame, self.node) {
+            return Decoded::Emcy {
+                error_code: e.error_code,
+                error_register: e.error_register,
+            };
+        }
+        if let Some(state) = nmt::parse_heartbeat(frame, self.node) {
+            return Decoded::Heartbeat(state);
+        }
+        if ours(function::SDO_RX) {
+            return Decoded::SdoRequest;
+        }
+        if ours(function::SDO_TX) {
+            return Decoded::SdoResponse;
+        }
+        Decoded::Unknown
+    }
+}
+
+/// A fault in words, as on the status frame's fault bits.
+pub fn fault_words(fault: Fault) -> &'static str {
+    match fault {
+        Fault::ReferenceTimeout => "reference timeout",
+        Fault::InvalidFrames => "invalid reference frames",
+        Fault::Encoder => "column encoder",
+        Fault::EncoderJump => "column encoder jump",
+        Fault::EncoderMotorDisagreement => "encoder/motor disagreement",
+        Fault::OverCurrent => "over-current",
+        Fault::EposFault => "EPOS4 fault",
+        Fault::HeartbeatLost => "EPOS4 heartbeat lost",
+        Fault::BusOff => "CAN bus-off",
+        Fault::TrackingError => "tracking error",
+    }
+}
+
+/// The fault bits in words, "none" for zero; unknown bits are named by number.
+pub fn faults_in_words(bits: u16) -> String {
+    if bits == 0 {
+        return "none".into();
+    }
+    let set = FaultSet::from_bits(bits);
+    let mut words: Vec<String> = set.iter().map(|f| fault_words(f).to_string()).collect();
+    let known = set.iter().fold(0u16, |acc, f| acc | (1 << f.bit()));
+    for bit in 0..16 {
+        if bits & !known & (1 << bit) != 0 {
+            words.push(format!("unknown bit {bit}"));
+        }
+    }
+    words.join(", ")
+}
+
+/// The status frame's ECU state in words.
+pub fn ecu_state_words(code: u8) -> String {
+    match EcuState::from_code(code) {
+        Some(EcuState::Idle) => "idle".into(),
+        Some(EcuState::Standby) => "standby".into(),
+        Some(EcuState::Tracking) => "tracking".into(),
+        Some(EcuState::Holding) => "holding".into(),
+        Some(EcuState::Emergency) => "emergency".into(),
+        Some(EcuState::Faulted) => "faulted".into(),
+        None => format!("unknown state {code}"),
+    }
+}
+
+/// The AS state in words.
+pub fn as_state_words(s: AsState) -> &'static str {
+    match s {
+        AsState::Off => "Off",
+        AsState::Ready => "Ready",
+        AsState::Driving => "Driving",
+        AsState::Emergency => "Emergency",
+        AsState::Finished => "Finished",
+        AsState::Manual => "Manual",
+    }
+}
+
+/// A CANopen NMT state in words.
+pub fn nmt_words(s: NmtState) -> &'static str {
+    match s {
+        NmtState::BootUp => "boot-up",
+        NmtState::Stopped => "stopped",
+        NmtState::Operational => "operational",
+        NmtState::PreOperational => "pre-operational",
+    }
+}
+
+/// Why a frame failed its checks, in words.
+pub fn frame_error_words(e: &FrameError) -> String {
+    match e {
+        FrameError::WrongId { id } => format!("wrong ID 0x{:03X}", id.raw()),
+        FrameError::WrongLength { len } => format!("length {len}, expected 8"),
+        FrameError::Crc { expected, found } => {
+            format!("CRC error (byte 0 is 0x{found:02X}, CRC is 0x{expected:02X})")
+        }
+        FrameError::UnknownAsState { code } => format!("unknown AS state {code}"),
+        other => format!("{other:?}"),
+    }
+}

@@ -1,0 +1,333 @@
+//! A recording (reference, status and motor frames with their times) as a log in the project's
+//! format: one row per reference period, `t,ref_sw_deg,sw_deg,motor_rad,current_a`, plus
+//! `as_state`, `ecu_state` and `faults` columns.
+//!
+//! Timing, so that a log means what a simulated one means (`host-sim gap` runs the log's
+//! reference through the model and compares each 10 ms period's mean output with the log):
+//!
+//! - The time axis is the reference grid: reference `k` (counted from the first, lost frames
+//!   leave a gap) is the row at `t = k x 10 ms + 5 ms`, the middle of the period it is in
+//!   force, whatever the jitter of the sender (rows after the first 1 µs later, so that the
+//!   diagnosis's binning puts each in its own period).
+//! - The ECU pushes a sample into its interpolator when the frame arrives, one frame time
+//!   after it was sent ([`BUS_LATENCY_US`]), and the model averages over the period after the
+//!   push. Each signal is read from the ECU's frames at the moment the model's average is
+//!   centred on, and each frame's value is dated when the ECU measured it rather than when
+//!   the frame arrived:
+//!
+//! ```text
+//! signal      | frame | measured at                          | model's period mean centred
+//! ------------+-------+--------------------------------------+------------------------------
+//! sw_deg      | 0x101 | the previous 2 ms encoder tick:      | push + 5.25 ms (sampled after
+//!             |       | 2 ms before the frame (the status    | each 0.5 ms position tick)
+//!             |       | task runs first at the shared tick)  |
+//! motor_rad   | 0x102 | the last 0.5 ms position tick:       | push + 4.75 ms (sampled before
+//!             |       | 0.25 ms before on average            | each position tick)
+//! current_a   | 0x102 | mean over the 10 ms status period:   | push + 5 ms
+//!             |       | its middle, 5 ms before              |
+//! ```
+//!
+//! Without motor frames, in EPOS4 mode, the motor angle and current are the drive's TPDO1
+//! position (0x6064) and TPDO2 current (0x30D1), dated when they arrived (the drive samples
+//! them at the SYNC just before). Without either (an older firmware), `motor_rad` is `nan` and
+//! the current comes from the status frame (one sample, 20 mA). The notes say which.
+
+use super::decode::{Decoded, Decoder};
+use super::{BringupError, Stamped};
+use crate::logfmt::{Log, Row};
+use steering_ecu::as_state::AsState;
+use steering_ecu::protocol::PERIOD_US;
+
+/// One 8-byte frame on the bus at 1 Mbit/s with stuff bits, µs.
+pub const BUS_LATENCY_US: u64 = 130;
+/// Age of the column-encoder sample in a status frame, µs (one 2 ms encoder period).
+pub const ENCODER_AGE_US: u64 = 2_000;
+/// Age of the motor angle in a motor frame, µs (half the 0.5 ms position period).
+pub const MOTOR_AGE_US: u64 = 250;
+/// Age of the mean current in a motor frame, µs (half the 10 ms status period).
+pub const CURRENT_AGE_US: u64 = PERIOD_US as u64 / 2;
+/// Where the model's period means are centred after the push, µs (see the table above).
+const SW_CENTRE_US: f64 = 5_250.0;
+/// Rows after the first are written this long after their grid point (see `build`), µs.
+const GRID_NUDGE_US: f64 = 1.0;
+const MOTOR_CENTRE_US: f64 = 4_750.0;
+const CURRENT_CENTRE_US: f64 = 5_000.0;
+
+/// Which reference periods become rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rows {
+    /// Every reference frame.
+    All,
+    /// Only frames claiming AS Ready or Driving (the drive may be powered).
+    Active,
+}
+
+/// The log and what went into it.
+#[derive(Debug, Clone)]
+pub struct Built {
+    pub log: Log,
+    pub references: usize,
+    pub invalid_frames: usize,
+    /// Rows dropped at the ends, outside the span the ECU's frames cover.
+    pub uncovered: usize,
+    pub notes: Vec<String>,
+}
+
+/// A time series of one signal, sample times in µs, sorted.
+#[derive(Debug, Default)]
+struct Series {
+    t: Vec<f64>,
+    v: Vec<f64>,
+}
+
+impl Series {
+    fn push(&mut self, t_us: u64, age_us: u64, v: f64) {
+        let t = t_us as f64 - age_us as f64;
+        // Frames come in order; a late one (bus delay) is kept out of order-sensitive search.
+        if self.t.last().is_none_or(|last| t > *last) {
+            self.t.push(t);
+            self.v.push(v);
+        }
+    }
+
+    fn covers(&self, t: f64) -> bool {
+        matches!((self.t.first(), self.t.last()), (Some(a), Some(b)) if *a <= t && t <= *b)
+    }
+
+    /// Linear interpolation; `None` outside the span.
+    fn at(&self, t: f64) -> Option<f64> {
+        if !self.covers(t) {
+            return None;
+        }
+        let j = self.t.partition_point(|x| *x < t);
+        if j == 0 {
+            return Some(self.v[0]);
+        }
+        let (t0, t1) = (self.t[j - 1], self.t[j]);
+        let s = if t1 > t0 { (t - t0) / (t1 - t0) } else { 1.0 };
+        Some(self.v[j - 1] + s * (self.v[j] - self.v[j - 1]))
+    }
+
+    /// The last sample at or before `t` (states and fault bits are not interpolated).
+    fn before(&self, t: f64) -> Option<f64> {
+        let j = self.t.partition_point(|x| *x <= t);
+        (j > 0).then(|| self.v[j - 1])
+    }
+}
+
+/// The log of `frames` (in time order), rows per `rows`.
+pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built, BringupError> {
+    let mut refs: Vec<(u64, f64, AsState)> = Vec::new();
+    let (mut sw, mut status_current, mut state, mut faults) = (
+        Series::default(),
+        Series::default(),
+        Series::default(),
+        Series::default(),
+    );
+    let (mut motor, mut current) = (Series::default(), Series::default());
+    // EPOS4 mode: the drive's own position (TPDO1) and current (TPDO2), if no motor frame.
+    let (mut epos_motor, mut epos_current) = (Series::default(), Series::default());
+    let mut invalid = 0;
+    for f in frames {
+        match decoder.decode(&f.frame) {
+            Decoded::Reference(Ok(r)) => refs.push((f.t_us, f64::from(r.angle.0), r.as_state)),
+            Decoded::Status(Ok(s)) => {
+                let sent = f.t_us.saturating_sub(BUS_LATENCY_US);
+                sw.push(sent, ENCODER_AGE_US, f64::from(s.angle.0));
+                status_current.push(sent, 0, f64::from(s.current.0));
+                state.push(sent, 0, f64::from(s.ecu_state));
+                faults.push(sent, 0, f64::from(s.faults));
+            }
+            Decoded::Motor(Ok(m)) => {
+                let sent = f.t_us.saturating_sub(BUS_LATENCY_US);
+                motor.push(sent, MOTOR_AGE_US, f64::from(m.angle.0));
+                current.push(sent, CURRENT_AGE_US, f64::from(m.current_mean.0));
+            }
+            Decoded::EposTpdo1 { motor_rad, .. } => {
+                epos_motor.push(f.t_us.saturating_sub(BUS_LATENCY_US), 0, motor_rad)
+            }
+            Decoded::EposTpdo2 { current_a } => {
+                epos_current.push(f.t_us.saturating_sub(BUS_LATENCY_US), 0, current_a)
+            }
+            Decoded::Reference(Err(_)) | Decoded::Status(Err(_)) | Decoded::Motor(Err(_)) => {
+                invalid += 1
+            }
+            _ => {}
+        }
+    }
+    if sw.t.is_empty() {
+        return Err(BringupError::Log {
+            reason: "no valid status frame (0x101) in the recording".into(),
+        });
+    }
+    if refs.is_empty() {
+        return Err(BringupError::Log {
+            reason: "no valid reference frame (0x100) in the recording".into(),
+        });
+    }
+    let mut notes = Vec::new();
+    let from_epos = motor.t.is_empty() && !epos_motor.t.is_empty() && !epos_current.t.is_empty();
+    if from_epos {
+        notes.push(
+            "no motor frame (0x102): motor_rad and current_a are the EPOS4's TPDO1 position \
+             and TPDO2 current (EPOS4 mode), dated when they arrived"
+                .to_string(),
+        );
+        motor = epos_motor;
+        current = epos_current;
+    }
+    let have_motor = !motor.t.is_empty();
+    if !have_motor {
+        notes.push(
+            "no motor frame (0x102) and no EPOS4 PDOs: motor_rad is nan and current_a is the \
+             status frame's single sample (20 mA); update the ECU firmware"
+                .to_string(),
+        );
+    }
+    let period = PERIOD_US as f64;
+    let mut log = Log::with_extra_columns(&["as_state", "ecu_state", "faults"]);
+    let first_us = refs[0].0 as f64;
+    let mut last_k: Option<u64> = None;
+    let mut origin_k: Option<u64> = None;
+    let mut uncovered = 0;
+    for &(t_us, angle, as_state) in &refs {
+        if rows == Rows::Active && !as_state.actuator_may_be_powered() {
+            continue;
+        }
+        // The period this sample belongs to, on the sender's 10 ms grid.
+        let k = ((t_us as f64 - first_us) / period).round().max(0.0) as u64;
+        if last_k.is_some_and(|last| k <= last) {
+            continue; // two frames in one period: the first one counts
+        }
+        let push = t_us as f64 + BUS_LATENCY_US as f64;
+        let values = if have_motor {
+            (
+                sw.at(push + SW_CENTRE_US),
+                motor.at(push + MOTOR_CENTRE_US),
+                current.at(push + CURRENT_CENTRE_US),
+            )
+        } else {
+            (
+                sw.at(push + SW_CENTRE_US),
+                Some(f64::NAN),
+                status_current.at(push + CURRENT_CENTRE_US),
+            )
+        };
+        let (Some(sw_deg), Some(motor_rad), Some(current_a)) = values else {
+            uncovered += 1;
+            continue;
+        };
+        last_k = Some(k);
+        let k0 = *origin_k.get_or_insert(k);
+        let mid = push + CURRENT_CENTRE_US;
+        // `host-sim gap` bins rows by floor((t - t_first) / 10 ms): a row exactly on the grid
+        // sits on a bin edge, where float rounding (0.03 / 0.01 = 2.9999999999999996) would
+        // put one row in ten into the bin before. One µs after the grid point keeps each row in
+        // its own bin and moves the reference the diagnosis reads by 0.01 % of a step.
+        let nudge_us = if k > k0 { GRID_NUDGE_US } else { 0.0 };
+        log.push(
+            Row {
+                t: ((k - k0) as f64 * period + period / 2.0 + nudge_us) * 1e-6,
+                ref_sw_deg: angle,
+                sw_deg,
+                motor_rad,
+                current_a,
+            },
+            &[
+                f64::from(as_state.code()),
+                state.before(mid).unwrap_or(f64::NAN),
+                faults.before(mid).unwrap_or(f64::NAN),
+            ],
+        );
+    }
+    if log.is_empty() {
+        return Err(BringupError::Log {
+            reason: match rows {
+                Rows::Active => {
+                    "no reference in AS Ready or Driving while the ECU was reporting".into()
+                }
+                Rows::All => "no reference while the ECU was reporting".into(),
+            },
+        });
+    }
+    Ok(Built {
+        log,
+        references: refs.len(),
+        invalid_frames: invalid,
+        uncovered,
+        notes,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use steering_ecu::can::{Frame, StandardId};
+    use steering_ecu::canopen::NodeId;
+    use steering_ecu::canopen::epos4::PositionScale;
+    use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference, Status};
+    use steering_ecu::units::{Amps, SteeringDeg};
+
+    fn frames(with_epos: bool) -> Vec<Stamped> {
+        let cfg = ProtocolConfig::DEFAULT;
+        let mut out = Vec::new();
+        for k in 0..20u64 {
+            let c = AliveCounter::wrapping(k as u8);
+            out.push(Stamped {
+                t_us: k * 10_000,
+                frame: cfg.encode_reference(&Reference {
+                    angle: SteeringDeg(1.0),
+                    as_state: AsState::Driving,
+                    counter: c,
+                    clear_faults: false,
+                }),
+            });
+            out.push(Stamped {
+                t_us: k * 10_000 + 3_000,
+                frame: cfg.encode_status(&Status {
+                    angle: SteeringDeg(1.0),
+                    current: Amps(0.5),
+                    ecu_state: 2,
+                    faults: 0,
+                    counter: c,
+                }),
+            });
+            if with_epos {
+                let mut tpdo1 = vec![0x37, 0x02];
+                tpdo1.extend_from_slice(&42i32.to_le_bytes()); // half a turn at 84 inc/rev
+                let tpdo2 = 1500i32.to_le_bytes(); // mA
+                for (id, data) in [(0x181u16, &tpdo1[..]), (0x281, &tpdo2[..])] {
+                    out.push(Stamped {
+                        t_us: k * 10_000 + 1_000,
+                        frame: Frame::new(StandardId::new(id).unwrap(), data).unwrap(),
+                    });
+                }
+            }
+        }
+        out.sort_by_key(|f| f.t_us);
+        out
+    }
+
+    fn decoder() -> Decoder {
+        Decoder::new(NodeId::new(1).unwrap(), PositionScale::new(84).unwrap())
+    }
+
+    #[test]
+    fn epos4_pdos_stand_in_for_the_motor_frame() {
+        let built = build(&frames(true), &decoder(), Rows::Active).unwrap();
+        assert!(built.notes[0].contains("TPDO1"), "{:?}", built.notes);
+        assert!(built.log.len() > 15);
+        for (m, i) in built.log.motor_rad.iter().zip(&built.log.current_a) {
+            assert!((m - std::f64::consts::PI).abs() < 1e-6, "{m}");
+            assert!((i - 1.5).abs() < 1e-6, "{i}"); // mA through f32
+        }
+    }
+
+    #[test]
+    fn without_motor_frames_or_pdos_the_log_says_so() {
+        let built = build(&frames(false), &decoder(), Rows::Active).unwrap();
+        assert!(built.notes[0].contains("nan"), "{:?}", built.notes);
+        assert!(built.log.motor_rad.iter().all(|m| m.is_nan()));
+        assert!(built.log.current_a.iter().all(|i| (i - 0.5).abs() < 1e-6));
+    }
+}

@@ -1,0 +1,154 @@
+//! `steer-can`, the CAN bring-up tool: what a team runs on a laptop with a USB-CAN adapter the
+//! first day the ECU is on the car. It speaks the ECU's vehicle protocol (`src/protocol`, the
+//! DBC) and CANopen towards the EPOS4, drives the test campaign and records logs in the
+//! project's log format, ready for `host-sim gap`.
+//!
+//! Theory of operation:
+//!
+//! ```text
+//!   steer-can <command> --iface can0|sim
+//!        |
+//!        v
+//!   Transport (send a frame, receive until a deadline, now_us)   <- the only I/O
+//!        |-- SocketCan (Linux, wall clock; thin)                  `socketcan.rs`
+//!        '-- SimEcu (the firmware's tasks + plant + EPOS4 sim,     `crate::sim_ecu`
+//!                    in-memory bus, virtual time)
+//!   decode   frame -> Decoded (reference, status, motor, EPOS4 PDO/SDO/EMCY/heartbeat, NMT)
+//!   monitor  Decoded stream -> counters, CRC errors, counter gaps, last values
+//!   profile  step / sine / sweep / track samples at 100 Hz, limited to the ECU's 400 deg/s
+//!   campaign ready check -> confirmation -> lead-in -> profile -> settle -> AS Off;
+//!            aborts on a fault bit, an EMCY, a silent ECU or Ctrl-C, always ending in AS Off
+//!   record   every frame with its time -> candump `-l` file        `candump.rs`
+//!   logbuild reference + status + motor frames -> log rows (t, ref_sw_deg, sw_deg, ...)
+//! ```
+//!
+//! Every command takes its time from the transport, so a campaign against the simulated ECU
+//! runs in virtual time, as fast as the simulation goes, and one on the car in wall-clock time.
+
+pub mod campaign;
+pub mod candump;
+pub mod cli;
+pub mod decode;
+pub mod epos;
+pub mod logbuild;
+pub mod monitor;
+pub mod profile;
+#[cfg(target_os = "linux")]
+pub mod socketcan;
+
+use std::fmt;
+use std::path::PathBuf;
+use steering_ecu::can::Frame;
+
+/// A frame with the time it was seen (received, or sent by this tool), µs on the transport's
+/// clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stamped {
+    pub t_us: u64,
+    pub frame: Frame,
+}
+
+/// Where time comes from: wall clock on the car, virtual time in the simulation.
+pub trait Clock {
+    /// Monotonic time, µs, from an arbitrary origin.
+    fn now_us(&self) -> u64;
+}
+
+/// One CAN interface, blocking: the commands are written against this alone.
+pub trait Transport: Clock {
+    /// Put one frame on the bus.
+    fn send(&mut self, frame: &Frame) -> Result<(), BringupError>;
+    /// The next received frame, or `None` once `deadline_us` has passed without one. A
+    /// deadline in the past still returns frames already waiting.
+    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, BringupError>;
+    /// Interface name for messages ("can0", "sim").
+    fn name(&self) -> &str;
+    /// Wall-clock time of `now_us() == 0`, s since the Unix epoch, for candump timestamps.
+    fn epoch_s(&self) -> f64;
+}
+
+/// Everything the tool reports as an error; each names what to check.
+#[derive(Debug)]
+pub enum BringupError {
+    /// The CAN interface does not exist or is down.
+    NoInterface { iface: String, detail: String },
+    /// A read or write on the interface or a file failed.
+    Io {
+        context: String,
+        source: std::io::Error,
+    },
+    /// No status frame within `waited_ms`.
+    EcuSilent { waited_ms: u64 },
+    /// The ECU is there but not ready for a campaign.
+    EcuNotReady { reason: String },
+    /// A candump line that is not `(seconds) iface id#data`.
+    Candump {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    /// A profile that cannot be sent (range, empty, bad file).
+    Profile { reason: String },
+    /// The EPOS4 did not answer or refused an SDO read.
+    Epos { reason: String },
+    /// The log could not be built or written.
+    Log { reason: String },
+    /// The operator said no at the confirmation prompt.
+    NotConfirmed,
+}
+
+impl fmt::Display for BringupError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            BringupError::NoInterface { iface, detail } => write!(
+                f,
+                "{iface}: no such interface, or it is down ({detail}) — bring it up with \
+                 `sudo ip link set {iface} up type can bitrate 1000000`"
+            ),
+            BringupError::Io { context, source } => write!(f, "{context}: {source}"),
+            BringupError::EcuSilent { waited_ms } => write!(
+                f,
+                "no status frame from the ECU (0x101) within {:.1} s — is it powered, is the bit \
+                 rate 1 Mbit/s?",
+                *waited_ms as f64 / 1000.0
+            ),
+            BringupError::EcuNotReady { reason } => write!(f, "the ECU is not ready: {reason}"),
+            BringupError::Candump {
+                path,
+                line,
+                message,
+            } => write!(f, "{}:{line}: {message}", path.display()),
+            BringupError::Profile { reason } => write!(f, "profile: {reason}"),
+            BringupError::Epos { reason } => write!(f, "EPOS4: {reason}"),
+            BringupError::Log { reason } => write!(f, "log: {reason}"),
+            BringupError::NotConfirmed => write!(
+                f,
+                "not confirmed; nothing was sent (answer `yes`, or pass --yes in a script)"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for BringupError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            BringupError::Io { source, .. } => Some(source),
+            _ => None,
+        }
+    }
+}
+
+/// Receive until `deadline_us`, handing each frame to `on_frame`; stops early when it returns
+/// `false`. Returns whether it was stopped early.
+pub fn pump(
+    transport: &mut dyn Transport,
+    deadline_us: u64,
+    mut on_frame: impl FnMut(&Stamped) -> bool,
+) -> Result<bool, BringupError> {
+    while let Some(rx) = transport.recv_until(deadline_us)? {
+        if !on_frame(&rx) {
+            return Ok(true);
+        }
+    }
+    Ok(false)
+}

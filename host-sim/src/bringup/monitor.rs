@@ -1,0 +1,293 @@
+//! Live decode of the bus: counts per frame kind, CRC and length errors, alive-counter gaps of
+//! the ECU's frames, and the last value of everything, as a block of text for the terminal.
+
+use super::Stamped;
+use super::decode::{
+    Decoded, Decoder, as_state_words, ecu_state_words, faults_in_words, frame_error_words,
+    nmt_words,
+};
+use std::collections::BTreeMap;
+use steering_ecu::canopen::nmt::NmtState;
+use steering_ecu::protocol::{AliveCounter, FrameError, MotorStatus, Reference, Status};
+
+/// Alive-counter bookkeeping of one frame stream.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CounterCheck {
+    last: Option<u8>,
+    /// Frames whose counter repeated the previous one.
+    pub repeats: u64,
+    /// Frames missing according to the counter (sum of the jumps).
+    pub lost: u64,
+}
+
+impl CounterCheck {
+    pub fn on(&mut self, counter: AliveCounter) {
+        let c = counter.raw();
+        if let Some(last) = self.last {
+            let step = (c + AliveCounter::MODULUS - last) % AliveCounter::MODULUS;
+            match step {
+                0 => self.repeats += 1,
+                1 => {}
+                n => self.lost += u64::from(n - 1),
+            }
+        }
+        self.last = Some(c);
+    }
+}
+
+/// Everything seen so far.
+#[derive(Debug, Clone)]
+pub struct Monitor {
+    decoder: Decoder,
+    pub counts: BTreeMap<&'static str, u64>,
+    /// Frames of the ECU's protocol that failed the CRC, per kind.
+    pub crc_errors: BTreeMap<&'static str, u64>,
+    /// Other check failures (length, AS state code), per kind.
+    pub other_errors: BTreeMap<&'static str, u64>,
+    pub reference_counter: CounterCheck,
+    pub status_counter: CounterCheck,
+    pub motor_counter: CounterCheck,
+    pub last_reference: Option<(u64, Reference)>,
+    pub last_status: Option<(u64, Status)>,
+    pub last_motor: Option<(u64, MotorStatus)>,
+    pub last_tpdo1: Option<(u64, u16, f64)>,
+    pub last_tpdo2: Option<(u64, f64)>,
+    pub last_heartbeat: Option<(u64, NmtState)>,
+    /// Every EMCY: (time, error code, error register).
+    pub emcy: Vec<(u64, u16, u8)>,
+    /// Fault bits seen set in any status frame.
+    pub faults_seen: u16,
+    pub first_us: Option<u64>,
+    pub last_us: u64,
+}
+
+impl Monitor {
+    pub fn new(decoder: Decoder) -> Self {
+        Monitor {
+            decoder,
+            counts: BTreeMap::new(),
+            crc_errors: BTreeMap::new(),
+            other_errors: BTreeMap::new(),
+            reference_counter: CounterCheck::default(),
+            status_counter: CounterCheck::default(),
+            motor_counter: CounterCheck::default(),
+            last_reference: None,
+            last_status: None,
+            last_motor: None,
+            last_tpdo1: None,
+            last_tpdo2: None,
+            last_heartbeat: None,
+            emcy: Vec::new(),
+            faults_seen: 0,
+            first_us: None,
+            last_us: 0,
+        }
+    }
+
+    pub fn decoder(&self) -> &Decoder {
+        &self.decoder
+    }
+
+    /// Takes one frame; returns what it was.
+    pub fn on_frame(&mut self, rx: &Stamped) -> Decoded {
+        let t = rx.t_us;
+        self.first_us.get_or_insert(t);
+        self.last_us = t;
+        let d = self.decoder.decode(&rx.frame);
+        *self.counts.entry(d.kind()).or_default() += 1;
+        let mut error = |e: &FrameError, kind: &'static str| {
+            let map = if matches!(e, FrameError::Crc { .. }) {
+                &mut self.crc_errors
+            } else {
+                &mut self.other_errors
+            };
+            *map.entry(kind).or_default() += 1;
+        };
+        match &d {
+            Decoded::Reference(Ok(r)) => {
+                self.reference_counter.on(r.counter);
+                self.last_reference = Some((t, *r));
+            }
+            Decoded::Status(Ok(s)) => {
+                self.status_counter.on(s.counter);
+                self.faults_seen |= s.faults;
+                self.last_status = Some((t, *s));
+            }
+            Decoded::Motor(Ok(m)) => {
+                self.motor_counter.on(m.counter);
+                self.last_motor = Some((t, *m));
+            }
+            Decoded::Reference(Err(e)) | Decoded::Status(Err(e)) | Decoded::Motor(Err(e)) => {
+                error(e, d.kind())
+            }
+            Decoded::EposTpdo1 {
+                statusword,
+                motor_rad,
+            } => self.last_tpdo1 = Some((t, *statusword, *motor_rad)),
+            Decoded::EposTpdo2 { current_a } => self.last_tpdo2 = Some((t, *current_a)),
+            Decoded::Emcy {
+                error_code,
+                error_register,
+            } => self.emcy.push((t, *error_code, *error_register)),
+            Decoded::Heartbeat(s) => self.last_heartbeat = Some((t, *s)),
+            _ => {}
+        }
+        d
+    }
+
+    /// One line for a decoded frame (the `--each` view).
+    pub fn line(&self, rx: &Stamped, d: &Decoded) -> String {
+        let t = rx.t_us as f64 * 1e-6;
+        let body = match d {
+            Decoded::Reference(Ok(r)) => format!(
+                "angle {:+8.2} deg  AS {}  counter {:2}{}",
+                r.angle.0,
+                as_state_words(r.as_state),
+                r.counter.raw(),
+                if r.clear_faults { "  clear-faults" } else { "" }
+            ),
+            Decoded::Status(Ok(s)) => format!(
+                "column {:+8.2} deg  current {:+7.2} A  state {}  faults: {}  counter {:2}",
+                s.angle.0,
+                s.current.0,
+                ecu_state_words(s.ecu_state),
+                faults_in_words(s.faults),
+                s.counter.raw()
+            ),
+            Decoded::Motor(Ok(m)) => format!(
+                "motor {:+10.4} rad  mean current {:+7.3} A  counter {:2}",
+                m.angle.0,
+                m.current_mean.0,
+                m.counter.raw()
+            ),
+            Decoded::Reference(Err(e)) | Decoded::Status(Err(e)) | Decoded::Motor(Err(e)) => {
+                frame_error_words(e)
+            }
+            Decoded::EposTpdo1 {
+                statusword,
+                motor_rad,
+            } => format!("statusword 0x{statusword:04X}  position {motor_rad:+10.4} rad"),
+            Decoded::EposTpdo2 { current_a } => format!("current {current_a:+7.3} A"),
+            Decoded::EposRpdo1 { target_rad } => format!("target {target_rad:+10.4} rad"),
+            Decoded::EposPdoLength { cob, len } => format!("COB 0x{cob:03X} length {len}"),
+            Decoded::Emcy {
+                error_code,
+                error_register,
+            } => format!("error code 0x{error_code:04X}  error register 0x{error_register:02X}"),
+            Decoded::Heartbeat(s) => nmt_words(*s).to_string(),
+            _ => hex(rx.frame.data()),
+        };
+        format!(
+            "{t:12.6}  {:03X}  {:<18} {body}",
+            rx.frame.id().raw(),
+            d.kind()
+        )
+    }
+
+    /// The summary block: rates, errors, last values.
+    pub fn summary(&self) -> String {
+        let span_s = self
+            .first_us
+            .map(|f| (self.last_us.saturating_sub(f)) as f64 * 1e-6)
+            .unwrap_or(0.0);
+        let mut out = String::new();
+        out.push_str(&format!(
+            "{:.1} s of bus, {} frames\n",
+            span_s,
+            self.counts.values().sum::<u64>()
+        ));
+        for (kind, n) in &self.counts {
+            let rate = if span_s > 0.0 {
+                *n as f64 / span_s
+            } else {
+                0.0
+            };
+            let crc = self.crc_errors.get(kind).copied().unwrap_or(0);
+            let other = self.other_errors.get(kind).copied().unwrap_or(0);
+            out.push_str(&format!(
+                "  {kind:<22} {n:7}  {rate:7.1} Hz  CRC errors {crc}  other errors {other}\n"
+            ));
+        }
+        for (name, c) in [
+            ("reference", &self.reference_counter),
+            ("status", &self.status_counter),
+            ("motor", &self.motor_counter),
+        ] {
+            if c.last.is_some() {
+                out.push_str(&format!(
+                    "  {name} counter: {} lost, {} repeated\n",
+                    c.lost, c.repeats
+                ));
+            }
+        }
+        if let Some((_, r)) = &self.last_reference {
+            out.push_str(&format!(
+                "  reference  {:+8.2} deg, AS {}\n",
+                r.angle.0,
+                as_state_words(r.as_state)
+            ));
+        }
+        match &self.last_status {
+            Some((_, s)) => out.push_str(&format!(
+                "  ECU        column {:+8.2} deg, current {:+7.2} A, state {}, faults: {}\n",
+                s.angle.0,
+                s.current.0,
+                ecu_state_words(s.ecu_state),
+                faults_in_words(s.faults)
+            )),
+            None => out.push_str("  ECU        no status frame (0x101) yet\n"),
+        }
+        if let Some((_, m)) = &self.last_motor {
+            out.push_str(&format!(
+                "  motor      {:+10.4} rad, mean current {:+7.3} A\n",
+                m.angle.0, m.current_mean.0
+            ));
+        }
+        if let Some((_, s)) = &self.last_heartbeat {
+            out.push_str(&format!("  EPOS4      NMT {}\n", nmt_words(*s)));
+        }
+        if let Some((_, sw, rad)) = &self.last_tpdo1 {
+            out.push_str(&format!(
+                "  EPOS4      statusword 0x{sw:04X}, position {rad:+10.4} rad\n"
+            ));
+        }
+        if let Some((_, a)) = &self.last_tpdo2 {
+            out.push_str(&format!("  EPOS4      current {a:+7.3} A\n"));
+        }
+        for (t, code, reg) in &self.emcy {
+            out.push_str(&format!(
+                "  EMCY at {:.3} s: error code 0x{code:04X}, error register 0x{reg:02X}\n",
+                *t as f64 * 1e-6
+            ));
+        }
+        if self.faults_seen != 0 {
+            out.push_str(&format!(
+                "  faults seen: {}\n",
+                faults_in_words(self.faults_seen)
+            ));
+        }
+        out
+    }
+}
+
+fn hex(data: &[u8]) -> String {
+    data.iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counter_gaps_and_repeats_are_counted() {
+        let mut c = CounterCheck::default();
+        for raw in [14u8, 15, 0, 0, 3, 4] {
+            c.on(AliveCounter::wrapping(raw));
+        }
+        assert_eq!(c.repeats, 1);
+        assert_eq!(c.lost, 2);
+    }
+}

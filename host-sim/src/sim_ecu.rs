@@ -1,0 +1,349 @@
+//! The simulated ECU on the car's bus: the firmware's own tasks (`steering_ecu::tasks`:
+//! reference receiver, status sender, encoder reader) and its `Ecu` in direct drive mode,
+//! driving the paper's plant, plus the simulated EPOS4 at its node, all on one in-memory CAN
+//! bus in virtual time. A host tool attaches as a third node through [`crate::bringup::Transport`],
+//! so every `steer-can` command runs against it exactly as against the car.
+//!
+//! How the tasks run: the same task functions the STM32 runs, polled once per 50 µs step by a
+//! small single-threaded executor here (a no-op waker, every task polled every step), with
+//! embassy-time's mock driver advanced by the step. Polling every step costs nothing at this
+//! rate and lets the host code call in and out (`recv_until`) instead of handing control to
+//! embassy's `Executor::run_until`. The direct-drive fast loop (`steering_ecu::direct::
+//! FastLoop`: Hall commutation, current sense, bridge; position 2 kHz, current 20 kHz) runs as
+//! the firmware's ADC interrupt runs it, as in `tests/firmware_tasks.rs`.
+//!
+//! The mock clock is global to the process, so one `SimEcu` lives at a time: `new` waits for
+//! the previous one to be dropped.
+//!
+//! ```text
+//!  step (50 µs):  bus delivers due frames -> ECU port: 0x100 to the reference queue
+//!                                          -> EPOS4 port: Epos4Sim::on_frame, answers sent
+//!                                          -> host port: inbox
+//!                 poll the three tasks; status/motor frames from the TX queue onto the bus
+//!                 EPOS4 advance (heartbeat, its own loops)
+//!                 fast loop (Hall code, phase currents -> bridge command; position tick
+//!                 every 10th step), plant step, encoder value
+//!                 mock clock += 50 µs
+//! ```
+
+use crate::bringup::{BringupError, Clock, Stamped, Transport};
+use crate::canbus::{CanBus, Port};
+use crate::epos4_sim::Epos4Sim;
+use crate::plant::{Actuator, LinearPlant, PlantParams, state};
+use embassy_time::{Duration, MockDriver};
+use std::cell::Cell;
+use std::collections::VecDeque;
+use std::future::Future;
+use std::pin::Pin;
+use std::rc::Rc;
+use std::sync::{Mutex, MutexGuard};
+use std::task::{Context, Waker};
+use steering_ecu::can::Frame;
+use steering_ecu::canopen::NodeId;
+use steering_ecu::canopen::epos4::{Epos4Config, PositionScale};
+use steering_ecu::commutation::{HallDecoder, code_of};
+use steering_ecu::direct::FastLoop;
+use steering_ecu::ecu::Ecu;
+use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
+use steering_ecu::protocol::REFERENCE_ID;
+use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
+use steering_ecu::steering::Output;
+use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
+use steering_ecu::units::{Amps, Volts};
+
+/// Simulation step, µs (the current loop's 20 kHz).
+pub const STEP_US: u64 = 50;
+/// The bridge's DC supply, V (Table 2: 24 V).
+pub const SUPPLY_V: f64 = 24.0;
+/// Frame time on the bus, µs (8 bytes at 1 Mbit/s, about 130 bit times).
+pub const BUS_LATENCY_US: u64 = 130;
+/// The EPOS4's node on the simulated bus (the firmware's default).
+pub const EPOS_NODE: u8 = 1;
+
+/// One simulated ECU per process at a time (the mock clock is global).
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// A fault put into the simulation on purpose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Injection {
+    /// The column encoder stops answering (SPI timeout).
+    EncoderNoResponse,
+    /// The current sensor reads this many amps more than flows (a broken sensor or a short):
+    /// the over-current check sees it.
+    CurrentOffset(f64),
+    /// The EPOS4 reports a drive error with this CANopen error code (EMCY + Fault state).
+    EposFault(u16),
+}
+
+impl Injection {
+    /// `encoder`, `overcurrent` (a 30 A offset), `epos` (0x3210, DC link over-voltage).
+    pub fn parse(s: &str) -> Option<Injection> {
+        match s {
+            "encoder" => Some(Injection::EncoderNoResponse),
+            "overcurrent" => Some(Injection::CurrentOffset(30.0)),
+            "epos" => Some(Injection::EposFault(0x3210)),
+            _ => None,
+        }
+    }
+}
+
+#[derive(Debug)]
+struct EncoderState {
+    column_rad: Cell<f64>,
+    broken: Cell<bool>,
+}
+
+struct SimEncoder(Rc<EncoderState>);
+
+impl ColumnEncoderPort for SimEncoder {
+    async fn read(&mut self) -> Result<u16, EncoderError> {
+        if self.0.broken.get() {
+            return Err(EncoderError::NoResponse);
+        }
+        Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(self.0.column_rad.get()))
+    }
+}
+
+type Task = Pin<Box<dyn Future<Output = ()>>>;
+
+/// The simulated ECU, its actuator, the EPOS4 and the bus.
+pub struct SimEcu {
+    ecu: &'static SharedEcu,
+    reference_frames: &'static FrameQueue,
+    tx_frames: &'static FrameQueue,
+    tasks: Vec<Task>,
+    encoder: Rc<EncoderState>,
+    bus: CanBus,
+    ecu_port: Port,
+    epos_port: Port,
+    host_port: Port,
+    plant: LinearPlant,
+    fast: FastLoop,
+    epos: Epos4Sim,
+    now_us: u64,
+    inbox: VecDeque<Stamped>,
+    current_offset: f64,
+    scheduled: Vec<(u64, Injection)>,
+    _one_at_a_time: MutexGuard<'static, ()>,
+}
+
+impl std::fmt::Debug for SimEcu {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SimEcu")
+            .field("now_us", &self.now_us)
+            .field("output", &self.output())
+            .finish_non_exhaustive()
+    }
+}
+
+impl SimEcu {
+    /// The paper's ECU and actuator at rest at 0 deg, the EPOS4 at node 1 (booting), t = 0.
+    /// Waits while another `SimEcu` of this process is alive.
+    pub fn paper() -> SimEcu {
+        let guard = ONE_AT_A_TIME
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        MockDriver::get().reset();
+        // Leaked: the task futures borrow them for 'static, like the firmware's statics.
+        let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(std::cell::RefCell::new(
+            Ecu::paper().expect("the paper configuration is valid"),
+        ))));
+        let reference_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
+        let tx_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
+        let encoder = Rc::new(EncoderState {
+            column_rad: Cell::new(0.0),
+            broken: Cell::new(false),
+        });
+        let port: &'static mut SimEncoder = Box::leak(Box::new(SimEncoder(encoder.clone())));
+        let tasks: Vec<Task> = vec![
+            Box::pin(async move {
+                tasks::reference_task(reference_frames.receiver(), ecu).await;
+            }),
+            Box::pin(async move {
+                tasks::status_task(tx_frames.sender(), ecu).await;
+            }),
+            Box::pin(async move {
+                tasks::encoder_task(port, ColumnEncoder { zero_raw: 0 }, ecu).await;
+            }),
+        ];
+        let mut bus = CanBus::new(1, BUS_LATENCY_US);
+        let ecu_port = bus.attach();
+        let epos_port = bus.attach();
+        let host_port = bus.attach();
+        let node = NodeId::new(EPOS_NODE).expect("node 1 is valid");
+        let config = Epos4Config::paper(node);
+        let scale = PositionScale::new(config.counts_per_rev).expect("84 inc/rev");
+        let epos = Epos4Sim::new(node, scale).expect("the paper plant discretises");
+        let plant = LinearPlant::new(PlantParams::PAPER, STEP_US as f64 * 1e-6)
+            .expect("the paper plant discretises");
+        SimEcu {
+            ecu,
+            reference_frames,
+            tx_frames,
+            tasks,
+            encoder,
+            bus,
+            ecu_port,
+            epos_port,
+            host_port,
+            plant,
+            fast: FastLoop::new(0, Volts(SUPPLY_V as f32)),
+            epos,
+            now_us: 0,
+            inbox: VecDeque::new(),
+            current_offset: 0.0,
+            scheduled: Vec::new(),
+            _one_at_a_time: guard,
+        }
+    }
+
+    /// The ECU's last output (demand, state, faults).
+    pub fn output(&self) -> Output {
+        self.ecu.lock(|e| e.borrow().output())
+    }
+
+    /// Read or change the ECU directly (tests).
+    pub fn with_ecu<R>(&self, f: impl FnOnce(&mut Ecu) -> R) -> R {
+        self.ecu.lock(|e| f(&mut e.borrow_mut()))
+    }
+
+    pub fn epos(&self) -> &Epos4Sim {
+        &self.epos
+    }
+
+    pub fn epos_mut(&mut self) -> &mut Epos4Sim {
+        &mut self.epos
+    }
+
+    pub fn bus_mut(&mut self) -> &mut CanBus {
+        &mut self.bus
+    }
+
+    /// Column angle of the simulated actuator, deg at the wheel.
+    pub fn column_deg(&self) -> f64 {
+        self.plant.column_rad().to_degrees()
+    }
+
+    pub fn current_a(&self) -> f64 {
+        self.plant.current_a()
+    }
+
+    /// Apply `injection` now.
+    pub fn inject(&mut self, injection: Injection) {
+        match injection {
+            Injection::EncoderNoResponse => self.encoder.broken.set(true),
+            Injection::CurrentOffset(a) => self.current_offset = a,
+            Injection::EposFault(code) => self.epos.inject_fault(code),
+        }
+    }
+
+    /// Apply `injection` when the virtual clock reaches `at_us`.
+    pub fn inject_at(&mut self, at_us: u64, injection: Injection) {
+        self.scheduled.push((at_us, injection));
+    }
+
+    /// Run until `t_us` (frames for the host go to its inbox).
+    pub fn run_until(&mut self, t_us: u64) {
+        while self.now_us < t_us {
+            self.step();
+        }
+    }
+
+    fn step(&mut self) {
+        let now = self.now_us;
+        let due: Vec<Injection> = self
+            .scheduled
+            .iter()
+            .filter(|(at, _)| *at <= now)
+            .map(|(_, i)| *i)
+            .collect();
+        self.scheduled.retain(|(at, _)| *at > now);
+        for i in due {
+            self.inject(i);
+        }
+        for (port, frame) in self.bus.deliver(now) {
+            if port == self.ecu_port {
+                // The firmware's router: reference frames to the reference task. Direct drive
+                // has no EPOS4 link task, so the drive's frames go nowhere.
+                if frame.id() == REFERENCE_ID {
+                    let _ = self.reference_frames.try_send(frame);
+                }
+            } else if port == self.epos_port {
+                for answer in self.epos.on_frame(&frame) {
+                    self.bus.send(self.epos_port, answer, now);
+                }
+            } else if port == self.host_port {
+                self.inbox.push_back(Stamped { t_us: now, frame });
+            }
+        }
+        let mut cx = Context::from_waker(Waker::noop());
+        for task in &mut self.tasks {
+            let _ = task.as_mut().poll(&mut cx);
+        }
+        while let Ok(frame) = self.tx_frames.try_receive() {
+            self.bus.send(self.ecu_port, frame, now);
+        }
+        for frame in self.epos.advance(now) {
+            self.bus.send(self.epos_port, frame, now);
+        }
+        // The fast loop, as the firmware's ADC interrupt runs it (`steering_ecu::direct`): the
+        // Hall code and phase currents from the plant, the bridge command back to a terminal
+        // voltage.
+        let sector = hall_from_motor(self.plant.motor_rad()).rem_euclid(6) as u8;
+        let mut truth = HallDecoder::new(0);
+        let _ = truth.update(code_of(sector));
+        let mut phases = [Amps::ZERO; 3];
+        if let Some((high, low)) = truth.driven_legs() {
+            let measured = (self.plant.current_a() + self.current_offset) as f32;
+            phases[high] = Amps(measured);
+            phases[low] = Amps(-measured);
+        }
+        let fast = &mut self.fast;
+        let command = self
+            .ecu
+            .lock(|e| fast.step(&mut e.borrow_mut(), now, code_of(sector), phases));
+        // Bridge off: the winding is left to its back-EMF, the current dies out.
+        let v = match truth.terminal_voltage(&command, SUPPLY_V as f32) {
+            Some(v) => f64::from(v),
+            None => PlantParams::PAPER.ke * self.plant.state()[state::W_ROT],
+        };
+        self.plant.step(v);
+        self.encoder.column_rad.set(self.plant.column_rad());
+        MockDriver::get().advance(Duration::from_micros(STEP_US));
+        self.now_us += STEP_US;
+    }
+}
+
+impl Clock for SimEcu {
+    fn now_us(&self) -> u64 {
+        self.now_us
+    }
+}
+
+impl Transport for SimEcu {
+    fn send(&mut self, frame: &Frame) -> Result<(), BringupError> {
+        self.bus.send(self.host_port, *frame, self.now_us);
+        Ok(())
+    }
+
+    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, BringupError> {
+        loop {
+            if let Some(rx) = self.inbox.pop_front() {
+                return Ok(Some(rx));
+            }
+            if self.now_us >= deadline_us {
+                return Ok(None);
+            }
+            self.step();
+        }
+    }
+
+    fn name(&self) -> &str {
+        "sim"
+    }
+
+    fn epoch_s(&self) -> f64 {
+        // A fixed, recognisable origin, so recordings of the simulation repeat byte for byte.
+        1_700_000_000.0
+    }
+}

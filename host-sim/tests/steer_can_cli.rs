@@ -1,0 +1,277 @@
+//! The `steer-can` binary end to end: every command with `--iface sim` (the simulated ECU in
+//! virtual time), the candump fixtures, and the errors a team meets on the first day.
+#![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn steer_can(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_steer-can"))
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+/// The number after `label` in `text` (e.g. "column" in "column  +5.10 deg").
+fn number_after(text: &str, label: &str) -> f64 {
+    let rest = &text[text.find(label).unwrap() + label.len()..];
+    rest.split_whitespace()
+        .next()
+        .unwrap()
+        .trim_end_matches(',')
+        .parse()
+        .unwrap()
+}
+
+#[test]
+fn monitor_decodes_the_simulated_bus() {
+    let o = steer_can(&["--iface", "sim", "monitor", "--duration-s", "1", "--each"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(out.contains("status 0x101"), "{out}");
+    assert!(out.contains("motor 0x102"));
+    assert!(out.contains("100.0 Hz"));
+    assert!(
+        out.contains("state idle  faults: none"),
+        "each frame decoded: {out}"
+    );
+    assert!(out.contains("EPOS4 heartbeat"));
+    assert!(out.contains("CRC errors 0"));
+}
+
+#[test]
+fn epos_check_compares_the_gains_with_ours() {
+    let o = steer_can(&["--iface", "sim", "epos", "check"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("mode             1 (profile position)"),
+        "{out}"
+    );
+    assert!(
+        out.contains("0x30A1/1     4390000     1500000  DIFFERS"),
+        "{out}"
+    );
+    assert!(out.contains("error register   0x00 (no error)"));
+    assert!(out.contains("error history    empty"));
+}
+
+#[test]
+fn send_step_moves_the_wheel_and_ends_with_the_drive_disabled() {
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "send",
+        "--as-state",
+        "driving",
+        "step",
+        "--amplitude-deg",
+        "5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    let column = number_after(&out, "ECU        column");
+    assert!((column - 5.0).abs() < 0.5, "column {column} deg: {out}");
+    assert!(out.contains("state idle, faults: none"), "{out}");
+    assert!(stderr(&o).contains("AS Finished sent"));
+}
+
+#[test]
+fn send_without_finish_leaves_the_ecu_to_time_out() {
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "send",
+        "--as-state",
+        "driving",
+        "--no-finish",
+        "step",
+        "--amplitude-deg",
+        "0",
+        "--duration-s",
+        "0.5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("state faulted, faults: reference timeout"),
+        "{out}"
+    );
+    assert!(out.contains("reference 0x100"), "own frames counted: {out}");
+}
+
+#[test]
+fn send_needs_the_as_state_said() {
+    let o = steer_can(&["--iface", "sim", "send", "sine"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--as-state"), "{}", stderr(&o));
+}
+
+#[test]
+fn campaign_sweep_writes_a_log_that_convert_reproduces_from_the_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("sweep.csv");
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "campaign",
+        "sweep",
+        "--yes",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("completed: 1001 profile samples sent"),
+        "{out}"
+    );
+    assert!(stderr(&o).contains("100 %"), "progress bar");
+    let recording = dir.path().join("sweep.csv.candump");
+    assert!(recording.exists());
+    let converted = dir.path().join("converted.csv");
+    let o = steer_can(&[
+        "convert",
+        recording.to_str().unwrap(),
+        "--out",
+        converted.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::read_to_string(&log).unwrap(),
+        std::fs::read_to_string(&converted).unwrap(),
+        "the recording holds everything the log was built from"
+    );
+}
+
+#[test]
+fn campaign_with_a_fault_mid_run_aborts_and_still_writes_the_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("track.csv");
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "--sim-inject",
+        "encoder@2.0",
+        "campaign",
+        "track",
+        "--yes",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(out.contains("ABORTED: fault at"), "{out}");
+    assert!(out.contains("column encoder"), "{out}");
+    assert!(out.contains("ECU faulted"), "{out}");
+    let written = host_sim::logfmt::Log::load(&log).unwrap();
+    assert!(
+        written.len() > 100 && written.len() < 300,
+        "{} rows",
+        written.len()
+    );
+}
+
+#[test]
+fn campaign_without_confirmation_sends_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("x.csv");
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "campaign",
+        "sweep",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("not confirmed"), "{}", stderr(&o));
+    assert!(!log.exists());
+}
+
+#[test]
+fn record_writes_candump_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("bus.candump");
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "record",
+        "--out",
+        file.to_str().unwrap(),
+        "--duration-s",
+        "0.5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&file).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 1 + 49 * 2, "boot-up + 49 x (status, motor)");
+    assert!(lines[1].starts_with("(1700000000.010"), "{}", lines[1]);
+    assert!(lines[1].contains(" sim 101#"), "{}", lines[1]);
+}
+
+#[test]
+fn candump_fixture_converts_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ramp.csv");
+    let o = steer_can(&[
+        "convert",
+        fixture("bringup_ramp.candump").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::read_to_string(&out).unwrap(),
+        std::fs::read_to_string(fixture("bringup_ramp.csv")).unwrap()
+    );
+    let said = stdout(&o);
+    assert!(said.contains("1 skipped"), "{said}");
+    assert!(said.contains("1 invalid frames"), "{said}");
+}
+
+#[test]
+fn malformed_candump_is_refused_with_the_line_number() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = steer_can(&[
+        "convert",
+        fixture("bringup_malformed.candump").to_str().unwrap(),
+        "--out",
+        dir.path().join("x.csv").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("bringup_malformed.candump:3: ID `10X` is not hexadecimal"),
+        "{err}"
+    );
+    let o = steer_can(&["convert", "no-such.candump", "--out", "x.csv"]);
+    assert!(stderr(&o).contains("cannot open candump file no-such.candump"));
+}
+
+#[test]
+fn a_missing_interface_says_how_to_bring_it_up() {
+    let o = steer_can(&["--iface", "nocan7", "monitor", "--duration-s", "0.1"]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("nocan7: no such interface"), "{err}");
+    assert!(
+        err.contains("sudo ip link set nocan7 up type can bitrate 1000000"),
+        "{err}"
+    );
+}
