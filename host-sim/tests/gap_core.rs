@@ -109,3 +109,17 @@ fn nominal_log_gets_no_effect_and_coulomb_log_gets_coulomb() {
     );
     assert!(json["where"]["segment"].is_string());
 }
+
+#[test]
+fn rows_on_the_grid_each_fill_their_own_step() {
+    // 100 Hz rows on the 10 ms grid (what steer-can and most loggers write): every row must
+    // land in its own step. Plain floor((t - t0) / dt) put about one row in ten in the step
+    // before, which halved that step and interpolated the next.
+    let t: Vec<f64> = (0..12_000).map(|k| 0.005 + k as f64 * 0.01).collect();
+    let y: Vec<f64> = (0..12_000).map(|k| k as f64).collect();
+    let rec = host_sim::gap::Record::from_samples_binned(&t, &y, &y, &y, None, 0.01);
+    assert_eq!(rec.len(), 11_999);
+    for (k, v) in rec.output.iter().enumerate() {
+        assert_eq!(*v, k as f64, "step {k}");
+    }
+}

@@ -78,7 +78,10 @@ impl Record {
             let mut sum = vec![0.0; n];
             let mut cnt = vec![0usize; n];
             for (ti, yi) in t.iter().zip(y) {
-                let k = ((ti - t0) / dt).floor();
+                // A row on a grid point starts that step. (t - t0) / dt lands a hair below the
+                // integer for about one row in ten (binary fractions of 0.01 s), which floor
+                // would put in the step before: leave a millionth of a step for the rounding.
+                let k = ((ti - t0) / dt + 1e-6).floor();
                 if k >= 0.0 && (k as usize) < n {
                     sum[k as usize] += yi;
                     cnt[k as usize] += 1;
@@ -622,9 +625,13 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
 
     // The verdict.
     let reducible = (cost0 - floor).max(0.0);
+    // Nothing above the noise floor: nothing to explain (an effect that still lowers the cost
+    // is fitting the noise).
     let named = |c: &Candidate, reference_cost: f64, share: f64| -> bool {
         let gain = reference_cost - c.cost;
-        gain > opts.min_share_of_reducible * reducible.max(1e-12) && gain > share * reference_cost
+        reducible > 0.0
+            && gain > opts.min_share_of_reducible * reducible
+            && gain > share * reference_cost
     };
     let mut verdict_candidate: Option<Candidate> = None;
     let mut reason;
