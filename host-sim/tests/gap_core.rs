@@ -123,3 +123,25 @@ fn rows_on_the_grid_each_fill_their_own_step() {
         assert_eq!(*v, k as f64, "step {k}");
     }
 }
+
+#[test]
+fn the_segment_replay_puts_a_delay_before_the_motor_and_backlash_after_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let rig = Rig::paper();
+    let mut delay = Effects::nominal();
+    delay.delay_s = 0.04;
+    let mut backlash = Effects::nominal();
+    backlash.backlash = 3.0;
+    for (name, fx, segment) in [
+        ("delay.csv", delay, "reference->motor"),
+        ("backlash.csv", backlash, "motor->steering"),
+    ] {
+        let rec = rig
+            .load_record(&write_log(dir.path(), name, fx))
+            .expect("load");
+        let d = diagnose(&rig, &rec, None, &opts());
+        let json = d.to_json();
+        println!("{name}: {}", json["where"]);
+        assert_eq!(json["where"]["segment"], segment, "{name}");
+    }
+}

@@ -1,7 +1,7 @@
 //! Where the gap lies: frequency bands, operating regimes, the segment of the chain, and the
 //! signal, from the nominal model's residual (and the verdict model's, for the "after").
 
-use super::model::SimOut;
+use super::model::{Effects, SimOut};
 use super::rig::{Rig, RigModel};
 use super::{Record, Scorer};
 use crate::analysis::{FrequencyResponse, h1_estimate};
@@ -252,15 +252,19 @@ pub fn locate(rig: &Rig, rec: &Record, scorer: &Scorer, sim0: &SimOut, after: &S
     })
     .collect();
 
-    // (c) segments: reference -> motor from the closed loop; motor -> output from the measured
-    // motor angle plus the twist of the chain the nominal model predicts.
+    // (c) segments, each replayed from the measured signal at its input: reference -> motor
+    // is the closed loop from the reference (its motor angle against the measured one);
+    // motor -> steering is the nominal chain driven by the measured motor angle
+    // (`model::replay_downstream`), its column against the measured one.
     let mut segments = Vec::new();
-    if let (Some(m), false) = (&rec.motor, sim0.motor.is_empty()) {
+    let downstream = match &rig.model {
+        RigModel::Paper(m) => super::model::replay_downstream(m, rec, &Effects::nominal()),
+        RigModel::Emps(_) => None,
+    };
+    if let (Some(m), false, Some(replay)) = (&rec.motor, sim0.motor.is_empty(), &downstream) {
         let e1: f64 = (s..n).map(|k| (sim0.motor[k] - m[k]).powi(2)).sum();
-        // The twist between motor and column (belt, screw, column compliance) measured,
-        // against what the nominal model predicts for it.
-        let e2: f64 = (s..n)
-            .map(|k| ((rec.output[k] - m[k]) - (sim0.output[k] - sim0.motor[k])).powi(2))
+        let e2: f64 = (s..n.min(replay.len()))
+            .map(|k| (rec.output[k] - replay[k]).powi(2))
             .sum();
         let tot = (e1 + e2).max(1e-300);
         segments.push(Segment {

@@ -289,6 +289,52 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
     out
 }
 
+/// Replays the motor -> steering segment (belt, screw, rack, column, encoder) from a motor
+/// angle: the record's `motor` signal (output units through the rigid gearing) drives the
+/// plant's rotor through a stiff virtual servo (300 Hz, critically damped, on the rotor
+/// inertia; the winding's back-EMF is cancelled so it carries no current), and the chain
+/// downstream responds with its own dynamics and the effects of `fx` (backlash, tyre). The
+/// result is the column encoder's reading, on the record's grid; `None` without a motor
+/// signal. Against the measured output it tells how much of the gap lies after the motor.
+pub fn replay_downstream(m: &PaperModel, rec: &Record, fx: &Effects) -> Option<Vec<f64>> {
+    let motor = rec.motor.as_ref()?;
+    let p = m.plant;
+    let dt = 1.0 / CURRENT_LOOP_HZ as f64;
+    let per_motor = p.motor_per_pinion();
+    let rad = |deg: f64| deg.to_radians() * per_motor;
+    let first = *motor.first()?;
+    let mut plant = EffectPlant::new(p, dt);
+    plant.set_at_rest(first.to_radians());
+    let encoder = ColumnEncoder { zero_raw: 0 };
+    let mut play = Play::new(fx.backlash.to_radians(), plant.column_rad());
+    let rack0 = plant.x()[state::THETA_BS] * p.tau_bs;
+    let mut bristle = Bristle::new(fx.tire_force_n, fx.tire_stiffness_n_per_mm * 1e3, rack0);
+    let wn = std::f64::consts::TAU * 300.0;
+    let substeps = ((rec.dt / dt).round() as usize).max(1);
+    let mut out = Vec::with_capacity(motor.len());
+    for k in 0..motor.len() {
+        // The record holds step averages: a line through the neighbours' mid-points.
+        let here = rad(motor[k]);
+        let next = rad(*motor.get(k + 1).unwrap_or(&motor[k]));
+        let w_ref = (next - here) / rec.dt;
+        let mut acc = 0.0;
+        for j in 0..substeps {
+            let x = *plant.x();
+            let theta_ref = here + w_ref * (j as f64 * dt - 0.5 * rec.dt);
+            let torque = p.j_rot
+                * (wn * wn * (theta_ref - x[state::THETA_ROT])
+                    + 2.0 * wn * (w_ref - x[state::W_ROT]));
+            let rack = x[state::THETA_BS] * p.tau_bs;
+            let t_screw = -bristle.force(rack) * p.tau_bs;
+            plant.step(p.ke * x[state::W_ROT], torque, t_screw);
+            let col = play.step(plant.column_rad());
+            acc += (encoder.angle(encoder.raw_from_angle(col)).0 as f64).to_degrees();
+        }
+        out.push(acc / substeps as f64);
+    }
+    Some(out)
+}
+
 /// The EMPS axis under its P-PD controller (README of `shared/data/emps`), on the record's
 /// 1 kHz grid: `c(k) = kv (kp (qg(k) - q(k)) - dq(k))`, `vir(k) = sat(c(k-1)) + pulse(k)`,
 /// `M q'' = gtau vir - Fv q' - Fc sign(q') - offset`, integrated with `substeps` per sample.

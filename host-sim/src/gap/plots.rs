@@ -127,32 +127,45 @@ pub fn write_all(
         files.push(p);
     }
 
-    if let Some(m) = &rec.motor {
+    let downstream = match &rig.model {
+        RigModel::Paper(pm) => super::model::replay_downstream(pm, rec, &Effects::nominal()),
+        RigModel::Emps(_) => None,
+    };
+    if let (Some(m), Some(replay)) = (&rec.motor, &downstream) {
+        let n = n.min(replay.len());
         let seg = TimePlot::new("Segment replay: where in the chain the residual arises")
             .panel(
                 Panel::new("reference -> motor, deg at the wheel")
-                    .series("measured motor", &t, &m[..n])
+                    .series("measured motor", &t[..n], &m[..n])
                     .series_styled(
                         "closed loop, nominal",
-                        &t,
+                        &t[..n],
                         &sim0.motor[..n],
                         Style::new().dashed(),
                     )
                     .series(
                         "residual",
-                        &t,
+                        &t[..n],
                         &(0..n).map(|k| sim0.motor[k] - m[k]).collect::<Vec<_>>(),
                     ),
             )
             .panel(
-                Panel::new("motor -> steering, deg").series_styled(
-                    "twist (column - motor through the gearing): measured - nominal",
-                    &t,
-                    &(0..n)
-                        .map(|k| (rec.output[k] - m[k]) - (sim0.output[k] - sim0.motor[k]))
-                        .collect::<Vec<_>>(),
-                    Style::new().color(Color::VERMILLION),
-                ),
+                Panel::new("motor -> steering (nominal chain driven by the measured motor), deg")
+                    .series("measured column", &t[..n], &rec.output[..n])
+                    .series_styled(
+                        "replayed column",
+                        &t[..n],
+                        &replay[..n],
+                        Style::new().dashed(),
+                    )
+                    .series_styled(
+                        "residual",
+                        &t[..n],
+                        &(0..n)
+                            .map(|k| rec.output[k] - replay[k])
+                            .collect::<Vec<_>>(),
+                        Style::new().color(Color::VERMILLION),
+                    ),
             )
             .x_label("time, s");
         let p = dir.join("gap_segments.svg");
