@@ -108,6 +108,9 @@ pub struct Epos4Sim {
     pdo_length_errors: u64,
     current_avg_ma: f64,
     out: Vec<Frame>,
+    /// Consumer heartbeat (0x1016 sub 1): when the watched node's heartbeat last came; the
+    /// watch starts with the first one (CiA 301).
+    consumer_last_us: Option<u64>,
 }
 
 impl Epos4Sim {
@@ -137,6 +140,7 @@ impl Epos4Sim {
             pdo_length_errors: 0,
             current_avg_ma: 0.0,
             out: Vec::new(),
+            consumer_last_us: None,
         };
         sim.load_defaults();
         Ok(sim)
@@ -166,6 +170,10 @@ impl Epos4Sim {
         }
         e(0x1005, 0, U32, Const, 0x80);
         e(0x1014, 0, U32, Ro, 0x80 + n);
+        // Consumer heartbeat time: bits 16..23 the node watched, bits 0..15 the time, ms.
+        e(0x1016, 0, U8, Ro, 2);
+        e(0x1016, 1, U32, Rw, 0);
+        e(0x1016, 2, U32, Rw, 0);
         e(0x1017, 0, U16, Rw, 0);
         for p in 0..4u16 {
             e(0x1400 + p, 0, U8, Ro, 2);
@@ -306,13 +314,40 @@ impl Epos4Sim {
             if self.now_us >= self.next_heartbeat_us {
                 self.emit_heartbeat();
             }
+            self.check_consumer_heartbeat();
         }
         std::mem::take(&mut self.out)
+    }
+
+    /// The consumer heartbeat's (node, time in µs), if 0x1016 sub 1 is set.
+    fn consumer(&self) -> Option<(u8, u64)> {
+        let raw = self.get_raw(0x1016, 1);
+        let (node, ms) = (((raw >> 16) & 0xFF) as u8, u64::from(raw & 0xFFFF));
+        (node != 0 && ms != 0).then_some((node, ms * 1000))
+    }
+
+    /// A heartbeat consumer that timed out is a communication error: the drive faults (EMCY
+    /// 0x8130, "life guard or heartbeat error"), which switches the power stage off.
+    fn check_consumer_heartbeat(&mut self) {
+        let (Some((_, time_us)), Some(last)) = (self.consumer(), self.consumer_last_us) else {
+            return;
+        };
+        if self.now_us.saturating_sub(last) > time_us && self.state != State::Fault {
+            self.consumer_last_us = None;
+            self.inject_fault(0x8130);
+        }
     }
 
     /// Handle one received frame; the frames the drive answers with.
     pub fn on_frame(&mut self, frame: &Frame) -> Vec<Frame> {
         if !self.booted {
+            return Vec::new();
+        }
+        if let Some((watched, _)) = self.consumer()
+            && let Some(node) = NodeId::new(watched)
+            && nmt::parse_heartbeat(frame, node).is_some()
+        {
+            self.consumer_last_us = Some(self.now_us);
             return Vec::new();
         }
         if let Some((cmd, target)) = nmt::parse_command(frame) {
@@ -925,6 +960,35 @@ mod tests {
     }
 
     #[test]
+    fn the_drive_faults_when_the_ecu_falls_silent() {
+        let mut rig = Rig::new(14);
+        rig.bring_up();
+        assert_eq!(
+            rig.sim.object(od::CONSUMER_HEARTBEAT),
+            Some(127 << 16 | 50),
+            "the drive watches node 127 with 50 ms"
+        );
+        rig.run_for(200_000);
+        assert_eq!(
+            rig.sim.cia402_state(),
+            State::OperationEnabled,
+            "heartbeats flow"
+        );
+        // The ECU dies: nothing of it reaches the bus any more.
+        rig.bus.silence(rig.ecu, true);
+        let dead_at = rig.now;
+        rig.run_until(200_000, |r| r.sim.cia402_state() == State::Fault);
+        assert_eq!(rig.sim.cia402_state(), State::Fault);
+        let after = rig.now - dead_at;
+        // 50 ms from the last heartbeat, which came up to one 10 ms period before the silence.
+        assert!(
+            (40_000..=60_000).contains(&after),
+            "faulted {after} us after"
+        );
+        assert_eq!(rig.sim.object(ObjectAddress::new(0x603F, 0)), Some(0x8130));
+    }
+
+    #[test]
     fn gain_read_back_mismatch_names_the_object() {
         let mut rig = Rig::new(2);
         rig.sim.limit_gain(od::POSITION_D, 100_000);
@@ -1099,7 +1163,10 @@ mod tests {
 
     #[test]
     fn a_dropped_sdo_answer_is_retried() {
-        let mut rig = Rig::new(6);
+        // Without the ECU's own heartbeat, so the frame numbers below are the SDO exchange's.
+        let mut config = Epos4Config::paper(node());
+        config.ecu_heartbeat = None;
+        let mut rig = Rig::with_config(6, config);
         // Frames: 0 = boot-up, 1 = first SDO request, 2 = its answer.
         rig.bus.schedule(2, Fault::Drop);
         rig.bus.schedule(9, Fault::Drop);

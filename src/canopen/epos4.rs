@@ -35,6 +35,10 @@
 //!   8-byte PDO: the link maps TPDO1 = 0x6041 + 0x6064 and TPDO2 = the current.
 //! - 0x1005 COB-ID SYNC is `const 0x00000080`, 0x1014 COB-ID EMCY is `ro $NODEID+0x80`,
 //!   0x1017 producer heartbeat time is UNSIGNED16 in ms (default 0 = off): the link sets it.
+//! - 0x1016 sub 1 "Consumer 1 heartbeat time" is UNSIGNED32, rw, default 0 (checked in the
+//!   EPOS4 EDS of the same repository, `bus_config_cia402_epos4_vel/maxon_epos4_0x1018.eds`);
+//!   CiA 301 packs the watched node into bits 16..23 and the time (ms) into bits 0..15. The
+//!   link makes the EPOS4 watch the ECU's own heartbeat, so a dead ECU faults the drive.
 //! - 0x30A0 sub 1..=2 and 0x30A1 sub 1..=5 are UNSIGNED32, access `rww`, matching Table 3.
 //!   (0x30A1 sub 0 reports 9 sub-indices; only 1..=5 are used.)
 //!
@@ -62,6 +66,8 @@ pub mod od {
 
     /// [1017] Producer heartbeat time, UNSIGNED16, rw, ms.
     pub const PRODUCER_HEARTBEAT: ObjectAddress = ObjectAddress::new(0x1017, 0);
+    /// [Consumer 1 heartbeat time] UNSIGNED32 rw: node << 16 | ms.
+    pub const CONSUMER_HEARTBEAT: ObjectAddress = ObjectAddress::new(0x1016, 1);
     /// [1400] Receive PDO 1 parameter / [1600] mapping.
     pub const RPDO1_COMMUNICATION: u16 = 0x1400;
     /// [1800] / [1801] Transmit PDO 1 / 2 parameter (subs 0..=3).
@@ -225,6 +231,33 @@ pub struct Epos4Config {
     pub max_missed_tpdos: u8,
     /// Which 0x30D1 sub-index TPDO2 carries.
     pub current_object: ObjectAddress,
+    /// The ECU's own heartbeat, which the drive is told to watch (0x1016): if the ECU dies
+    /// (a hang, a reset, a cut wire), the drive faults and switches its power stage off.
+    pub ecu_heartbeat: Option<EcuHeartbeat>,
+}
+
+/// The heartbeat the link produces for the ECU and the time the drive allows between two.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EcuHeartbeat {
+    /// The ECU's node ID on the bus (not used by any drive).
+    pub node: NodeId,
+    /// Producer period, ms (>= 1).
+    pub period_ms: u16,
+    /// Consumer time given to the drive, ms; must exceed `period_ms`.
+    pub consumer_ms: u16,
+}
+
+impl EcuHeartbeat {
+    /// Node 127, every 10 ms, 50 ms allowed: five periods, so one lost frame is no fault.
+    pub const DEFAULT: EcuHeartbeat = EcuHeartbeat {
+        node: match NodeId::new(127) {
+            Some(n) => n,
+            None => panic!("127 is a node ID"), // evaluated at compile time
+        },
+        period_ms: 10,
+        consumer_ms: 50,
+    };
 }
 
 impl Epos4Config {
@@ -241,6 +274,7 @@ impl Epos4Config {
             sdo_attempts: 3,
             max_missed_tpdos: 5,
             current_object: od::CURRENT_ACTUAL,
+            ecu_heartbeat: Some(EcuHeartbeat::DEFAULT),
         }
     }
 }
@@ -441,6 +475,7 @@ pub struct Epos4Link {
     power: bool,
     /// The one best-effort "disable voltage" after a failure was sent.
     failsafe_sent: bool,
+    next_ecu_heartbeat_us: u64,
 }
 
 impl Epos4Link {
@@ -458,6 +493,11 @@ impl Epos4Link {
         }
         if config.sdo_attempts == 0 {
             return Err(ConfigError::SdoAttempts);
+        }
+        if let Some(hb) = config.ecu_heartbeat
+            && (hb.period_ms == 0 || hb.consumer_ms <= hb.period_ms || hb.node == config.node)
+        {
+            return Err(ConfigError::Heartbeat);
         }
         if config.current_object != od::CURRENT_ACTUAL
             && config.current_object != od::CURRENT_ACTUAL_AVERAGED
@@ -496,6 +536,7 @@ impl Epos4Link {
             started: false,
             power: false,
             failsafe_sent: false,
+            next_ecu_heartbeat_us: now_us,
         })
     }
 
@@ -545,6 +586,13 @@ impl Epos4Link {
             config.heartbeat_ms as u32,
             Width::U16,
         ))?;
+        if let Some(hb) = config.ecu_heartbeat {
+            push(small(
+                od::CONSUMER_HEARTBEAT,
+                u32::from(hb.node.raw()) << 16 | u32::from(hb.consumer_ms),
+                Width::U32,
+            ))?;
+        }
         let sync = pdo::TRANSMISSION_SYNC_EVERY;
         let pdos = [
             PdoConfig::new(
@@ -794,6 +842,20 @@ impl Epos4Link {
     /// in `Cyclic` the RPDO + SYNC of each period.
     pub fn poll(&mut self, now_us: u64) -> Outbox {
         let mut out = Outbox::new();
+        // The ECU's heartbeat, in every phase (failed too: the ECU is alive and the drive
+        // keeps what the link last told it).
+        if let Some(hb) = self.config.ecu_heartbeat
+            && now_us >= self.next_ecu_heartbeat_us
+        {
+            if let Some(f) = nmt::heartbeat_frame(hb.node, NmtState::Operational) {
+                let _ = out.push(f);
+            }
+            let period = u64::from(hb.period_ms) * 1000;
+            self.next_ecu_heartbeat_us = self.next_ecu_heartbeat_us.saturating_add(period);
+            if self.next_ecu_heartbeat_us <= now_us {
+                self.next_ecu_heartbeat_us = now_us.saturating_add(period);
+            }
+        }
         if let Phase::Failed(_) = self.phase {
             return out;
         }
@@ -1119,8 +1181,9 @@ mod tests {
     #[test]
     fn pdo_layouts_are_valid() {
         let link = Epos4Link::new(Epos4Config::paper(node()), 0).unwrap();
-        // 7 writes + 7 read-backs + 4 mode/period/heartbeat + 6 + 7 + 6 PDO writes.
-        assert_eq!(link.script.len(), 37);
+        // 7 writes + 7 read-backs + 4 mode/period/heartbeat + 1 consumer heartbeat + 6 + 7 + 6
+        // PDO writes.
+        assert_eq!(link.script.len(), 38);
     }
 
     #[test]
@@ -1160,7 +1223,12 @@ mod tests {
         let mut t = 0;
         while link.error().is_none() && t < 1_000_000 {
             t += 1_000;
-            sent += link.poll(t).len();
+            // SDO requests only (the ECU's heartbeat goes out too).
+            sent += link
+                .poll(t)
+                .iter()
+                .filter(|f| f.id().raw() == 0x601)
+                .count();
         }
         assert_eq!(sent, 3);
         assert_eq!(
