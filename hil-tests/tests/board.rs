@@ -25,34 +25,11 @@ bind_interrupts!(struct CanIrqs {
 /// The core clock the budgets are set at (the firmware's `clock_config`, src/main.rs).
 const CORE_HZ: u32 = 180_000_000;
 
-/// The firmware's clock tree on the NUCLEO-F446RE: 8 MHz from the ST-LINK (HSE bypass), PLL to
-/// 180 MHz, APB1 45 MHz (bxCAN), APB2 90 MHz (TIM1 at 180 MHz). Kept equal to src/main.rs.
-fn clock_config() -> embassy_stm32::Config {
-    use embassy_stm32::rcc::{
-        AHBPrescaler, APBPrescaler, Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllSource,
-        Sysclk,
-    };
-    use embassy_stm32::time::Hertz;
-
-    let mut config = embassy_stm32::Config::default();
-    config.rcc.hse = Some(Hse {
-        freq: Hertz::mhz(8),
-        mode: HseMode::Bypass,
-    });
-    config.rcc.pll_src = PllSource::HSE;
-    config.rcc.pll = Some(Pll {
-        prediv: PllPreDiv::DIV4,
-        mul: PllMul::MUL180,
-        divp: Some(PllPDiv::DIV2),
-        divq: None,
-        divr: None,
-    });
-    config.rcc.sys = Sysclk::PLL1_P;
-    config.rcc.ahb_pre = AHBPrescaler::DIV1;
-    config.rcc.apb1_pre = APBPrescaler::DIV4;
-    config.rcc.apb2_pre = APBPrescaler::DIV2;
-    config
-}
+/// The firmware's clock tree on the NUCLEO-F446RE, from the firmware's own source: 8 MHz from
+/// the ST-LINK (HSE bypass), PLL to 180 MHz, APB1 45 MHz (bxCAN), APB2 90 MHz (TIM1 at 180 MHz).
+#[path = "../../src/firmware/clock_f446.rs"]
+mod clock_f446;
+use clock_f446::clock_config;
 
 /// The bridge outputs: TIM1 CH1-3 on PA8/PA9/PA10, CH1N-3N on PB13/PB14/PB15 (morpho pins; the
 /// Arduino PA7 is the encoder's MOSI).
