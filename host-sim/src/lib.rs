@@ -7,6 +7,7 @@ pub mod epos4_sim;
 pub mod gap;
 pub mod golden;
 pub mod logfmt;
+pub mod out;
 pub mod plant;
 pub mod plot;
 pub mod report;

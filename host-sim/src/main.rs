@@ -131,19 +131,8 @@ impl Common {
 /// instead of panicking on the broken pipe.
 macro_rules! say {
     ($($arg:tt)*) => {
-        emit(format_args!($($arg)*))
+        host_sim::out::stdout_line("host-sim", format_args!($($arg)*))
     };
-}
-
-fn emit(args: std::fmt::Arguments<'_>) {
-    use std::io::Write;
-    if let Err(e) = writeln!(std::io::stdout().lock(), "{args}") {
-        if e.kind() == std::io::ErrorKind::BrokenPipe {
-            std::process::exit(0);
-        }
-        eprintln!("host-sim: cannot write to stdout: {e}");
-        std::process::exit(1);
-    }
 }
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;

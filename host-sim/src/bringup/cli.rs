@@ -191,18 +191,8 @@ pub struct CampaignArgs {
 /// `println!` that ends the program quietly when stdout is closed (`steer-can ... | head`).
 macro_rules! say {
     ($($arg:tt)*) => {
-        emit(format_args!($($arg)*))
+        crate::out::stdout_line("steer-can", format_args!($($arg)*))
     };
-}
-
-fn emit(args: std::fmt::Arguments<'_>) {
-    if let Err(e) = writeln!(std::io::stdout().lock(), "{args}") {
-        if e.kind() == std::io::ErrorKind::BrokenPipe {
-            std::process::exit(0);
-        }
-        eprintln!("steer-can: cannot write to stdout: {e}");
-        std::process::exit(1);
-    }
 }
 
 /// Exit code of a campaign that stopped on a fault or Ctrl-C (the log is still written).
