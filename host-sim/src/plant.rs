@@ -71,6 +71,17 @@ impl Default for PlantParams {
 }
 
 impl PlantParams {
+    /// The state at rest at a steering angle: no current, no speed, belt and column unloaded
+    /// (motor, nut and column all at the angle through the gearing).
+    pub fn at_rest(&self, column_rad: f64) -> [f64; 7] {
+        let theta_bs = column_rad / self.screw_to_pinion();
+        let mut x = [0.0; 7];
+        x[state::THETA_BS] = theta_bs;
+        x[state::THETA_ROT] = theta_bs * self.belt_reduction;
+        x[state::DELTA_SW] = column_rad;
+        x
+    }
+
     /// Tables 1, 2 and 4 of the paper.
     pub const PAPER: PlantParams = PlantParams {
         ra: 0.293,
@@ -352,11 +363,7 @@ impl LinearPlant {
 
     /// Put the actuator at rest at a steering angle (belt and column unloaded).
     pub fn set_at_rest(&mut self, column_rad: f64) {
-        let theta_bs = column_rad / self.params.screw_to_pinion();
-        self.x = [0.0; 7];
-        self.x[state::THETA_BS] = theta_bs;
-        self.x[state::THETA_ROT] = theta_bs * self.params.belt_reduction;
-        self.x[state::DELTA_SW] = column_rad;
+        self.x = self.params.at_rest(column_rad);
     }
 }
 

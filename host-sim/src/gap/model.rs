@@ -173,11 +173,7 @@ impl EffectPlant {
     }
 
     pub fn set_at_rest(&mut self, column_rad: f64) {
-        let theta_bs = column_rad / self.params.screw_to_pinion();
-        self.x = [0.0; 7];
-        self.x[state::THETA_BS] = theta_bs;
-        self.x[state::THETA_ROT] = theta_bs * self.params.belt_reduction;
-        self.x[state::DELTA_SW] = column_rad;
+        self.x = self.params.at_rest(column_rad);
     }
 
     pub fn step(&mut self, voltage_v: f64, motor_torque: f64, screw_torque: f64) {
