@@ -9,16 +9,15 @@ use host_sim::gap::rig::{Rig, RigModel};
 use host_sim::gap::selftest::{Case, record_of};
 use host_sim::gap::{Options, diagnose};
 
+/// The linear chirp of `host_sim::scenario::Sweep` from 0.2 Hz, deg at the wheel, 100 Hz.
 fn chirp(amplitude: f64, f1: f64, duration_s: f64) -> Vec<f64> {
-    let n = (duration_s * 100.0) as usize + 1;
-    (0..n)
-        .map(|k| {
-            let t = k as f64 / 100.0;
-            amplitude
-                * (std::f64::consts::TAU * (0.2 * t + (f1 - 0.2) * t * t / (2.0 * duration_s)))
-                    .sin()
-        })
-        .collect()
+    host_sim::scenario::Sweep {
+        amplitude_deg: amplitude,
+        f_start_hz: 0.2,
+        f_end_hz: f1,
+        duration_s,
+    }
+    .samples()
 }
 
 #[test]

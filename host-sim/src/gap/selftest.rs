@@ -5,6 +5,7 @@
 use super::model::Effects;
 use super::rig::Rig;
 use super::{EffectKind, Options, Record, diagnose};
+use crate::scenario::Sweep;
 use std::collections::BTreeMap;
 
 /// A small deterministic generator (SplitMix64), so a seed gives the same cases everywhere.
@@ -74,18 +75,6 @@ fn draw_effect(kind: EffectKind, rng: &mut Rng, fx: &mut Effects) {
     }
 }
 
-/// A chirp at the wheel, deg, 100 Hz.
-fn chirp(amplitude: f64, f0: f64, f1: f64, duration_s: f64) -> Vec<f64> {
-    let n = (duration_s * 100.0) as usize + 1;
-    (0..n)
-        .map(|k| {
-            let t = k as f64 / 100.0;
-            let phase = std::f64::consts::TAU * (f0 * t + (f1 - f0) * t * t / (2.0 * duration_s));
-            amplitude * phase.sin()
-        })
-        .collect()
-}
-
 /// Draw case `index` of a run seeded with `seed`.
 pub fn draw_case(seed: u64, index: usize, duration_s: f64) -> Case {
     let mut rng = Rng::new(seed.wrapping_mul(1_000_003).wrapping_add(index as u64));
@@ -111,7 +100,13 @@ pub fn draw_case(seed: u64, index: usize, duration_s: f64) -> Case {
         let f1 = rng.range(3.0, 6.0);
         (
             format!("sweep {amp:.1} deg 0.2-{f1:.1} Hz"),
-            chirp(amp, 0.2, f1, duration_s),
+            Sweep {
+                amplitude_deg: amp,
+                f_start_hz: 0.2,
+                f_end_hz: f1,
+                duration_s,
+            }
+            .samples(),
         )
     } else {
         let track = crate::scenario::builtin_track();
