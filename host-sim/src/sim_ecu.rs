@@ -41,10 +41,10 @@ use std::task::{Context, Waker};
 use steering_ecu::can::Frame;
 use steering_ecu::canopen::NodeId;
 use steering_ecu::canopen::epos4::{Epos4Config, PositionScale};
-use steering_ecu::commutation::{HallDecoder, code_of};
+use steering_ecu::commutation::{BRIDGE_OFF, BridgeCommand, HallDecoder, code_of};
 use steering_ecu::direct::FastLoop;
 use steering_ecu::ecu::Ecu;
-use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
+use steering_ecu::ports::{Bridge, ColumnEncoderPort, CurrentSense, EncoderError, HallInputs};
 use steering_ecu::protocol::REFERENCE_ID;
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
 use steering_ecu::steering::Output;
@@ -102,6 +102,69 @@ impl ColumnEncoderPort for SimEncoder {
         }
         Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(self.0.column_rad.get()))
     }
+}
+
+/// The Hall sensors as the fast loop reads them: the code of the motor's true sector.
+struct SimHall(u8);
+impl HallInputs for SimHall {
+    fn read(&mut self) -> u8 {
+        self.0
+    }
+}
+
+/// The phase currents as the ADC reads them.
+struct SimSense([Amps; 3]);
+impl CurrentSense for SimSense {
+    fn phase_currents(&mut self) -> [Amps; 3] {
+        self.0
+    }
+}
+
+/// The bridge: keeps the command for the plant's terminal voltage.
+struct SimBridge(BridgeCommand);
+impl Bridge for SimBridge {
+    fn apply(&mut self, command: &BridgeCommand) {
+        self.0 = *command;
+    }
+}
+
+/// One 50 us PWM period of the direct drive on the paper's actuator, as the firmware's ADC
+/// interrupt runs it (`steering_ecu::direct::FastLoop::run`): the Hall code of the motor's
+/// sector and the phase currents (the winding current in the pair the sector drives, plus
+/// `current_offset_a` of sense error) from the plant, then the bridge command back to a
+/// terminal voltage for one plant step. With the bridge off the winding is left to its
+/// back-EMF and the current dies out.
+pub fn direct_drive_period(
+    plant: &mut LinearPlant,
+    fast: &mut FastLoop,
+    ecu: &SharedEcu,
+    now_us: u64,
+    current_offset_a: f64,
+) {
+    let sector = hall_from_motor(plant.motor_rad()).rem_euclid(6) as u8;
+    let mut truth = HallDecoder::new(0);
+    let _ = truth.update(code_of(sector));
+    let mut phases = [Amps::ZERO; 3];
+    if let Some((high, low)) = truth.driven_legs() {
+        let measured = (plant.current_a() + current_offset_a) as f32;
+        phases[high] = Amps(measured);
+        phases[low] = Amps(-measured);
+    }
+    let mut bridge = SimBridge(BRIDGE_OFF);
+    ecu.lock(|e| {
+        fast.run(
+            &mut e.borrow_mut(),
+            now_us,
+            &mut SimHall(code_of(sector)),
+            &mut SimSense(phases),
+            &mut bridge,
+        )
+    });
+    let v = match truth.terminal_voltage(&bridge.0, SUPPLY_V as f32) {
+        Some(v) => f64::from(v),
+        None => PlantParams::PAPER.ke * plant.state()[state::W_ROT],
+    };
+    plant.step(v);
 }
 
 type Task = Pin<Box<dyn Future<Output = ()>>>;
@@ -286,28 +349,13 @@ impl SimEcu {
         for frame in self.epos.advance(now) {
             self.bus.send(self.epos_port, frame, now);
         }
-        // The fast loop, as the firmware's ADC interrupt runs it (`steering_ecu::direct`): the
-        // Hall code and phase currents from the plant, the bridge command back to a terminal
-        // voltage.
-        let sector = hall_from_motor(self.plant.motor_rad()).rem_euclid(6) as u8;
-        let mut truth = HallDecoder::new(0);
-        let _ = truth.update(code_of(sector));
-        let mut phases = [Amps::ZERO; 3];
-        if let Some((high, low)) = truth.driven_legs() {
-            let measured = (self.plant.current_a() + self.current_offset) as f32;
-            phases[high] = Amps(measured);
-            phases[low] = Amps(-measured);
-        }
-        let fast = &mut self.fast;
-        let command = self
-            .ecu
-            .lock(|e| fast.step(&mut e.borrow_mut(), now, code_of(sector), phases));
-        // Bridge off: the winding is left to its back-EMF, the current dies out.
-        let v = match truth.terminal_voltage(&command, SUPPLY_V as f32) {
-            Some(v) => f64::from(v),
-            None => PlantParams::PAPER.ke * self.plant.state()[state::W_ROT],
-        };
-        self.plant.step(v);
+        direct_drive_period(
+            &mut self.plant,
+            &mut self.fast,
+            self.ecu,
+            now,
+            self.current_offset,
+        );
         self.encoder.column_rad.set(self.plant.column_rad());
         MockDriver::get().advance(Duration::from_micros(STEP_US));
         self.now_us += STEP_US;

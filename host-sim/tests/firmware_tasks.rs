@@ -6,21 +6,21 @@
 
 use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
-use host_sim::plant::{Actuator, LinearPlant, PlantParams, state};
+use host_sim::plant::{Actuator, LinearPlant, PlantParams};
+use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period};
 use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
-use steering_ecu::commutation::{BRIDGE_OFF, BridgeCommand, HallDecoder, code_of};
 use steering_ecu::direct::FastLoop;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
-use steering_ecu::ports::{Bridge, ColumnEncoderPort, CurrentSense, EncoderError, HallInputs};
+use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
-use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
+use steering_ecu::sensors::ColumnEncoder;
 use steering_ecu::steering::{DriveDemand, EcuState};
 use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
-use steering_ecu::units::{Amps, SteeringDeg, Volts};
+use steering_ecu::units::{SteeringDeg, Volts};
 
 static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
 static TX_FRAMES: FrameQueue = FrameQueue::new();
@@ -47,30 +47,6 @@ enum Inject {
 
 fn inject() -> Inject {
     INJECT.lock().map(|v| *v).unwrap_or(Inject::None)
-}
-
-/// The bridge's DC supply, V (Table 2: 24 V).
-const SUPPLY_V: f64 = 24.0;
-
-struct SimHall(u8);
-impl HallInputs for SimHall {
-    fn read(&mut self) -> u8 {
-        self.0
-    }
-}
-
-struct SimSense([Amps; 3]);
-impl CurrentSense for SimSense {
-    fn phase_currents(&mut self) -> [Amps; 3] {
-        self.0
-    }
-}
-
-struct SimBridge(BridgeCommand);
-impl Bridge for SimBridge {
-    fn apply(&mut self, command: &BridgeCommand) {
-        self.0 = *command;
-    }
 }
 
 struct SimEncoder;
@@ -203,35 +179,12 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
                 }
                 while TX_FRAMES.try_receive().is_ok() {}
             }
-            // The fast loop, as the firmware's ADC interrupt runs it: Hall code and phase
-            // currents from the plant, the bridge command back to a terminal voltage.
-            let sector = hall_from_motor(plant.motor_rad()).rem_euclid(6) as u8;
-            let mut truth = HallDecoder::new(0);
-            let _ = truth.update(code_of(sector));
-            let (high, low) = truth.driven_legs().unwrap();
-            let mut phases = [Amps::ZERO; 3];
+            // The fast loop, as the firmware's ADC interrupt runs it.
             let bias = match inject() {
-                Inject::CurrentBiasA(a) => a,
+                Inject::CurrentBiasA(a) => f64::from(a),
                 _ => 0.0,
             };
-            phases[high] = Amps(plant.current_a() as f32 + bias);
-            phases[low] = Amps(-plant.current_a() as f32 - bias);
-            let mut bridge = SimBridge(BRIDGE_OFF);
-            ecu.lock(|e| {
-                fast.run(
-                    &mut e.borrow_mut(),
-                    now_us,
-                    &mut SimHall(code_of(sector)),
-                    &mut SimSense(phases),
-                    &mut bridge,
-                )
-            });
-            // Bridge off: the winding is left to its back-EMF, the current dies out.
-            let v = match truth.terminal_voltage(&bridge.0, SUPPLY_V as f32) {
-                Some(v) => v as f64,
-                None => PlantParams::PAPER.ke * plant.state()[state::W_ROT],
-            };
-            plant.step(v);
+            direct_drive_period(&mut plant, &mut fast, ecu, now_us, bias);
             if let Ok(mut c) = COLUMN_RAD.lock() {
                 *c = plant.column_rad();
             }
