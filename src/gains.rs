@@ -127,6 +127,29 @@ impl SiGains {
         ff_acceleration: 0.0,
     };
 
+    /// These current-loop gains with other position-loop gains (A/rad, A/(rad s), A s/rad,
+    /// A s/rad, A s^2/rad); `None` if any is negative or not finite.
+    pub fn with_position_loop(
+        &self,
+        kp: f32,
+        ki: f32,
+        kd: f32,
+        ff_velocity: f32,
+        ff_acceleration: f32,
+    ) -> Option<SiGains> {
+        let all = [kp, ki, kd, ff_velocity, ff_acceleration];
+        all.iter()
+            .all(|g| g.is_finite() && *g >= 0.0)
+            .then_some(SiGains {
+                position_kp: kp,
+                position_ki: ki,
+                position_kd: kd,
+                ff_velocity,
+                ff_acceleration,
+                ..*self
+            })
+    }
+
     pub fn current_kp(&self) -> f32 {
         self.current_kp
     }

@@ -23,6 +23,7 @@ pub mod commutation;
 pub mod control;
 pub mod direct;
 pub mod ecu;
+pub mod ecu_mode;
 pub mod faults;
 pub mod gains;
 pub mod gearing;

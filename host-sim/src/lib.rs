@@ -6,6 +6,7 @@ pub mod canbus;
 pub mod epos4_sim;
 pub mod gap;
 pub mod golden;
+pub mod linear_model;
 pub mod logfmt;
 pub mod out;
 pub mod plant;

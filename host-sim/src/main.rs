@@ -12,7 +12,7 @@ use host_sim::plant::PlantParams;
 use host_sim::plot::{BodePlot, Panel, Style, TimePlot};
 use host_sim::report::{self, SweepReport, TrackReport};
 use host_sim::scenario::{self, Sweep};
-use host_sim::sim::{Run, RunConfig};
+use host_sim::sim::{Controller, Run, RunConfig};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -109,6 +109,10 @@ struct Common {
     /// Integrate regardless of saturation (to see what anti-windup prevents).
     #[arg(long)]
     no_anti_windup: bool,
+    /// The steering controller: the paper's EPOS4 cascade on the motor, or the ECU's own
+    /// (inverse belt model, model feedforward, column integral; README "ECU mode").
+    #[arg(long, value_enum, default_value_t = Controller::Paper)]
+    controller: Controller,
 }
 
 impl Common {
@@ -122,6 +126,7 @@ impl Common {
             },
             log_rate_hz: self.log_rate_hz,
             supply_v: self.supply_v,
+            controller: self.controller,
             ..RunConfig::default()
         }
     }

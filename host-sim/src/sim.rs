@@ -12,18 +12,63 @@ use crate::plant::{Actuator, LinearPlant, PlantError, PlantParams};
 use steering_ecu::control::AntiWindup;
 use steering_ecu::control::current::{CurrentOutput, CurrentStatus};
 use steering_ecu::control::position::{PositionOutput, PositionStatus};
+use steering_ecu::ecu_mode::{ColumnCascade, EcuTuning};
 use steering_ecu::gains::{EposGains, GainError};
 use steering_ecu::gearing::Gearing;
 use steering_ecu::paper_mode::{
     CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, Cascade, POSITION_LOOP_HZ,
     POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ,
 };
-use steering_ecu::reference::ReferenceError;
+use steering_ecu::reference::{ReferenceError, Setpoint};
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
 use steering_ecu::units::{Amps, MotorRad, SteeringDeg, Volts};
 
 /// Extra log columns a simulated run writes after the five required ones.
 pub const SIM_EXTRA_COLUMNS: [&str; 3] = ["current_setpoint_a", "voltage_v", "setpoint_motor_rad"];
+
+/// Which steering controller closes the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+pub enum Controller {
+    /// The paper's EPOS4 cascade on the motor angle (Table 3), bit-exact with the firmware.
+    #[default]
+    Paper,
+    /// The ECU's own controller (`steering_ecu::ecu_mode`): inverse belt model, model
+    /// feedforward, Hall-timed speed, slow column integral. Always Hall feedback.
+    Ecu,
+}
+
+/// The two controllers behind one call pattern.
+enum Loop {
+    Paper(Cascade),
+    Ecu(ColumnCascade),
+}
+
+impl Loop {
+    fn push_reference(&mut self, deg: SteeringDeg) -> Result<(), ReferenceError> {
+        match self {
+            Loop::Paper(c) => c.push_reference(deg),
+            Loop::Ecu(c) => c.push_reference(deg),
+        }
+    }
+    fn current_step(&mut self, measured: Amps) -> CurrentOutput {
+        match self {
+            Loop::Paper(c) => c.current_step(measured),
+            Loop::Ecu(c) => c.current_step(measured),
+        }
+    }
+    fn setpoint(&self) -> Setpoint {
+        match self {
+            Loop::Paper(c) => c.setpoint(),
+            Loop::Ecu(c) => c.setpoint(),
+        }
+    }
+    fn current_setpoint(&self) -> Amps {
+        match self {
+            Loop::Paper(c) => c.current_setpoint(),
+            Loop::Ecu(c) => c.current_setpoint(),
+        }
+    }
+}
 
 /// Everything a closed-loop run depends on besides the reference.
 #[derive(Debug, Clone)]
@@ -38,6 +83,22 @@ pub struct RunConfig {
     pub supply_v: f64,
     /// Log rate, Hz; must divide the 2 kHz position-loop rate. 0 = no log (benchmarks).
     pub log_rate_hz: u32,
+    pub controller: Controller,
+    /// What the log's angle columns hold (the control loop is not affected).
+    pub logged_angles: LoggedAngles,
+}
+
+/// What the log's `sw_deg` and `motor_rad` columns hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LoggedAngles {
+    /// What the car's sensors read: the 12-bit column encoder (0.088 deg steps) and the
+    /// 84-count Hall angle (4.3 deg steps of the motor). Paper mode.
+    #[default]
+    Sensors,
+    /// The plant's exact column angle (delta_P, the pinion end) and motor angle, for comparing
+    /// a small-signal run with the linear model (`linear_model.rs`), where the encoder's step
+    /// would be a sizeable share of a 0.5 deg signal.
+    Exact,
 }
 
 impl Default for RunConfig {
@@ -49,6 +110,8 @@ impl Default for RunConfig {
             hall_feedback: true,
             supply_v: 24.0,
             log_rate_hz: 1000,
+            controller: Controller::Paper,
+            logged_angles: LoggedAngles::Sensors,
         }
     }
 }
@@ -160,17 +223,32 @@ pub fn run_tapped(
         name: "gear ratios",
         value: cfg.plant.motor_per_pinion(),
     }))?;
-    let mut cascade = Cascade::new(&si, gearing);
-    cascade.set_anti_windup(cfg.anti_windup);
-    cascade.set_winding(cfg.plant.ra as f32, cfg.plant.la as f32);
-    cascade.set_voltage_limit(Volts(cfg.supply_v as f32));
-    if std::env::var("X_NOGUARD").is_ok() {
-        cascade.set_winding(f32::NAN, 0.0);
-    }
+    let mut cascade = match cfg.controller {
+        Controller::Paper => {
+            let mut c = Cascade::new(&si, gearing);
+            c.set_anti_windup(cfg.anti_windup);
+            c.set_winding(cfg.plant.ra as f32, cfg.plant.la as f32);
+            c.set_voltage_limit(Volts(cfg.supply_v as f32));
+            if std::env::var("X_NOGUARD").is_ok() {
+                c.set_winding(f32::NAN, 0.0);
+            }
+            Loop::Paper(c)
+        }
+        Controller::Ecu => {
+            let mut c = ColumnCascade::new(&si, gearing, EcuTuning::PAPER);
+            c.set_anti_windup(cfg.anti_windup);
+            c.set_winding(cfg.plant.ra as f32, cfg.plant.la as f32);
+            c.set_voltage_limit(Volts(cfg.supply_v as f32));
+            Loop::Ecu(c)
+        }
+    };
     let encoder = ColumnEncoder { zero_raw: 0 };
 
     plant.set_at_rest(first.to_radians());
-    cascade.reset(hall_from_motor(plant.motor_rad()));
+    match &mut cascade {
+        Loop::Paper(c) => c.reset(hall_from_motor(plant.motor_rad())),
+        Loop::Ecu(c) => c.reset(hall_from_motor(plant.motor_rad())),
+    }
     tap.reset(hall_from_motor(plant.motor_rad()));
 
     let mut log = match log_every {
@@ -191,12 +269,17 @@ pub fn run_tapped(
         }
         for _ in 0..POSITION_TICKS_PER_REFERENCE {
             let hall = hall_from_motor(plant.motor_rad());
-            let pos = if cfg.hall_feedback {
-                let pos = cascade.position_step(hall);
-                tap.position(hall, &pos);
-                pos
-            } else {
-                cascade.position_step_at(MotorRad(plant.motor_rad() as f32))
+            let pos = match &mut cascade {
+                Loop::Paper(c) if cfg.hall_feedback => {
+                    let pos = c.position_step(hall);
+                    tap.position(hall, &pos);
+                    pos
+                }
+                Loop::Paper(c) => c.position_step_at(MotorRad(plant.motor_rad() as f32)),
+                Loop::Ecu(c) => {
+                    let column = encoder.angle(encoder.raw_from_angle(plant.column_rad()));
+                    c.position_step(hall, Some(column))
+                }
             };
             if pos.status == PositionStatus::Saturated {
                 current_limited += 1;
@@ -223,13 +306,19 @@ pub fn run_tapped(
             if let Some(every) = log_every
                 && tick.is_multiple_of(every as u64)
             {
-                let sw = encoder.angle(encoder.raw_from_angle(plant.column_rad()));
+                let (sw_rad, motor_rad) = match cfg.logged_angles {
+                    LoggedAngles::Sensors => (
+                        encoder.angle(encoder.raw_from_angle(plant.column_rad())).0 as f64,
+                        motor_from_hall(hall).0 as f64,
+                    ),
+                    LoggedAngles::Exact => (plant.column_rad(), plant.motor_rad()),
+                };
                 log.push(
                     Row {
                         t: tick as f64 * dt_position,
                         ref_sw_deg: sample,
-                        sw_deg: (sw.0 as f64).to_degrees(),
-                        motor_rad: motor_from_hall(hall).0 as f64,
+                        sw_deg: sw_rad.to_degrees(),
+                        motor_rad,
                         current_a: plant.current_a(),
                     },
                     &[

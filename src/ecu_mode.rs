@@ -1,0 +1,422 @@
+//! "ECU mode": the ECU's own steering controller, for the column rather than the motor.
+//!
+//! Paper mode (see [`crate::paper_mode`]) closes its loops on the motor and leaves the column to
+//! follow through the belt. On the paper's plant that belt is soft (k_B = 0.29 Nm/rad, Table 4)
+//! and the nut side is dominated by damping (beta_BS = 1.34e-2 Nm s/rad, Table 4), so with the
+//! motor held on its set-point the pinion lags it like a low-pass of about 50 ms: 0.86 of the
+//! amplitude at 2 Hz, 0.64 at 4 Hz (eqs. 5-8). Paper mode's -3 dB point therefore sits near
+//! 2.3 Hz whatever its motor loop does. ECU mode keeps the paper's structure (PID on the motor
+//! angle, PI on the current, the same limits and anti-windup) and adds what the model says is
+//! missing:
+//!
+//! ```text
+//!  r (100 Hz) --> [inverse belt model] --> motor target --> interpolator --> PID + model ff --> i*
+//!       |                                                          ^              ^
+//!       +--> interpolator --> (r - column) --> slow integral ------+   speed from Hall edge timing
+//! ```
+//!
+//! 1. **Inverse belt model on the reference.** With the motor position imposed the nut obeys
+//!    `J* th'' + c th' + k_B th = k_B th_m / 2 + beta_B th_m' / 2` (eqs. 5-7, the column taken as
+//!    rigid with the pinion), so the motor target that makes the pinion follow `r` is
+//!    `G (r + tau1 r' + tau2 r'')` with `tau1 = (c - beta_B) / k_B`, `tau2 = J* / k_B`, `G` the
+//!    motor-per-pinion ratio. `r'` and `r''` are backward differences of the 100 Hz samples.
+//! 2. **Model feedforward.** The drivetrain reflected to the motor: inertia `J_rot + J*/4`,
+//!    damping `r + c/4` (eq. 8 for `J*`), in A per rad/s and A per rad/s^2 through k_t. Table
+//!    3's velocity feedforward (12.59 mA s/rad) covers the motor alone; the nut's damping needs
+//!    about six times that.
+//! 3. **Speed from Hall edge timing** for the D term instead of differencing the 84-count Hall
+//!    angle: a Hall step over one 0.5 ms tick reads as 150 rad/s, so paper mode's D term kicks
+//!    the current set-point by about 24 A at every edge, even holding still. Here the speed is
+//!    the last edge-to-edge step over its time, bounded by one step over the time since the
+//!    last edge (so it decays to zero at rest), and the D term acts on `w_ref - w_est`.
+//! 4. **A slow integral on the column error**, which moves the motor target so that the column
+//!    (not the motor) settles on the reference: it absorbs backlash, friction and gearing
+//!    offsets. It is slow (time constant [`EcuTuning::column_time_constant_s`], well below the
+//!    belt mode) so it does not fight the inner loop, and clamped to
+//!    [`EcuTuning::column_authority_rad`] at the column.
+//!
+//! Bad input: as paper mode. A non-finite or out-of-range reference is refused; a missing or
+//! non-finite column sample freezes the column integral (the inner loops carry on).
+
+use crate::control::AntiWindup;
+use crate::control::current::{CurrentLoop, CurrentOutput, Winding};
+use crate::control::position::{PositionLoop, PositionOutput};
+use crate::gains::SiGains;
+use crate::gearing::Gearing;
+use crate::paper_mode::{
+    CURRENT_LIMIT, CURRENT_LOOP_HZ, MOTOR_LA_H, MOTOR_RA_OHM, POSITION_LOOP_HZ,
+    POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ, STEERING_RANGE_DEG, VOLTAGE_LIMIT,
+};
+use crate::reference::{Interpolator, ReferenceError, Setpoint};
+use crate::sensors::{HALL_COUNTS_PER_REV, motor_from_hall};
+use crate::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts, saturate};
+use core::f32::consts::TAU;
+
+/// The model-derived constants of ECU mode. [`EcuTuning::PAPER`] is the paper's plant; host-sim
+/// derives the same numbers from any plant with `EcuTuning::from_model`-style arithmetic (see
+/// `host-sim/src/ecu_tuning.rs`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EcuTuning {
+    /// First-order term of the inverse belt model, s: (c - beta_B) / k_B.
+    pub lag1_s: f32,
+    /// Second-order term of the inverse belt model, s^2: J* / k_B.
+    pub lag2_s2: f32,
+    /// Velocity feedforward at the motor, A per rad/s: (r + c / 4) / k_t.
+    pub ff_velocity: f32,
+    /// Acceleration feedforward at the motor, A per rad/s^2: (J_rot + J* / 4) / k_t.
+    pub ff_acceleration: f32,
+    /// Time constant of the column integral, s.
+    pub column_time_constant_s: f32,
+    /// Largest correction the column integral may make, rad at the column.
+    pub column_authority_rad: f32,
+}
+
+impl EcuTuning {
+    /// The paper's plant (Tables 1, 2, 4; belt factor 1/2 and eq. 6 corrected as in host-sim):
+    /// c = beta_BS + beta_B + beta_SW g^2 = 1.597e-2 Nm s/rad at the nut (g = tauBS / tauP),
+    /// J* = 1.076e-4 kg m^2 (eq. 8), k_B = 0.29 Nm/rad, k_t = 52.5 mNm/A, J_rot = 0.81e-4 kg m^2,
+    /// r = 5.78e-5 Nm s/rad. The unit test `paper_tuning_matches_the_tables` recomputes them.
+    pub const PAPER: EcuTuning = EcuTuning {
+        lag1_s: 0.049_203,
+        lag2_s2: 3.709_3e-4,
+        ff_velocity: 0.077_132,
+        ff_acceleration: 2.055_1e-3,
+        column_time_constant_s: 0.3,
+        column_authority_rad: 0.087_266,
+    };
+
+    fn is_valid(&self) -> bool {
+        let ok = |x: f32| x.is_finite() && x >= 0.0;
+        ok(self.lag1_s)
+            && ok(self.lag2_s2)
+            && ok(self.ff_velocity)
+            && ok(self.ff_acceleration)
+            && self.column_time_constant_s.is_finite()
+            && self.column_time_constant_s > 0.0
+            && ok(self.column_authority_rad)
+    }
+}
+
+/// Motor speed from Hall edge timing, rad/s.
+#[derive(Debug, Clone, Default)]
+struct HallSpeed {
+    last_count: Option<i32>,
+    /// Ticks since the last edge.
+    since_edge: u32,
+    speed: f32,
+    /// Sign of the last edge (0 before the first).
+    direction: f32,
+}
+
+impl HallSpeed {
+    fn step(&mut self, count: i32, dt_s: f32) -> f32 {
+        let step_rad = TAU / HALL_COUNTS_PER_REV as f32;
+        self.since_edge = self.since_edge.saturating_add(1);
+        match self.last_count {
+            Some(last) if last != count => {
+                let steps = count.wrapping_sub(last) as f32;
+                let speed = steps * step_rad / (self.since_edge as f32 * dt_s);
+                // An edge against the last one's direction: the motor turned round in between,
+                // so its speed is near zero, not a full step over one tick (chatter on an edge).
+                // The first edge after a reset has no start time either.
+                let unknown = speed * self.direction <= 0.0;
+                self.direction = speed.signum();
+                self.speed = if unknown { 0.0 } else { speed };
+                self.since_edge = 0;
+            }
+            Some(_) => {
+                // No edge: the speed cannot exceed one step over the time since the last one.
+                let bound = step_rad / (self.since_edge as f32 * dt_s);
+                self.speed = saturate(self.speed, bound).0;
+            }
+            None => {
+                self.speed = 0.0;
+                self.since_edge = 0;
+            }
+        }
+        self.last_count = Some(count);
+        self.speed
+    }
+}
+
+/// The ECU-mode cascade: the same call pattern as [`crate::paper_mode::Cascade`] (a reference
+/// sample, then 20 position steps each followed by 10 current steps), with the column angle
+/// given to each position step.
+#[derive(Debug, Clone)]
+pub struct ColumnCascade {
+    gearing: Gearing,
+    tuning: EcuTuning,
+    /// Motor targets (after the inverse belt model).
+    target: Interpolator,
+    /// The plain reference at the motor, for the column error.
+    plain: Interpolator,
+    position: PositionLoop,
+    current: CurrentLoop,
+    speed: HallSpeed,
+    kd: f32,
+    current_setpoint: Amps,
+    last_setpoint: Setpoint,
+    /// The last two accepted reference samples at the motor, newest first.
+    history: [Option<f32>; 2],
+    /// Column integral, rad at the motor.
+    column_correction: f32,
+}
+
+impl ColumnCascade {
+    /// `gains` are the paper's loops (Table 3) whose feedforward ECU mode replaces by the model's.
+    pub fn new(gains: &SiGains, gearing: Gearing, tuning: EcuTuning) -> Self {
+        let tuning = if tuning.is_valid() {
+            tuning
+        } else {
+            EcuTuning::PAPER
+        };
+        let ticks = POSITION_TICKS_PER_REFERENCE as u16;
+        let period = 1.0 / REFERENCE_HZ as f32;
+        let mut cascade = ColumnCascade {
+            gearing,
+            tuning,
+            target: Interpolator::new(ticks, period),
+            plain: Interpolator::new(ticks, period),
+            position: PositionLoop::new(
+                &SiGains::ZERO,
+                1.0 / POSITION_LOOP_HZ as f32,
+                CURRENT_LIMIT,
+            ),
+            current: CurrentLoop::new(
+                gains,
+                1.0 / CURRENT_LOOP_HZ as f32,
+                CURRENT_LIMIT,
+                VOLTAGE_LIMIT,
+            ),
+            speed: HallSpeed::default(),
+            kd: 0.0,
+            current_setpoint: Amps::ZERO,
+            last_setpoint: Setpoint::default(),
+            history: [None; 2],
+            column_correction: 0.0,
+        };
+        cascade.set_gains(gains);
+        cascade.set_winding(MOTOR_RA_OHM, MOTOR_LA_H);
+        cascade
+    }
+
+    fn set_gains(&mut self, gains: &SiGains) {
+        // The PID without its D term and with the model's feedforward: the D term acts on the
+        // Hall-timed speed below, outside the loop's own backward difference.
+        let pid = gains
+            .with_position_loop(
+                gains.position_kp(),
+                gains.position_ki(),
+                0.0,
+                self.tuning.ff_velocity,
+                self.tuning.ff_acceleration,
+            )
+            .unwrap_or(SiGains::ZERO);
+        self.position.set_gains(&pid);
+        self.kd = gains.position_kd();
+        self.current.set_gains(gains);
+    }
+
+    pub fn set_winding(&mut self, ra_ohm: f32, la_h: f32) {
+        self.current
+            .set_winding(Winding::new(ra_ohm, la_h, 1.0 / CURRENT_LOOP_HZ as f32));
+    }
+
+    pub fn set_anti_windup(&mut self, mode: AntiWindup) {
+        self.position.set_anti_windup(mode);
+        self.current.set_anti_windup(mode);
+    }
+
+    pub fn set_voltage_limit(&mut self, limit: Volts) {
+        self.current.set_voltage_limit(limit);
+    }
+
+    /// A new reference sample at the wheel; refused as paper mode refuses it.
+    pub fn push_reference(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
+        if !angle.is_finite() {
+            return Err(ReferenceError::NotFinite);
+        }
+        if angle.0.abs() > STEERING_RANGE_DEG {
+            return Err(ReferenceError::OutOfRange);
+        }
+        let r = self.gearing.motor_from_steering(SteeringRad::from(angle)).0;
+        let t = 1.0 / REFERENCE_HZ as f32;
+        let r1 = self.history[0].unwrap_or(r);
+        let r2 = self.history[1].unwrap_or(r1);
+        let slope = (r - r1) / t;
+        let curvature = (r - 2.0 * r1 + r2) / (t * t);
+        let target = r + self.tuning.lag1_s * slope + self.tuning.lag2_s2 * curvature;
+        self.history = [Some(r), Some(r1)];
+        self.plain.push(MotorRad(r))?;
+        self.target.push(MotorRad(target))
+    }
+
+    /// One position-loop tick (2 kHz): the Hall count and, when a fresh sample exists, the
+    /// column angle.
+    pub fn position_step(
+        &mut self,
+        hall_count: i32,
+        column: Option<SteeringRad>,
+    ) -> PositionOutput {
+        let dt = 1.0 / POSITION_LOOP_HZ as f32;
+        let speed = self.speed.step(hall_count, dt);
+        let plain = self.plain.next_setpoint();
+        let mut setpoint = self.target.next_setpoint();
+        if let Some(column) = column.filter(|c| c.is_finite()) {
+            let column_motor = self.gearing.motor_from_steering(column).0;
+            let error = plain.position.0 - column_motor;
+            let authority = self.gearing.ratio() * self.tuning.column_authority_rad;
+            let next = self.column_correction + error * dt / self.tuning.column_time_constant_s;
+            if next.is_finite() {
+                self.column_correction = saturate(next, authority).0;
+            }
+        }
+        setpoint.position = MotorRad(setpoint.position.0 + self.column_correction);
+        self.last_setpoint = setpoint;
+        let mut out = self.position.step(setpoint, motor_from_hall(hall_count));
+        let damping = self.kd * (setpoint.velocity - speed);
+        if damping.is_finite() && out.current.0.is_finite() {
+            let (current, _) = saturate(out.current.0 + damping, self.position.limit().0);
+            out.current = Amps(current);
+        }
+        self.current_setpoint = out.current;
+        out
+    }
+
+    pub fn current_step(&mut self, measured: Amps) -> CurrentOutput {
+        self.current.step(self.current_setpoint, measured)
+    }
+
+    pub fn setpoint(&self) -> Setpoint {
+        self.last_setpoint
+    }
+
+    pub fn current_setpoint(&self) -> Amps {
+        self.current_setpoint
+    }
+
+    /// Drive disabled: every integrator and history cleared, the target held at the motor.
+    pub fn reset(&mut self, hall_count: i32) {
+        self.position.reset();
+        self.current.reset();
+        self.speed = HallSpeed::default();
+        self.current_setpoint = Amps::ZERO;
+        self.column_correction = 0.0;
+        self.history = [None; 2];
+        let here = motor_from_hall(hall_count);
+        self.target.reset_to(here);
+        self.plain.reset_to(here);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gains::EposGains;
+
+    #[test]
+    fn paper_tuning_matches_the_tables() {
+        // Tables 1, 2, 4 (SI).
+        let (r, j_rot, kt) = (5.78e-5f64, 0.81e-4, 52.5e-3);
+        let (m_bs, m_r, tau_bs, tau_p, tau_r) = (0.171, 6.5e-2, 3.183e-4, 1.36e-2, 19.4);
+        let (j_bs, j_w, k_b, beta_b, beta_bs, beta_sw) =
+            (6.5e-6, 2.65, 0.29, 1.7e-3, 1.34e-2, 1.59);
+        let g: f64 = tau_bs / tau_p;
+        let j_star = j_bs + (m_r + m_bs) * tau_bs * tau_bs + j_w * (tau_bs * tau_r).powi(2);
+        let c = beta_bs + beta_b + beta_sw * g * g;
+        let p = EcuTuning::PAPER;
+        let close = |a: f32, b: f64| ((a as f64 - b) / b).abs() < 1e-3;
+        assert!(
+            close(p.lag1_s, (c - beta_b) / k_b),
+            "{}",
+            (c - beta_b) / k_b
+        );
+        assert!(close(p.lag2_s2, j_star / k_b), "{}", j_star / k_b);
+        assert!(
+            close(p.ff_velocity, (r + c / 4.0) / kt),
+            "{}",
+            (r + c / 4.0) / kt
+        );
+        assert!(
+            close(p.ff_acceleration, (j_rot + j_star / 4.0) / kt),
+            "{}",
+            (j_rot + j_star / 4.0) / kt
+        );
+    }
+
+    fn cascade() -> ColumnCascade {
+        ColumnCascade::new(
+            &EposGains::PAPER.to_si().unwrap(),
+            Gearing::PAPER,
+            EcuTuning::PAPER,
+        )
+    }
+
+    #[test]
+    fn holding_still_on_a_hall_edge_does_not_kick_the_current() {
+        let mut c = cascade();
+        c.reset(0);
+        c.push_reference(SteeringDeg(0.0)).unwrap();
+        let mut worst = 0.0f32;
+        // The motor sits on an edge and chatters between two counts every other tick.
+        for k in 0..2000 {
+            let out = c.position_step(k % 2, Some(SteeringRad(0.0)));
+            worst = worst.max(out.current.0.abs());
+        }
+        assert!(worst < 10.0, "{worst} A");
+    }
+
+    #[test]
+    fn hall_speed_reads_edge_timing_and_decays_at_rest() {
+        let mut s = HallSpeed::default();
+        let dt = 5e-4;
+        let step = TAU / 84.0;
+        s.step(0, dt);
+        // The first edge only starts the clock.
+        assert_eq!(s.step(1, dt), 0.0);
+        for _ in 0..3 {
+            s.step(1, dt);
+        }
+        // The next edge four ticks later: one step over 2 ms.
+        let w = s.step(2, dt);
+        assert!((w - step / 2e-3).abs() < 1e-3, "{w}");
+        let mut last = w;
+        for _ in 0..100 {
+            last = s.step(2, dt);
+        }
+        // Chatter back across the edge reads as a turn-round, not a full step per tick.
+        assert_eq!(s.step(1, dt), 0.0);
+        assert!(last > 0.0 && last <= step / (100.0 * dt) + 1e-6, "{last}");
+    }
+
+    #[test]
+    fn the_column_integral_moves_the_motor_target_towards_the_column_reference() {
+        let mut c = cascade();
+        c.reset(0);
+        c.push_reference(SteeringDeg(0.0)).unwrap();
+        // The column reads 1 deg short of the reference, the motor sits on its target.
+        for _ in 0..2000 {
+            c.position_step(0, Some(SteeringRad::from(SteeringDeg(-1.0))));
+        }
+        assert!(c.setpoint().position.0 > 0.0);
+    }
+
+    #[test]
+    fn refuses_bad_references_and_missing_columns_keep_it_running() {
+        let mut c = cascade();
+        c.reset(0);
+        assert_eq!(
+            c.push_reference(SteeringDeg(f32::NAN)),
+            Err(ReferenceError::NotFinite)
+        );
+        assert_eq!(
+            c.push_reference(SteeringDeg(91.0)),
+            Err(ReferenceError::OutOfRange)
+        );
+        let out = c.position_step(0, Some(SteeringRad(f32::NAN)));
+        assert!(out.current.0.is_finite());
+        let out = c.position_step(i32::MAX, None);
+        assert!(out.current.0.is_finite() && out.current.0.abs() <= 20.0);
+    }
+}
