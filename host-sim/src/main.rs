@@ -113,11 +113,29 @@ struct Common {
     /// (inverse belt model, model feedforward, column integral; README "ECU mode").
     #[arg(long, value_enum, default_value_t = Controller::Paper)]
     controller: Controller,
+    /// A rig file (as in host-sim/rigs/) whose `model.plant` replaces the paper's plant (Tables
+    /// 1, 2, 4); the controller keeps its own tuning, so this is how its robustness is checked.
+    #[arg(long, value_name = "FILE")]
+    plant: Option<PathBuf>,
 }
 
 impl Common {
-    fn config(&self) -> RunConfig {
-        RunConfig {
+    fn config(&self) -> Result<RunConfig> {
+        let plant = match &self.plant {
+            None => PlantParams::PAPER,
+            Some(path) => match host_sim::gap::rig::Rig::load(path)?.model {
+                host_sim::gap::rig::RigModel::Paper(m) => m.plant,
+                _ => {
+                    return Err(format!(
+                        "--plant {}: not a paper-kind rig (its model has no `plant`)",
+                        path.display()
+                    )
+                    .into());
+                }
+            },
+        };
+        Ok(RunConfig {
+            plant,
             hall_feedback: !self.ideal_sensors,
             anti_windup: if self.no_anti_windup {
                 AntiWindup::Disabled
@@ -128,7 +146,7 @@ impl Common {
             supply_v: self.supply_v,
             controller: self.controller,
             ..RunConfig::default()
-        }
+        })
     }
 }
 
@@ -329,7 +347,7 @@ fn print_limits(summary: &host_sim::sim::RunSummary, supply_v: f64) {
 }
 
 fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
-    let cfg = common.config();
+    let cfg = common.config()?;
     let (rep, run) = report::sweep(sweep, &cfg)?;
     say!(
         "Sine sweep 0-{} Hz in {} s, {} deg at the wheel ({})",
@@ -452,7 +470,7 @@ fn time_plot(title: &str, run: &Run, supply_v: f64) -> TimePlot {
 }
 
 fn track_cmd(reference: &[f64], name: &str, common: &Common) -> Result<()> {
-    let cfg = common.config();
+    let cfg = common.config()?;
     let (rep, run): (TrackReport, Run) = report::track(reference, &cfg)?;
     say!(
         "Track run, {} ({:.1} s, {})",
@@ -482,7 +500,7 @@ fn track_cmd(reference: &[f64], name: &str, common: &Common) -> Result<()> {
 }
 
 fn step_cmd(amplitude_deg: f64, duration_s: f64, common: &Common) -> Result<()> {
-    let cfg = common.config();
+    let cfg = common.config()?;
     let reference = scenario::step(amplitude_deg, 0.1, duration_s);
     let (rep, run) = report::step(&reference, amplitude_deg, &cfg)?;
     say!(
