@@ -38,8 +38,14 @@ const FREQS_HZ: [f64; 16] = [
 ];
 const PEAK_DEG: f64 = 0.5;
 const LOG_RATE_HZ: u32 = 1000;
+/// The issue's tolerance.
 const TOL_DB: f64 = 0.5;
 const TOL_DEG: f64 = 5.0;
+/// What the two methods achieve on the steady-state multisine (measured: 5e-7 dB and 2e-6 deg,
+/// the f32 arithmetic of the firmware's loops against the model's f64), with a wide margin: a
+/// drift beyond this is a modelling difference even while within the issue's tolerance.
+const EXACT_DB: f64 = 0.01;
+const EXACT_DEG: f64 = 0.1;
 
 /// `periods` periods of a Schroeder-phased multisine at 100 Hz, scaled to `PEAK_DEG` peak.
 fn multisine(periods: usize) -> Vec<f64> {
@@ -153,18 +159,25 @@ fn simulated_small_signal_response_matches_the_linear_model() {
     ] {
         let est = estimate(&log.ref_sw_deg, &y);
         let (db, deg, table) = worst(&est, &model, output);
-        println!("{output:?}: worst {db:.4} dB, {deg:.3} deg\n{table}");
+        println!("{output:?}: worst {db:.2e} dB, {deg:.2e} deg\n{table}");
         assert!(
             db <= TOL_DB && deg <= TOL_DEG,
             "{output:?}: {db:.3} dB / {deg:.2} deg off\n{table}"
+        );
+        assert!(
+            db <= EXACT_DB && deg <= EXACT_DEG,
+            "{output:?}: {db:.2e} dB / {deg:.2e} deg: within the issue's tolerance but the \
+             two methods no longer agree to rounding\n{table}"
         );
     }
 }
 
 /// The paper's sweep at 0.5 deg, read by `report::sweep` exactly as `host-sim sweep` reads it
-/// (chirp, 2 s Welch segments), against the model from 0.5 to 9.5 Hz: the analytic curve drawn
-/// beside the measured one is the same quantity. (The chirp sweeps through each 0.5 Hz bin in
-/// half a second, so the tolerance is the issue's, not the multisine's precision.)
+/// (chirp, 2 s Welch segments), against the model from 1 to 9 Hz: the analytic curve drawn
+/// beside the measured one is the same quantity. (A chirp is not a steady state: it passes
+/// each 0.5 Hz bin in half a second, and the first and last second of the record see half a
+/// segment's worth of it, so this holds the issue's tolerance, not the multisine's precision;
+/// at 0.5 Hz and 9.5 Hz the chirp's own estimate is off by up to 0.45 dB and 4.5 deg.)
 #[test]
 fn the_sweep_commands_estimate_matches_the_linear_model() {
     let sweep = Sweep {
@@ -179,10 +192,10 @@ fn the_sweep_commands_estimate_matches_the_linear_model() {
         .iter()
         .zip(&rep.response.magnitude_db)
         .zip(&rep.response.phase_deg)
-        .filter(|((f, _), _)| (0.5..=9.5).contains(*f))
+        .filter(|((f, _), _)| (1.0..=9.0).contains(*f))
         .map(|((f, m), p)| (*f, *m, *p))
         .collect();
-    assert!(est.len() >= 15, "{} bins", est.len());
+    assert!(est.len() >= 17, "{} bins", est.len());
     let (db, deg, table) = worst(&est, &model, Output::Column);
     println!("sweep: worst {db:.3} dB, {deg:.2} deg\n{table}");
     assert!(
@@ -251,7 +264,7 @@ fn the_comparison_tells_the_old_acceleration_feedforward_apart() {
     let (x, y) = loop_with_accel(&reference, true);
     let est = estimate(&x, &y);
     let (db, deg, table) = worst(&est, &old, Output::Column);
-    println!("defect vs old model: {db:.4} dB, {deg:.3} deg\n{table}");
+    println!("defect vs old model: {db:.2e} dB, {deg:.2e} deg\n{table}");
     assert!(db <= TOL_DB && deg <= TOL_DEG, "{db} dB {deg} deg\n{table}");
     // ...and fails the test against the fixed model, by far.
     let (db, deg, table) = worst(&est, &fixed, Output::Column);
