@@ -42,7 +42,7 @@
 
 use crate::control::AntiWindup;
 use crate::control::current::{CurrentLoop, CurrentOutput, Winding};
-use crate::control::position::{PositionLoop, PositionOutput};
+use crate::control::position::{PositionLoop, PositionOutput, PositionStatus};
 use crate::gains::SiGains;
 use crate::gearing::Gearing;
 use crate::paper_mode::{
@@ -150,23 +150,19 @@ impl HallSpeed {
     }
 }
 
-/// The ECU-mode cascade: the same call pattern as [`crate::paper_mode::Cascade`] (a reference
-/// sample, then 20 position steps each followed by 10 current steps), with the column angle
-/// given to each position step.
+/// The column side of ECU mode: the inverse belt model on the reference and the column
+/// feedback, giving the motor target. Direct drive runs it inside [`ColumnCascade`] at 2 kHz;
+/// EPOS4 mode runs it alone, once per SYNC, and sends the target as the CSP position.
 #[derive(Debug, Clone)]
-pub struct ColumnCascade {
+pub struct ColumnShaper {
     gearing: Gearing,
     tuning: EcuTuning,
     /// Motor targets (after the inverse belt model).
     target: Interpolator,
     /// The plain reference at the motor, for the column error.
     plain: Interpolator,
-    position: PositionLoop,
-    current: CurrentLoop,
-    speed: HallSpeed,
-    kd: f32,
-    current_setpoint: Amps,
-    last_setpoint: Setpoint,
+    /// Seconds per tick.
+    dt_s: f32,
     /// The last two accepted reference samples at the motor, newest first.
     history: [Option<f32>; 2],
     /// Column integral, rad at the motor.
@@ -175,21 +171,108 @@ pub struct ColumnCascade {
     column_error: f32,
 }
 
-impl ColumnCascade {
-    /// `gains` are the paper's loops (Table 3) whose feedforward ECU mode replaces by the model's.
-    pub fn new(gains: &SiGains, gearing: Gearing, tuning: EcuTuning) -> Self {
+impl ColumnShaper {
+    /// `ticks_per_period` calls of [`ColumnShaper::next`] per 10 ms reference period (20 in
+    /// direct drive at 2 kHz; the SYNCs per period in EPOS4 mode). An invalid tuning is
+    /// replaced by [`EcuTuning::PAPER`].
+    pub fn new(gearing: Gearing, tuning: EcuTuning, ticks_per_period: u16) -> Self {
         let tuning = if tuning.is_valid() {
             tuning
         } else {
             EcuTuning::PAPER
         };
-        let ticks = POSITION_TICKS_PER_REFERENCE as u16;
+        let ticks = ticks_per_period.max(1);
         let period = 1.0 / REFERENCE_HZ as f32;
-        let mut cascade = ColumnCascade {
+        ColumnShaper {
             gearing,
             tuning,
             target: Interpolator::new(ticks, period),
             plain: Interpolator::new(ticks, period),
+            dt_s: period / ticks as f32,
+            history: [None; 2],
+            column_correction: 0.0,
+            column_error: 0.0,
+        }
+    }
+
+    pub fn tuning(&self) -> EcuTuning {
+        self.tuning
+    }
+
+    /// A new reference sample at the wheel; refused as paper mode refuses it.
+    pub fn push_reference(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
+        if !angle.is_finite() {
+            return Err(ReferenceError::NotFinite);
+        }
+        if angle.0.abs() > STEERING_RANGE_DEG {
+            return Err(ReferenceError::OutOfRange);
+        }
+        let r = self.gearing.motor_from_steering(SteeringRad::from(angle)).0;
+        let t = 1.0 / REFERENCE_HZ as f32;
+        let r1 = self.history[0].unwrap_or(r);
+        let r2 = self.history[1].unwrap_or(r1);
+        let slope = (r - r1) / t;
+        let curvature = (r - 2.0 * r1 + r2) / (t * t);
+        let target = r + self.tuning.lag1_s * slope + self.tuning.lag2_s2 * curvature;
+        self.history = [Some(r), Some(r1)];
+        self.plain.push(MotorRad(r))?;
+        self.target.push(MotorRad(target))
+    }
+
+    /// The motor target for this tick, given the column angle when a fresh sample exists.
+    pub fn next(&mut self, column: Option<SteeringRad>) -> Setpoint {
+        let plain = self.plain.next_setpoint();
+        let mut setpoint = self.target.next_setpoint();
+        if let Some(column) = column.filter(|c| c.is_finite()) {
+            let column_motor = self.gearing.motor_from_steering(column).0;
+            let error = plain.position.0 - column_motor;
+            self.column_error = if error.is_finite() { error } else { 0.0 };
+            let authority = self.gearing.ratio() * self.tuning.column_authority_rad;
+            let next =
+                self.column_correction + error * self.dt_s / self.tuning.column_time_constant_s;
+            if next.is_finite() {
+                self.column_correction = saturate(next, authority).0;
+            }
+        }
+        // The column encoder's 0.088 deg count is 1.75 Hall counts at the motor: proportional
+        // action on the last count would chatter the target between two counts at rest, so it
+        // acts only on the error beyond one count (the integral still sees all of it).
+        let dead_band = self.gearing.ratio() * COLUMN_COUNT_RAD;
+        let beyond = self.column_error - saturate(self.column_error, dead_band).0;
+        let proportional = self.tuning.column_gain * beyond;
+        setpoint.position = MotorRad(setpoint.position.0 + self.column_correction + proportional);
+        setpoint
+    }
+
+    /// Start again from rest at the motor angle `here`: histories and column terms cleared.
+    pub fn reset(&mut self, here: MotorRad) {
+        self.column_correction = 0.0;
+        self.column_error = 0.0;
+        self.history = [None; 2];
+        self.target.reset_to(here);
+        self.plain.reset_to(here);
+    }
+}
+
+/// The ECU-mode cascade for direct drive: the same call pattern as
+/// [`crate::paper_mode::Cascade`] (a reference sample, then 20 position steps each followed by
+/// 10 current steps), with the column angle given to each position step.
+#[derive(Debug, Clone)]
+pub struct ColumnCascade {
+    shaper: ColumnShaper,
+    position: PositionLoop,
+    current: CurrentLoop,
+    speed: HallSpeed,
+    kd: f32,
+    current_setpoint: Amps,
+    last_setpoint: Setpoint,
+}
+
+impl ColumnCascade {
+    /// `gains` are the paper's loops (Table 3) whose feedforward ECU mode replaces by the model's.
+    pub fn new(gains: &SiGains, gearing: Gearing, tuning: EcuTuning) -> Self {
+        let mut cascade = ColumnCascade {
+            shaper: ColumnShaper::new(gearing, tuning, POSITION_TICKS_PER_REFERENCE as u16),
             position: PositionLoop::new(
                 &SiGains::ZERO,
                 1.0 / POSITION_LOOP_HZ as f32,
@@ -205,9 +288,6 @@ impl ColumnCascade {
             kd: 0.0,
             current_setpoint: Amps::ZERO,
             last_setpoint: Setpoint::default(),
-            history: [None; 2],
-            column_correction: 0.0,
-            column_error: 0.0,
         };
         cascade.set_gains(gains);
         cascade.set_winding(MOTOR_RA_OHM, MOTOR_LA_H);
@@ -217,13 +297,14 @@ impl ColumnCascade {
     fn set_gains(&mut self, gains: &SiGains) {
         // The PID without its D term and with the model's feedforward: the D term acts on the
         // Hall-timed speed below, outside the loop's own backward difference.
+        let tuning = self.shaper.tuning();
         let pid = gains
             .with_position_loop(
                 gains.position_kp(),
                 gains.position_ki(),
                 0.0,
-                self.tuning.ff_velocity,
-                self.tuning.ff_acceleration,
+                tuning.ff_velocity,
+                tuning.ff_acceleration,
             )
             .unwrap_or(SiGains::ZERO);
         self.position.set_gains(&pid);
@@ -247,22 +328,7 @@ impl ColumnCascade {
 
     /// A new reference sample at the wheel; refused as paper mode refuses it.
     pub fn push_reference(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
-        if !angle.is_finite() {
-            return Err(ReferenceError::NotFinite);
-        }
-        if angle.0.abs() > STEERING_RANGE_DEG {
-            return Err(ReferenceError::OutOfRange);
-        }
-        let r = self.gearing.motor_from_steering(SteeringRad::from(angle)).0;
-        let t = 1.0 / REFERENCE_HZ as f32;
-        let r1 = self.history[0].unwrap_or(r);
-        let r2 = self.history[1].unwrap_or(r1);
-        let slope = (r - r1) / t;
-        let curvature = (r - 2.0 * r1 + r2) / (t * t);
-        let target = r + self.tuning.lag1_s * slope + self.tuning.lag2_s2 * curvature;
-        self.history = [Some(r), Some(r1)];
-        self.plain.push(MotorRad(r))?;
-        self.target.push(MotorRad(target))
+        self.shaper.push_reference(angle)
     }
 
     /// One position-loop tick (2 kHz): the Hall count and, when a fresh sample exists, the
@@ -272,33 +338,17 @@ impl ColumnCascade {
         hall_count: i32,
         column: Option<SteeringRad>,
     ) -> PositionOutput {
-        let dt = 1.0 / POSITION_LOOP_HZ as f32;
-        let speed = self.speed.step(hall_count, dt);
-        let plain = self.plain.next_setpoint();
-        let mut setpoint = self.target.next_setpoint();
-        if let Some(column) = column.filter(|c| c.is_finite()) {
-            let column_motor = self.gearing.motor_from_steering(column).0;
-            let error = plain.position.0 - column_motor;
-            self.column_error = if error.is_finite() { error } else { 0.0 };
-            let authority = self.gearing.ratio() * self.tuning.column_authority_rad;
-            let next = self.column_correction + error * dt / self.tuning.column_time_constant_s;
-            if next.is_finite() {
-                self.column_correction = saturate(next, authority).0;
-            }
-        }
-        // The column encoder's 0.088 deg count is 1.75 Hall counts at the motor: proportional
-        // action on the last count would chatter the target between two counts at rest, so it
-        // acts only on the error beyond one count (the integral still sees all of it).
-        let dead_band = self.gearing.ratio() * COLUMN_COUNT_RAD;
-        let beyond = self.column_error - saturate(self.column_error, dead_band).0;
-        let proportional = self.tuning.column_gain * beyond;
-        setpoint.position = MotorRad(setpoint.position.0 + self.column_correction + proportional);
+        let speed = self.speed.step(hall_count, 1.0 / POSITION_LOOP_HZ as f32);
+        let setpoint = self.shaper.next(column);
         self.last_setpoint = setpoint;
         let mut out = self.position.step(setpoint, motor_from_hall(hall_count));
         let damping = self.kd * (setpoint.velocity - speed);
-        if damping.is_finite() && out.current.0.is_finite() {
-            let (current, _) = saturate(out.current.0 + damping, self.position.limit().0);
+        if out.status != PositionStatus::InputNotFinite && damping.is_finite() {
+            let (current, saturated) = saturate(out.current.0 + damping, self.position.limit().0);
             out.current = Amps(current);
+            if saturated {
+                out.status = PositionStatus::Saturated;
+            }
         }
         self.current_setpoint = out.current;
         out
@@ -322,12 +372,7 @@ impl ColumnCascade {
         self.current.reset();
         self.speed = HallSpeed::default();
         self.current_setpoint = Amps::ZERO;
-        self.column_correction = 0.0;
-        self.column_error = 0.0;
-        self.history = [None; 2];
-        let here = motor_from_hall(hall_count);
-        self.target.reset_to(here);
-        self.plain.reset_to(here);
+        self.shaper.reset(motor_from_hall(hall_count));
     }
 }
 

@@ -21,6 +21,7 @@ pub mod can;
 pub mod canopen;
 pub mod commutation;
 pub mod control;
+pub mod controller;
 pub mod direct;
 pub mod ecu;
 pub mod ecu_mode;

@@ -12,6 +12,7 @@ use crate::plant::{Actuator, LinearPlant, PlantError, PlantParams};
 use steering_ecu::control::AntiWindup;
 use steering_ecu::control::current::{CurrentOutput, CurrentStatus};
 use steering_ecu::control::position::{PositionOutput, PositionStatus};
+use steering_ecu::controller::SteeringController;
 use steering_ecu::ecu_mode::{ColumnCascade, EcuTuning};
 use steering_ecu::gains::{EposGains, GainError};
 use steering_ecu::gearing::Gearing;
@@ -19,7 +20,7 @@ use steering_ecu::paper_mode::{
     CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, Cascade, POSITION_LOOP_HZ,
     POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ,
 };
-use steering_ecu::reference::{ReferenceError, Setpoint};
+use steering_ecu::reference::ReferenceError;
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
 use steering_ecu::units::{Amps, MotorRad, SteeringDeg, Volts};
 
@@ -35,39 +36,6 @@ pub enum Controller {
     /// The ECU's own controller (`steering_ecu::ecu_mode`): inverse belt model, model
     /// feedforward, Hall-timed speed, slow column integral. Always Hall feedback.
     Ecu,
-}
-
-/// The two controllers behind one call pattern.
-enum Loop {
-    Paper(Cascade),
-    Ecu(ColumnCascade),
-}
-
-impl Loop {
-    fn push_reference(&mut self, deg: SteeringDeg) -> Result<(), ReferenceError> {
-        match self {
-            Loop::Paper(c) => c.push_reference(deg),
-            Loop::Ecu(c) => c.push_reference(deg),
-        }
-    }
-    fn current_step(&mut self, measured: Amps) -> CurrentOutput {
-        match self {
-            Loop::Paper(c) => c.current_step(measured),
-            Loop::Ecu(c) => c.current_step(measured),
-        }
-    }
-    fn setpoint(&self) -> Setpoint {
-        match self {
-            Loop::Paper(c) => c.setpoint(),
-            Loop::Ecu(c) => c.setpoint(),
-        }
-    }
-    fn current_setpoint(&self) -> Amps {
-        match self {
-            Loop::Paper(c) => c.current_setpoint(),
-            Loop::Ecu(c) => c.current_setpoint(),
-        }
-    }
 }
 
 /// Everything a closed-loop run depends on besides the reference.
@@ -232,23 +200,20 @@ pub fn run_tapped(
             if std::env::var("X_NOGUARD").is_ok() {
                 c.set_winding(f32::NAN, 0.0);
             }
-            Loop::Paper(c)
+            SteeringController::Paper(c)
         }
         Controller::Ecu => {
             let mut c = ColumnCascade::new(&si, gearing, EcuTuning::PAPER);
             c.set_anti_windup(cfg.anti_windup);
             c.set_winding(cfg.plant.ra as f32, cfg.plant.la as f32);
             c.set_voltage_limit(Volts(cfg.supply_v as f32));
-            Loop::Ecu(c)
+            SteeringController::Ecu(c)
         }
     };
     let encoder = ColumnEncoder { zero_raw: 0 };
 
     plant.set_at_rest(first.to_radians());
-    match &mut cascade {
-        Loop::Paper(c) => c.reset(hall_from_motor(plant.motor_rad())),
-        Loop::Ecu(c) => c.reset(hall_from_motor(plant.motor_rad())),
-    }
+    cascade.reset(hall_from_motor(plant.motor_rad()));
     tap.reset(hall_from_motor(plant.motor_rad()));
 
     let mut log = match log_every {
@@ -270,13 +235,15 @@ pub fn run_tapped(
         for _ in 0..POSITION_TICKS_PER_REFERENCE {
             let hall = hall_from_motor(plant.motor_rad());
             let pos = match &mut cascade {
-                Loop::Paper(c) if cfg.hall_feedback => {
+                SteeringController::Paper(c) if cfg.hall_feedback => {
                     let pos = c.position_step(hall);
                     tap.position(hall, &pos);
                     pos
                 }
-                Loop::Paper(c) => c.position_step_at(MotorRad(plant.motor_rad() as f32)),
-                Loop::Ecu(c) => {
+                SteeringController::Paper(c) => {
+                    c.position_step_at(MotorRad(plant.motor_rad() as f32))
+                }
+                SteeringController::Ecu(c) => {
                     let column = encoder.angle(encoder.raw_from_angle(plant.column_rad()));
                     c.position_step(hall, Some(column))
                 }
