@@ -5,6 +5,8 @@
 //! - `sweep.bin`: the paper's sweep (10 deg, 0-10 Hz in 10 s), the window 6.0-6.6 s (about
 //!   6 Hz, the current at its limit), started at rest on the window's first sample.
 //! - `track.bin`: the built-in track, 110.0-110.5 s (the 4.5 Hz burst), likewise.
+//! - `ecu_sweep.bin`, `ecu_track.bin`: the same two windows under ECU mode
+//!   (`--controller ecu`), which also records the column angle each position step was given.
 //! - `cases.bin`: the codec, CANopen, CiA 402, ECU and arbitrary-input cases of
 //!   `golden_vectors::cases`, one hash per case.
 //!
@@ -12,13 +14,14 @@
 //! `host-sim/tests/golden.rs` fails when the stored files are stale.
 
 use crate::scenario::{self, Sweep};
-use crate::sim::{self, RunConfig, SimError, Tap};
+use crate::sim::{self, Controller, RunConfig, SimError, Tap};
 use golden_vectors::loops::{self, Header};
 use std::path::Path;
 use steering_ecu::control::current::CurrentOutput;
 use steering_ecu::control::position::PositionOutput;
+use steering_ecu::controller::ControllerKind;
 use steering_ecu::reference::ReferenceError;
-use steering_ecu::units::Amps;
+use steering_ecu::units::{Amps, SteeringRad};
 
 /// Where the stored vectors live, from the repository root.
 pub const DIR: &str = "hil-tests/vectors";
@@ -48,9 +51,10 @@ impl Tap for Recorder {
         self.body
             .extend_from_slice(&loops::reference_record(deg, result));
     }
-    fn position(&mut self, hall: i32, out: &PositionOutput) {
+    fn position(&mut self, hall: i32, column: Option<SteeringRad>, out: &PositionOutput) {
+        let column = column.map_or(f32::NAN, |c| c.0);
         self.body
-            .extend_from_slice(&loops::position_record(hall, out));
+            .extend_from_slice(&loops::position_record(hall, column, out));
     }
     fn current(&mut self, measured: Amps, out: &CurrentOutput) {
         self.body
@@ -63,10 +67,12 @@ fn window(samples: &[f64], (start_s, end_s): (f64, f64)) -> &[f64] {
     &samples[at(start_s)..at(end_s)]
 }
 
-/// A closed-loop run of host-sim with every cascade call recorded (paper rig, Hall feedback).
-pub fn record_loop(reference_deg: &[f64]) -> Result<Vec<u8>, SimError> {
+/// A closed-loop run of host-sim with every controller call recorded (paper rig, Hall
+/// feedback).
+pub fn record_loop(reference_deg: &[f64], controller: Controller) -> Result<Vec<u8>, SimError> {
     let cfg = RunConfig {
         log_rate_hz: 0,
+        controller,
         ..RunConfig::default()
     };
     let mut recorder = Recorder::default();
@@ -80,6 +86,10 @@ pub fn record_loop(reference_deg: &[f64]) -> Result<Vec<u8>, SimError> {
         ra_ohm: cfg.plant.ra as f32,
         la_h: cfg.plant.la as f32,
         supply_v: cfg.supply_v as f32,
+        controller: match controller {
+            Controller::Paper => ControllerKind::Paper,
+            Controller::Ecu => ControllerKind::Ecu,
+        },
     };
     let mut bytes = header.to_bytes().to_vec();
     bytes.extend_from_slice(&recorder.body);
@@ -95,11 +105,19 @@ pub fn generate() -> Result<Vec<Vector>, SimError> {
     Ok(vec![
         Vector {
             name: "sweep.bin",
-            bytes: record_loop(window(&sweep, SWEEP_WINDOW_S))?,
+            bytes: record_loop(window(&sweep, SWEEP_WINDOW_S), Controller::Paper)?,
         },
         Vector {
             name: "track.bin",
-            bytes: record_loop(window(&track, TRACK_WINDOW_S))?,
+            bytes: record_loop(window(&track, TRACK_WINDOW_S), Controller::Paper)?,
+        },
+        Vector {
+            name: "ecu_sweep.bin",
+            bytes: record_loop(window(&sweep, SWEEP_WINDOW_S), Controller::Ecu)?,
+        },
+        Vector {
+            name: "ecu_track.bin",
+            bytes: record_loop(window(&track, TRACK_WINDOW_S), Controller::Ecu)?,
         },
         Vector {
             name: "cases.bin",

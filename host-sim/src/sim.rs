@@ -22,7 +22,7 @@ use steering_ecu::paper_mode::{
 };
 use steering_ecu::reference::ReferenceError;
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
-use steering_ecu::units::{Amps, MotorRad, SteeringDeg, Volts};
+use steering_ecu::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts};
 
 /// Extra log columns a simulated run writes after the five required ones.
 pub const SIM_EXTRA_COLUMNS: [&str; 3] = ["current_setpoint_a", "voltage_v", "setpoint_motor_rad"];
@@ -143,7 +143,9 @@ pub trait Tap {
     /// The cascade was reset to this Hall count, before the first sample.
     fn reset(&mut self, hall: i32);
     fn reference(&mut self, deg: f32, result: Result<(), ReferenceError>);
-    fn position(&mut self, hall: i32, out: &PositionOutput);
+    /// A position step with its Hall count and the column the controller was given (`None`:
+    /// paper mode, whose loop sees only the motor).
+    fn position(&mut self, hall: i32, column: Option<SteeringRad>, out: &PositionOutput);
     fn current(&mut self, measured: Amps, out: &CurrentOutput);
 }
 
@@ -152,7 +154,7 @@ struct NoTap;
 impl Tap for NoTap {
     fn reset(&mut self, _: i32) {}
     fn reference(&mut self, _: f32, _: Result<(), ReferenceError>) {}
-    fn position(&mut self, _: i32, _: &PositionOutput) {}
+    fn position(&mut self, _: i32, _: Option<SteeringRad>, _: &PositionOutput) {}
     fn current(&mut self, _: Amps, _: &CurrentOutput) {}
 }
 
@@ -237,15 +239,17 @@ pub fn run_tapped(
             let pos = match &mut cascade {
                 SteeringController::Paper(c) if cfg.hall_feedback => {
                     let pos = c.position_step(hall);
-                    tap.position(hall, &pos);
+                    tap.position(hall, None, &pos);
                     pos
                 }
                 SteeringController::Paper(c) => {
                     c.position_step_at(MotorRad(plant.motor_rad() as f32))
                 }
                 SteeringController::Ecu(c) => {
-                    let column = encoder.angle(encoder.raw_from_angle(plant.column_rad()));
-                    c.position_step(hall, Some(column))
+                    let column = Some(encoder.angle(encoder.raw_from_angle(plant.column_rad())));
+                    let pos = c.position_step(hall, column);
+                    tap.position(hall, column, &pos);
+                    pos
                 }
             };
             if pos.status == PositionStatus::Saturated {

@@ -24,6 +24,8 @@ use golden_vectors::loops::{self, Meter, Report, Step, Tamper, Verdict};
 static SWEEP: &[u8] = include_bytes!("../../vectors/sweep.bin");
 static TRACK: &[u8] = include_bytes!("../../vectors/track.bin");
 static CASES: &[u8] = include_bytes!("../../vectors/cases.bin");
+static ECU_SWEEP: &[u8] = include_bytes!("../../vectors/ecu_sweep.bin");
+static ECU_TRACK: &[u8] = include_bytes!("../../vectors/ecu_track.bin");
 
 /// Budgets: 5 % of the period at the F446's 180 MHz (issue 5). They are cycle budgets; an
 /// instruction takes at least one cycle on the Cortex-M4, so an instruction count above the
@@ -302,6 +304,20 @@ fn main() -> ! {
         &mut meter,
         None,
     );
+    // ECU mode on its own meter, so each controller's counts are its own.
+    let mut ecu_meter = InstructionMeter::new();
+    pass &= check_loop(
+        "ecu_sweep.bin (ECU mode, paper sweep 6.0-6.6 s)",
+        ECU_SWEEP,
+        &mut ecu_meter,
+        None,
+    );
+    pass &= check_loop(
+        "ecu_track.bin (ECU mode, built-in track 110.0-110.5 s)",
+        ECU_TRACK,
+        &mut ecu_meter,
+        None,
+    );
     match cases::check(CASES, &mut print_group) {
         Ok(differing) => pass &= differing == 0,
         Err(e) => {
@@ -325,6 +341,19 @@ fn main() -> ! {
     pass &= print_counts(
         "position_step",
         &meter.position,
+        POSITION_BUDGET,
+        steering_ecu::paper_mode::POSITION_LOOP_HZ,
+    );
+    hprintln!("ECU mode (`--controller ecu`):");
+    pass &= print_counts(
+        "current_step",
+        &ecu_meter.current,
+        CURRENT_BUDGET,
+        steering_ecu::paper_mode::CURRENT_LOOP_HZ,
+    );
+    pass &= print_counts(
+        "position_step",
+        &ecu_meter.position,
         POSITION_BUDGET,
         steering_ecu::paper_mode::POSITION_LOOP_HZ,
     );

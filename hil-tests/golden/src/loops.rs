@@ -4,16 +4,17 @@
 //! File layout (little-endian; `f32` as its bit pattern):
 //!
 //! ```text
-//! header   "GLV1", periods u32, hall0 i32, belt f32, tau_bs f32, tau_p f32, ra f32, la f32,
-//!          supply_v f32
+//! header   "GLV2", periods u32, hall0 i32, belt f32, tau_bs f32, tau_p f32, ra f32, la f32,
+//!          supply_v f32, controller u32 (0 paper mode, 1 ECU mode)
 //! period   reference_deg f32, push result u8 (0 ok, 1 not finite, 2 out of range),
 //!          20 x tick
-//! tick     hall i32, current set-point f32, position status u8,
+//! tick     hall i32, column rad f32, current set-point f32, position status u8,
 //!          10 x (measured current f32, voltage f32, current status u8)
 //! ```
 //!
-//! The cascade is built as host-sim's `sim::run` builds it: the Table 3 gains, the gearing and
-//! winding of the header, conditional integration, the supply as voltage limit, reset to `hall0`.
+//! The controller is built as host-sim's `sim::run` builds it: the Table 3 gains (ECU mode: with
+//! `EcuTuning::PAPER`), the gearing and winding of the header, conditional integration, the
+//! supply as voltage limit, reset to `hall0`. Paper mode ignores the column.
 //! The host-side test replays every freshly recorded file too, so a difference between this
 //! construction and host-sim's would fail on the host before it reaches the target.
 
@@ -21,19 +22,21 @@ use crate::Reader;
 use steering_ecu::control::AntiWindup;
 use steering_ecu::control::current::{CurrentOutput, CurrentStatus};
 use steering_ecu::control::position::{PositionOutput, PositionStatus};
+use steering_ecu::controller::{ControllerKind, SteeringController};
+use steering_ecu::ecu_mode::{ColumnCascade, EcuTuning};
 use steering_ecu::gains::EposGains;
 use steering_ecu::gearing::Gearing;
 use steering_ecu::paper_mode::{
     CURRENT_TICKS_PER_POSITION_TICK, Cascade, POSITION_TICKS_PER_REFERENCE,
 };
 use steering_ecu::reference::ReferenceError;
-use steering_ecu::units::{Amps, SteeringDeg, Volts};
+use steering_ecu::units::{Amps, SteeringDeg, SteeringRad, Volts};
 
-pub const MAGIC: [u8; 4] = *b"GLV1";
-/// Bytes per position tick: hall, set-point, status, then ten current ticks of 9 bytes.
-pub const TICK_BYTES: usize = 9 + 9 * CURRENT_TICKS_PER_POSITION_TICK as usize;
+pub const MAGIC: [u8; 4] = *b"GLV2";
+/// Bytes per position tick: hall, column, set-point, status, then ten current ticks of 9 bytes.
+pub const TICK_BYTES: usize = 13 + 9 * CURRENT_TICKS_PER_POSITION_TICK as usize;
 pub const PERIOD_BYTES: usize = 5 + TICK_BYTES * POSITION_TICKS_PER_REFERENCE as usize;
-pub const HEADER_BYTES: usize = 36;
+pub const HEADER_BYTES: usize = 40;
 
 /// Where Rust's `f32` code could differ between host and target (an FMA contraction, a
 /// different libm), an output within this much still passes, reported as "within tolerance".
@@ -54,6 +57,14 @@ pub struct Header {
     pub ra_ohm: f32,
     pub la_h: f32,
     pub supply_v: f32,
+    pub controller: ControllerKind,
+}
+
+fn controller_code(kind: ControllerKind) -> u32 {
+    match kind {
+        ControllerKind::Paper => 0,
+        ControllerKind::Ecu => 1,
+    }
 }
 
 impl Header {
@@ -69,6 +80,7 @@ impl Header {
             self.ra_ohm.to_bits(),
             self.la_h.to_bits(),
             self.supply_v.to_bits(),
+            controller_code(self.controller),
         ];
         for (chunk, word) in out[4..].chunks_exact_mut(4).zip(words) {
             chunk.copy_from_slice(&word.to_le_bytes());
@@ -90,14 +102,23 @@ impl Header {
             ra_ohm: f32::from_bits(f()?),
             la_h: f32::from_bits(f()?),
             supply_v: f32::from_bits(f()?),
+            controller: match f()? {
+                0 => ControllerKind::Paper,
+                1 => ControllerKind::Ecu,
+                _ => return None,
+            },
         })
     }
 
-    /// The cascade as host-sim builds it for this run; `None` if the header's gearing is invalid.
-    pub fn cascade(&self) -> Option<Cascade> {
+    /// The controller as host-sim builds it for this run; `None` if the header's gearing is
+    /// invalid.
+    pub fn cascade(&self) -> Option<SteeringController> {
         let gains = EposGains::PAPER.to_si().ok()?;
         let gearing = Gearing::new(self.belt_reduction, self.tau_bs, self.tau_p)?;
-        let mut cascade = Cascade::new(&gains, gearing);
+        let mut cascade: SteeringController = match self.controller {
+            ControllerKind::Paper => Cascade::new(&gains, gearing).into(),
+            ControllerKind::Ecu => ColumnCascade::new(&gains, gearing, EcuTuning::PAPER).into(),
+        };
         cascade.set_anti_windup(AntiWindup::ConditionalIntegration);
         cascade.set_winding(self.ra_ohm, self.la_h);
         cascade.set_voltage_limit(Volts(self.supply_v));
@@ -137,13 +158,17 @@ pub fn reference_record(deg: f32, result: Result<(), ReferenceError>) -> [u8; 5]
     [b[0], b[1], b[2], b[3], reference_code(result)]
 }
 
-/// The record of one position step; ten current records follow it.
-pub fn position_record(hall: i32, out: &PositionOutput) -> [u8; 9] {
-    two_words_and_code(
-        hall as u32,
+/// The record of one position step (the column as the controller got it, NaN for none); ten
+/// current records follow it.
+pub fn position_record(hall: i32, column_rad: f32, out: &PositionOutput) -> [u8; 13] {
+    let mut rec = [0u8; 13];
+    rec[..4].copy_from_slice(&hall.to_le_bytes());
+    rec[4..].copy_from_slice(&two_words_and_code(
+        column_rad.to_bits(),
         out.current.0.to_bits(),
         position_code(out.status),
-    )
+    ));
+    rec
 }
 
 /// The record of one current step.
@@ -300,9 +325,11 @@ pub fn replay(
         report.note(at("reference result", expected.into(), got.into()), None);
         for tick in 0..POSITION_TICKS_PER_REFERENCE {
             let hall = r.u32().ok_or_else(|| truncated(&r))? as i32;
+            let column = f32::from_bits(r.u32().ok_or_else(|| truncated(&r))?);
+            let column = column.is_finite().then_some(SteeringRad(column));
             let expected_a = r.u32().ok_or_else(|| truncated(&r))?;
             let expected_status = r.u8().ok_or_else(|| truncated(&r))?;
-            let out = meter.measure(Step::Position, || cascade.position_step(hall));
+            let out = meter.measure(Step::Position, || cascade.position_step(hall, column));
             let at = |what, expected, got, step| Difference {
                 period,
                 tick,
