@@ -22,7 +22,12 @@ use steering_ecu::paper_mode::{
 };
 use steering_ecu::reference::ReferenceError;
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
+use steering_ecu::tasks;
 use steering_ecu::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts};
+
+/// Position ticks per column-encoder sample: the firmware samples it at 500 Hz.
+const COLUMN_SAMPLE_TICKS: u64 =
+    (tasks::ENCODER_PERIOD.as_micros() * POSITION_LOOP_HZ as u64) / 1_000_000;
 
 /// Extra log columns a simulated run writes after the five required ones.
 pub const SIM_EXTRA_COLUMNS: [&str; 3] = ["current_setpoint_a", "voltage_v", "setpoint_motor_rad"];
@@ -226,6 +231,7 @@ pub fn run_tapped(
     let mut current_limited = 0u64;
     let mut voltage_limited = 0u64;
     let mut tick: u64 = 0;
+    let mut column = None;
     let dt_position = 1.0 / POSITION_LOOP_HZ as f64;
 
     for &sample in reference_deg {
@@ -246,7 +252,11 @@ pub fn run_tapped(
                     c.position_step_at(MotorRad(plant.motor_rad() as f32))
                 }
                 SteeringController::Ecu(c) => {
-                    let column = Some(encoder.angle(encoder.raw_from_angle(plant.column_rad())));
+                    // The firmware reads the column encoder at 500 Hz (`tasks::ENCODER_PERIOD`)
+                    // and the position loop uses the newest sample.
+                    if tick.is_multiple_of(COLUMN_SAMPLE_TICKS) {
+                        column = Some(encoder.angle(encoder.raw_from_angle(plant.column_rad())));
+                    }
                     let pos = c.position_step(hall, column);
                     tap.position(hall, column, &pos);
                     pos
