@@ -711,6 +711,16 @@ pub struct Demand {
     pub voltage_v: f64,
     /// The largest pinion amplitude within the limits at this frequency, deg.
     pub largest_amplitude_deg: f64,
+    /// Which limit sets `largest_amplitude_deg`.
+    pub limited_by: LimitedBy,
+}
+
+/// Which of the two limits is reached first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LimitedBy {
+    Current,
+    Voltage,
 }
 
 /// What the plant allows whatever the controller (issue 14): the current and voltage needed for
@@ -766,6 +776,11 @@ impl PhysicalLimit {
             current_a: i * a,
             voltage_v: v * a,
             largest_amplitude_deg: self.largest_amplitude_deg(f_hz),
+            limited_by: if self.current_limit_a / i <= self.voltage_limit_v / v {
+                LimitedBy::Current
+            } else {
+                LimitedBy::Voltage
+            },
         }
     }
 
