@@ -40,9 +40,9 @@
 //!    For `r[n] = e^{j w n T}` the steady state is `S = (zI - Phi)^-1 Gamma`, `z = e^{j w T}`,
 //!    and the output after position tick `m` of every period is
 //!    `y[n, m] = g_m(w) e^{j w n T}` with `g_m` linear in `[S; 1]`. Nothing is approximated:
-//!    this is the exact periodic steady state of the linear loop (standard lifting, e.g.
-//!    Chen & Francis, *Optimal Sampled-Data Control Systems*, ch. 8), computed from exact
-//!    products of the per-tick matrices.
+//!    this is the exact periodic steady state of the linear loop (the standard lifting of a
+//!    periodic discrete system, as in Chen & Francis, *Optimal Sampled-Data Control Systems*,
+//!    1995), computed from exact products of the per-tick matrices.
 //!
 //! # What a frequency response means here
 //!
@@ -64,6 +64,15 @@
 //! This includes the staircase's half-period shift (the logged reference is the held sample),
 //! so the analytic curve and the measured one are the same quantity and can be compared to
 //! a fraction of a degree. `tests/analytic_vs_sim.rs` does that.
+//!
+//! # How it is checked
+//!
+//! `tests/analytic_vs_sim.rs`: on a steady 0.5 deg multisine (0.2-10 Hz) the simulation's H1
+//! estimate and this model agree to 5e-7 dB and 2e-6 deg, for the column and the motor (the
+//! rest is the firmware's f32 arithmetic). A loop built there from the firmware's own parts
+//! with issue 10's defective acceleration feedforward (`slope / T`) matches this model with
+//! [`AccelFeedforward::SlopeOverPeriod`] as closely, and misses the fixed model by 5.8 dB and
+//! 21 deg: the comparison would have caught the defect.
 //!
 //! # The physical limit (issue 14)
 //!

@@ -421,12 +421,11 @@ fn physical_limit(cfg: &RunConfig) -> PhysicalLimit {
     }
 }
 
-/// "61 % of the 3.79 Hz bound" for a bandwidth, or why there is no share.
+/// A bandwidth as a share of its bound: "61 %", or "-" when either is missing.
 fn share_of_bound(bandwidth_hz: Option<f64>, bound_hz: Option<f64>) -> String {
     match (bandwidth_hz, bound_hz) {
-        (Some(bw), Some(b)) if b > 0.0 => format!("{:.0} % of the {b:.2} Hz bound", 100.0 * bw / b),
-        (_, Some(b)) => format!("bound {b:.2} Hz"),
-        (_, None) => "no bound below 50 Hz".to_string(),
+        (Some(bw), Some(b)) if b > 0.0 => format!("{:.0} %", 100.0 * bw / b),
+        _ => "-".to_string(),
     }
 }
 
@@ -547,8 +546,8 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
     let limit = physical_limit(&cfg);
     let bound = limit.bandwidth_bound_hz(sweep.amplitude_deg);
     say!(
-        "  physical bound     {}  ({} A / {} V on this plant, any controller; the bandwidth \
-         is {})",
+        "  physical bound     {}  ({} A / {} V on this plant, any controller: `host-sim limits`); \
+         the bandwidth is {} of it",
         bound.map_or("above 50 Hz".to_string(), |b| format!("{b:6.2} Hz")),
         limit.current_limit_a,
         limit.voltage_limit_v,
@@ -567,6 +566,11 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
                 sweep.f_end_hz,
                 cfg.log_rate_hz,
             );
+            if !model.is_stable() {
+                say!(
+                    "  linear model: the closed loop is UNSTABLE on this plant (`host-sim poles`)"
+                );
+            }
             match bw {
                 Some(bw) => say!(
                     "  linear model       {bw:6.2} Hz  (small signal, exact sensors: `host-sim poles`)"
@@ -588,8 +592,9 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
     let small_bound = limit.bandwidth_bound_hz(small.amplitude_deg);
     if let Some(bw) = small_rep.bandwidth_hz {
         say!(
-            "  (at 1 deg, below the speed limit: {bw:.2} Hz, {})",
-            share_of_bound(Some(bw), small_bound)
+            "  (at 1 deg, below the speed limit: {bw:.2} Hz, {} of its bound of {})",
+            share_of_bound(Some(bw), small_bound),
+            small_bound.map_or("above 50 Hz".to_string(), |b| format!("{b:.2} Hz"))
         );
     }
     if let Some(path) = &common.json {
