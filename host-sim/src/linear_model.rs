@@ -887,7 +887,7 @@ mod tests {
     }
 
     #[test]
-    fn loop_transfer_agrees_with_the_closed_loop_poles() {
+    fn loop_transfer_gives_the_state_space_sensitivity() {
         // The sensitivity at the break point, 1 / (1 + L), equals the state-space closed loop
         // from a disturbance added to i* to the applied i*.
         let m = paper();
