@@ -1,12 +1,13 @@
 //! `host-sim`: the paper's steering actuator simulated under the firmware's control code.
 //!
-//! Subcommands: `poles`, `sweep`, `track`, `step`, `bench`, `gap` (sim-to-real gap diagnosis
-//! of a log, `gap selftest`, `gap bench`) and `identify` (Table 4 from a log). Each prints a
+//! Subcommands: `poles`, `limits`, `sweep`, `track`, `step`, `bench`, `gap` (sim-to-real gap
+//! diagnosis of a log, `gap selftest`, `gap bench`) and `identify` (Table 4 from a log). Each prints a
 //! readable summary; `--json PATH` writes its figures, `--log PATH` the run's log (CSV,
 //! `.csv.gz` compressed), `--plots DIR` its pictures (SVG).
 
 use clap::{Args, Parser, Subcommand};
 use host_sim::analysis::FrequencyResponse;
+use host_sim::linear_model::{LimitedBy, LinearModel, MINUS_3_DB, Output, PhysicalLimit};
 use host_sim::logfmt::Log;
 use host_sim::plant::PlantParams;
 use host_sim::plot::{BodePlot, Panel, Style, TimePlot};
@@ -17,6 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 use steering_ecu::control::AntiWindup;
+use steering_ecu::gains::EposGains;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -31,8 +33,22 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Eigenvalues of the linear plant (eqs. 5-8, Tables 1, 2, 4) against the paper's.
+    /// Eigenvalues of the linear plant (eqs. 5-8, Tables 1, 2, 4) against the paper's, and of the
+    /// paper-mode closed loop with the position loop's gain and phase margins (linear model).
     Poles {
+        #[arg(long, value_name = "PATH")]
+        json: Option<PathBuf>,
+    },
+    /// What the paper plant allows whatever the controller (issue 14): the current and voltage
+    /// a sinusoidal pinion angle needs, the largest amplitude within 20 A and the supply, and
+    /// the bound this puts on a sweep's -3 dB bandwidth.
+    Limits {
+        /// Sweep amplitude at the wheel; the table is for its -3 dB point, deg.
+        #[arg(long, default_value_t = 10.0, value_name = "DEG")]
+        amplitude_deg: f64,
+        /// Supply (battery) voltage, the voltage limit, V.
+        #[arg(long, default_value_t = 24.0, value_name = "V")]
+        supply_v: f64,
         #[arg(long, value_name = "PATH")]
         json: Option<PathBuf>,
     },
@@ -174,6 +190,11 @@ fn main() -> ExitCode {
 fn dispatch(command: Command) -> Result<()> {
     match command {
         Command::Poles { json } => poles(json.as_deref()),
+        Command::Limits {
+            amplitude_deg,
+            supply_v,
+            json,
+        } => limits_cmd(amplitude_deg, supply_v, json.as_deref()),
         Command::Sweep {
             amplitude_deg,
             f_end_hz,
@@ -310,6 +331,62 @@ fn poles(json: Option<&Path>) -> Result<()> {
         "With the winding (eq. 1) the fast pole is at {:.0} rad/s.",
         em.last().map_or(f64::NAN, |p| p.norm())
     );
+    let model = LinearModel::new(params, &EposGains::PAPER)?;
+    let closed = model.closed_loop_poles();
+    say!("");
+    say!(
+        "Closed loop, paper mode (Table 3 gains; linear model: 20 kHz PI, 2 kHz PID + feedforward, \
+         exact sensors, no limits), s = ln(z) / 0.5 ms:"
+    );
+    say!(
+        "{:>12} {:>12} {:>10} {:>8} {:>7} {:>8}",
+        "re rad/s",
+        "im rad/s",
+        "|s| rad/s",
+        "Hz",
+        "zeta",
+        "|z|"
+    );
+    for p in &closed {
+        say!(
+            "{:>12.2} {:>12.2} {:>10.2} {:>8.2} {:>7.3} {:>8.4}",
+            p.re,
+            p.im,
+            p.wn,
+            p.f_hz,
+            p.zeta,
+            p.z_magnitude
+        );
+    }
+    say!(
+        "  {} (|z| < 1 for all). im = +-{:.0} rad/s marks a negative real z: a mode that \
+         alternates sign every position tick.",
+        if model.is_stable() {
+            "stable"
+        } else {
+            "UNSTABLE"
+        },
+        std::f64::consts::PI * steering_ecu::paper_mode::POSITION_LOOP_HZ as f64
+    );
+    let margins = model.margins();
+    say!("Position-loop margins (loop broken at the current set-point, 0.01 Hz to 1 kHz):");
+    match (margins.gain_margin_db, margins.phase_crossover_hz) {
+        (Some(gm), Some(f)) => say!("  gain margin   {gm:6.1} dB  at {f:7.2} Hz (phase -180 deg)"),
+        _ => say!("  gain margin   none: the phase never crosses -180 deg with |L| < 1"),
+    }
+    match (margins.phase_margin_deg, margins.gain_crossover_hz) {
+        (Some(pm), Some(f)) => say!("  phase margin  {pm:6.1} deg at {f:7.2} Hz (|L| = 1)"),
+        _ => say!("  phase margin  none: |L| never crosses 1"),
+    }
+    let log_rate = RunConfig::default().log_rate_hz;
+    let bandwidth = model.bandwidth_hz(0.05, 50.0, log_rate);
+    match bandwidth {
+        Some(bw) => say!(
+            "Small-signal -3 dB bandwidth of the column (linear model, as a {log_rate} Hz log \
+             sees it): {bw:.2} Hz"
+        ),
+        None => say!("Small-signal -3 dB bandwidth of the column: above 50 Hz"),
+    }
     if let Some(path) = json {
         let poles: Vec<_> = mech
             .iter()
@@ -321,7 +398,108 @@ fn poles(json: Option<&Path>) -> Result<()> {
             .collect();
         write_json(
             path,
-            &serde_json::json!({"poles": poles, "electromechanical_poles": em, "unit": "rad/s"}),
+            &serde_json::json!({
+                "poles": poles,
+                "electromechanical_poles": em,
+                "unit": "rad/s",
+                "closed_loop_poles": closed,
+                "closed_loop_stable": model.is_stable(),
+                "margins": margins,
+                "small_signal_bandwidth_hz": bandwidth,
+            }),
+        )?;
+    }
+    Ok(())
+}
+
+/// The physical limit of issue 14 for a run's plant and supply (20 A, as the cascade's limit).
+fn physical_limit(cfg: &RunConfig) -> PhysicalLimit {
+    PhysicalLimit {
+        params: cfg.plant,
+        voltage_limit_v: cfg.supply_v,
+        ..PhysicalLimit::paper()
+    }
+}
+
+/// A bandwidth as a share of its bound: "61 %", or "-" when either is missing.
+fn share_of_bound(bandwidth_hz: Option<f64>, bound_hz: Option<f64>) -> String {
+    match (bandwidth_hz, bound_hz) {
+        (Some(bw), Some(b)) if b > 0.0 => format!("{:.0} %", 100.0 * bw / b),
+        _ => "-".to_string(),
+    }
+}
+
+fn limits_cmd(amplitude_deg: f64, supply_v: f64, json: Option<&Path>) -> Result<()> {
+    if !(amplitude_deg.is_finite() && amplitude_deg > 0.0 && amplitude_deg <= 90.0) {
+        return Err(format!("--amplitude-deg {amplitude_deg}: must be in (0, 90] deg").into());
+    }
+    if !(supply_v.is_finite() && supply_v > 0.0 && supply_v <= 60.0) {
+        return Err(format!("--supply-v {supply_v}: must be in (0, 60] V").into());
+    }
+    let limit = PhysicalLimit {
+        voltage_limit_v: supply_v,
+        ..PhysicalLimit::paper()
+    };
+    let pinion = MINUS_3_DB * amplitude_deg;
+    say!(
+        "Steady state at the motor for a sinusoidal pinion angle (delta_P), paper plant (Tables \
+         1, 2, 4; eqs. 1-8), any controller:"
+    );
+    say!(
+        "pinion amplitude {pinion:.2} deg (-3 dB of a {amplitude_deg} deg sweep); limits {} A, \
+         {supply_v} V",
+        limit.current_limit_a
+    );
+    say!(
+        "{:>6} {:>10} {:>10} {:>24}",
+        "f Hz",
+        "current A",
+        "voltage V",
+        "largest amplitude, deg"
+    );
+    let mut rows = Vec::new();
+    for f in 1..=10 {
+        let d = limit.demand(f as f64, pinion);
+        say!(
+            "{:>6.1} {:>10.1} {:>10.1} {:>12.2} ({}-bound)",
+            d.f_hz,
+            d.current_a,
+            d.voltage_v,
+            d.largest_amplitude_deg,
+            match d.limited_by {
+                LimitedBy::Current => "current",
+                LimitedBy::Voltage => "voltage",
+            }
+        );
+        rows.push(d);
+    }
+    say!(
+        "Bound on the -3 dB bandwidth of a sweep of amplitude A (the highest f where \
+         10^(-3/20) A is reachable):"
+    );
+    let mut amplitudes = vec![10.0, 5.0, 2.0, 1.0];
+    if !amplitudes.contains(&amplitude_deg) {
+        amplitudes.insert(0, amplitude_deg);
+    }
+    let mut bounds = Vec::new();
+    for a in amplitudes {
+        let b = limit.bandwidth_bound_hz(a);
+        match b {
+            Some(b) => say!("  {a:5} deg: {b:6.2} Hz"),
+            None => say!("  {a:5} deg: above 50 Hz"),
+        }
+        bounds.push(serde_json::json!({"amplitude_deg": a, "bandwidth_bound_hz": b}));
+    }
+    if let Some(path) = json {
+        write_json(
+            path,
+            &serde_json::json!({
+                "current_limit_a": limit.current_limit_a,
+                "voltage_limit_v": supply_v,
+                "pinion_amplitude_deg": pinion,
+                "table": rows,
+                "bounds": bounds,
+            }),
         )?;
     }
     Ok(())
@@ -365,6 +543,44 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
             sweep.f_end_hz
         ),
     }
+    let limit = physical_limit(&cfg);
+    let bound = limit.bandwidth_bound_hz(sweep.amplitude_deg);
+    say!(
+        "  physical bound     {}  ({} A / {} V on this plant, any controller: `host-sim limits`); \
+         the bandwidth is {} of it",
+        bound.map_or("above 50 Hz".to_string(), |b| format!("{b:6.2} Hz")),
+        limit.current_limit_a,
+        limit.voltage_limit_v,
+        share_of_bound(rep.bandwidth_hz, bound)
+    );
+    // The linear model of the paper cascade (exact sensors, no limits); not for other controllers.
+    let analytic = match cfg.controller {
+        Controller::Paper => {
+            let model = LinearModel::new(cfg.plant, &cfg.gains)?;
+            let grid: Vec<f64> = (1..=(sweep.f_end_hz * 20.0).round() as usize)
+                .map(|k| k as f64 / 20.0)
+                .collect();
+            let fr = model.bode(&grid, Output::Column, cfg.log_rate_hz)?;
+            let bw = model.bandwidth_hz(
+                report::BANDWIDTH_SEARCH_FROM_HZ,
+                sweep.f_end_hz,
+                cfg.log_rate_hz,
+            );
+            if !model.is_stable() {
+                say!(
+                    "  linear model: the closed loop is UNSTABLE on this plant (`host-sim poles`)"
+                );
+            }
+            match bw {
+                Some(bw) => say!(
+                    "  linear model       {bw:6.2} Hz  (small signal, exact sensors: `host-sim poles`)"
+                ),
+                None => say!("  linear model       above {} Hz", sweep.f_end_hz),
+            }
+            Some((fr, bw))
+        }
+        Controller::Ecu => None,
+    };
     say!("  RMS error          {:6.2} deg", rep.tracking.rmse);
     print_limits(&rep.summary, common.supply_v);
     // Small-signal response for comparison: the same loop where no limit is reached.
@@ -373,18 +589,28 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
         ..*sweep
     };
     let (small_rep, _) = report::sweep(&small, &cfg)?;
+    let small_bound = limit.bandwidth_bound_hz(small.amplitude_deg);
     if let Some(bw) = small_rep.bandwidth_hz {
-        say!("  (at 1 deg, below the speed limit: {bw:.2} Hz)");
+        say!(
+            "  (at 1 deg, below the speed limit: {bw:.2} Hz, {} of its bound of {})",
+            share_of_bound(Some(bw), small_bound),
+            small_bound.map_or("above 50 Hz".to_string(), |b| format!("{b:.2} Hz"))
+        );
     }
     if let Some(path) = &common.json {
         let mut v = serde_json::to_value(&rep)?;
         v["small_signal_bandwidth_hz"] = serde_json::json!(small_rep.bandwidth_hz);
         v["paper_bandwidth_hz"] = serde_json::json!(5.0);
+        v["bandwidth_bound_hz"] = serde_json::json!(bound);
+        v["bandwidth_share_of_bound"] =
+            serde_json::json!(rep.bandwidth_hz.zip(bound).map(|(bw, b)| bw / b));
+        v["small_signal_bandwidth_bound_hz"] = serde_json::json!(small_bound);
+        v["analytic_bandwidth_hz"] = serde_json::json!(analytic.as_ref().and_then(|a| a.1));
         write_json(path, &v)?;
     }
     save_log(&run.log, common)?;
     if let Some(dir) = &common.plots {
-        let bode = bode_plot(sweep, &rep, &small_rep);
+        let bode = bode_plot(sweep, &rep, &small_rep, analytic.as_ref().map(|a| &a.0));
         save_svg(dir, "sweep_bode.svg", |p| bode.save(p))?;
         let time = time_plot(
             &format!(
@@ -407,7 +633,12 @@ fn sensors_label(common: &Common) -> &'static str {
     }
 }
 
-fn bode_plot(sweep: &Sweep, rep: &SweepReport, small: &SweepReport) -> BodePlot {
+fn bode_plot(
+    sweep: &Sweep,
+    rep: &SweepReport,
+    small: &SweepReport,
+    analytic: Option<&FrequencyResponse>,
+) -> BodePlot {
     let main = format!("{} deg", sweep.amplitude_deg);
     let add = |plot: BodePlot, name: &str, fr: &FrequencyResponse, style: Style| {
         plot.series_styled(name, &fr.freq_hz, &fr.magnitude_db, &fr.phase_deg, style)
@@ -420,6 +651,14 @@ fn bode_plot(sweep: &Sweep, rep: &SweepReport, small: &SweepReport) -> BodePlot 
         &small.response,
         Style::new().dashed(),
     );
+    if let Some(fr) = analytic {
+        plot = add(
+            plot,
+            ANALYTIC_LABEL,
+            fr,
+            Style::new().dashed().color(host_sim::plot::Color::BLACK),
+        );
+    }
     plot = plot.coherence(&main, &rep.response.freq_hz, &rep.response.coherence);
     if let Some(bw) = rep.bandwidth_hz {
         plot = plot.bandwidth_of(&main, bw);
@@ -429,6 +668,9 @@ fn bode_plot(sweep: &Sweep, rep: &SweepReport, small: &SweepReport) -> BodePlot 
     }
     plot
 }
+
+/// The Bode plot's name for the linear model's curve (`linear_model.rs`).
+const ANALYTIC_LABEL: &str = "analytic (linear model)";
 
 fn time_plot(title: &str, run: &Run, supply_v: f64) -> TimePlot {
     let log = &run.log;

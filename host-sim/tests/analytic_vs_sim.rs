@@ -274,3 +274,73 @@ fn the_comparison_tells_the_old_acceleration_feedforward_apart() {
         "{db} dB {deg} deg\n{table}"
     );
 }
+
+/// `host-sim poles --json` and `host-sim limits --json` print what the model computes.
+#[test]
+fn poles_and_limits_commands_report_the_model() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let run_cli = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+            .args(args)
+            .output()
+            .expect("host-sim runs");
+        assert!(out.status.success(), "{args:?}: {out:?}");
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let read = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join(name)).expect("written"))
+            .expect("JSON")
+    };
+
+    let poles_path = dir.path().join("poles.json");
+    let text = run_cli(&["poles", "--json", poles_path.to_str().expect("utf-8")]);
+    assert!(
+        text.contains("gain margin") && text.contains("phase margin"),
+        "{text}"
+    );
+    let v = read("poles.json");
+    let model = paper_model(AccelFeedforward::ChangeOfSlope);
+    let closed = v["closed_loop_poles"]
+        .as_array()
+        .expect("closed_loop_poles");
+    assert_eq!(closed.len(), model.closed_loop_poles().len());
+    assert!(
+        closed
+            .iter()
+            .all(|p| p["z_magnitude"].as_f64().expect("number") < 1.0)
+    );
+    assert_eq!(v["closed_loop_stable"], serde_json::json!(true));
+    let margins = model.margins();
+    let gm = v["margins"]["gain_margin_db"]
+        .as_f64()
+        .expect("gain margin");
+    let pm = v["margins"]["phase_margin_deg"]
+        .as_f64()
+        .expect("phase margin");
+    assert_eq!(Some(gm), margins.gain_margin_db);
+    assert_eq!(Some(pm), margins.phase_margin_deg);
+    // Table 3's gains: a stable loop with issue 14's minimum margins (6 dB, 40 deg) to spare.
+    assert!(gm > 6.0 && pm > 40.0, "{gm} dB, {pm} deg");
+
+    let limits_path = dir.path().join("limits.json");
+    let text = run_cli(&["limits", "--json", limits_path.to_str().expect("utf-8")]);
+    assert!(text.contains("10 deg:"), "{text}");
+    let v = read("limits.json");
+    let table = v["table"].as_array().expect("table");
+    let at_3 = table
+        .iter()
+        .find(|r| r["f_hz"].as_f64() == Some(3.0))
+        .expect("3 Hz row");
+    // Issue 14's row for 3 Hz (7.07 deg: 11.3 A, 17.4 V; 9.75 deg within the limits).
+    assert!((at_3["current_a"].as_f64().expect("A") - 11.3).abs() < 0.1);
+    assert!((at_3["voltage_v"].as_f64().expect("V") - 17.4).abs() < 0.1);
+    assert!((at_3["largest_amplitude_deg"].as_f64().expect("deg") - 9.75).abs() < 0.01);
+    let bound_10 = v["bounds"]
+        .as_array()
+        .expect("bounds")
+        .iter()
+        .find(|b| b["amplitude_deg"].as_f64() == Some(10.0))
+        .and_then(|b| b["bandwidth_bound_hz"].as_f64())
+        .expect("10 deg bound");
+    assert!((bound_10 - 3.8).abs() < 0.05, "{bound_10}");
+}
