@@ -5,7 +5,7 @@
 //! - `sweep.bin`: the paper's sweep (10 deg, 0-10 Hz in 10 s), the window 6.0-6.6 s (about
 //!   6 Hz, the current at its limit), started at rest on the window's first sample.
 //! - `track.bin`: the built-in track, 110.0-110.5 s (the 4.5 Hz burst), likewise.
-//! - `ecu_sweep.bin`, `ecu_track.bin`: the same two windows under ECU mode
+//! - `ecu_sweep.bin`, `ecu_track.bin`: the first halves of those two windows under ECU mode
 //!   (`--controller ecu`), which also records the column angle each position step was given.
 //! - `cases.bin`: the codec, CANopen, CiA 402, ECU and arbitrary-input cases of
 //!   `golden_vectors::cases`, one hash per case.
@@ -29,6 +29,10 @@ pub const DIR: &str = "hil-tests/vectors";
 pub const SWEEP_WINDOW_S: (f64, f64) = (6.0, 6.6);
 /// Window of the built-in track, s.
 pub const TRACK_WINDOW_S: (f64, f64) = (110.0, 110.5);
+/// ECU mode's windows: the first halves of the two above, so that every vector still fits the
+/// emulated suite's 512 KiB of flash beside its code.
+pub const ECU_SWEEP_WINDOW_S: (f64, f64) = (6.0, 6.3);
+pub const ECU_TRACK_WINDOW_S: (f64, f64) = (110.0, 110.25);
 
 /// One stored file: its name and contents.
 #[derive(Debug, Clone)]
@@ -113,11 +117,11 @@ pub fn generate() -> Result<Vec<Vector>, SimError> {
         },
         Vector {
             name: "ecu_sweep.bin",
-            bytes: record_loop(window(&sweep, SWEEP_WINDOW_S), Controller::Ecu)?,
+            bytes: record_loop(window(&sweep, ECU_SWEEP_WINDOW_S), Controller::Ecu)?,
         },
         Vector {
             name: "ecu_track.bin",
-            bytes: record_loop(window(&track, TRACK_WINDOW_S), Controller::Ecu)?,
+            bytes: record_loop(window(&track, ECU_TRACK_WINDOW_S), Controller::Ecu)?,
         },
         Vector {
             name: "cases.bin",

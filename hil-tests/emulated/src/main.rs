@@ -307,13 +307,13 @@ fn main() -> ! {
     // ECU mode on its own meter, so each controller's counts are its own.
     let mut ecu_meter = InstructionMeter::new();
     pass &= check_loop(
-        "ecu_sweep.bin (ECU mode, paper sweep 6.0-6.6 s)",
+        "ecu_sweep.bin (ECU mode, paper sweep 6.0-6.3 s)",
         ECU_SWEEP,
         &mut ecu_meter,
         None,
     );
     pass &= check_loop(
-        "ecu_track.bin (ECU mode, built-in track 110.0-110.5 s)",
+        "ecu_track.bin (ECU mode, built-in track 110.0-110.25 s)",
         ECU_TRACK,
         &mut ecu_meter,
         None,
