@@ -115,6 +115,32 @@ fn send_without_finish_leaves_the_ecu_to_time_out() {
     assert!(out.contains("reference 0x100"), "own frames counted: {out}");
 }
 
+/// The README's order (`send step --as-state driving`, options after the profile and the
+/// global ones last) works as well as the order above; piped stderr has no progress redraws.
+#[test]
+fn options_after_the_subcommand_work_and_piped_progress_stays_quiet() {
+    let o = steer_can(&[
+        "send",
+        "step",
+        "--as-state",
+        "driving",
+        "--amplitude-deg",
+        "2",
+        "--iface",
+        "sim",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    let column = number_after(&out, "ECU        column");
+    assert!((column - 2.0).abs() < 0.5, "column {column} deg: {out}");
+    let err = stderr(&o);
+    assert!(!err.contains('\r'), "progress redraws in a pipe: {err:?}");
+    assert!(
+        err.lines().all(|l| !l.trim().is_empty()),
+        "blank lines: {err:?}"
+    );
+}
+
 #[test]
 fn send_needs_the_as_state_said() {
     let o = steer_can(&["--iface", "sim", "send", "sine"]);
@@ -141,7 +167,9 @@ fn campaign_sweep_writes_a_log_that_convert_reproduces_from_the_recording() {
         out.contains("completed: 1001 profile samples sent"),
         "{out}"
     );
-    assert!(stderr(&o).contains("100 %"), "progress bar");
+    // Piped, as here, there is no progress bar: it redraws a line, so it is drawn only on a
+    // terminal (issue 13).
+    assert!(!stderr(&o).contains('\r'), "progress bar in a pipe");
     let recording = dir.path().join("sweep.csv.candump");
     assert!(recording.exists());
     let converted = dir.path().join("converted.csv");
