@@ -115,6 +115,10 @@ struct Common {
     /// Integrate regardless of saturation (to see what anti-windup prevents).
     #[arg(long)]
     no_anti_windup: bool,
+    /// Run without the current guard, the voltage clamp that holds the current within 20 A
+    /// (to see the overshoot it prevents).
+    #[arg(long)]
+    no_current_guard: bool,
 }
 
 impl Common {
@@ -128,6 +132,7 @@ impl Common {
             },
             log_rate_hz: self.log_rate_hz,
             supply_v: self.supply_v,
+            current_guard: !self.no_current_guard,
             ..RunConfig::default()
         }
     }

@@ -38,6 +38,10 @@ pub struct RunConfig {
     pub supply_v: f64,
     /// Log rate, Hz; must divide the 2 kHz position-loop rate. 0 = no log (benchmarks).
     pub log_rate_hz: u32,
+    /// The current guard (README, "Current guard"): the voltage clamp that keeps the current
+    /// predicted at the end of each period within the limit. `false` runs without it, to see
+    /// the overshoot it prevents; it replaces an undocumented environment switch.
+    pub current_guard: bool,
 }
 
 impl Default for RunConfig {
@@ -49,6 +53,7 @@ impl Default for RunConfig {
             hall_feedback: true,
             supply_v: 24.0,
             log_rate_hz: 1000,
+            current_guard: true,
         }
     }
 }
@@ -164,7 +169,8 @@ pub fn run_tapped(
     cascade.set_anti_windup(cfg.anti_windup);
     cascade.set_winding(cfg.plant.ra as f32, cfg.plant.la as f32);
     cascade.set_voltage_limit(Volts(cfg.supply_v as f32));
-    if std::env::var("X_NOGUARD").is_ok() {
+    if !cfg.current_guard {
+        // The guard needs the winding model; a winding it refuses (NaN) leaves it off.
         cascade.set_winding(f32::NAN, 0.0);
     }
     let encoder = ColumnEncoder { zero_raw: 0 };

@@ -5,9 +5,12 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
+/// The simulated ECU at CPU speed (`--fast`, a global option, so it may go last): the tests
+/// would otherwise wait for the wall clock.
 fn steer_can(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_steer-can"))
         .args(args)
+        .arg("--fast")
         .stdin(Stdio::null())
         .output()
         .unwrap()
@@ -139,6 +142,24 @@ fn options_after_the_subcommand_work_and_piped_progress_stays_quiet() {
         err.lines().all(|l| !l.trim().is_empty()),
         "blank lines: {err:?}"
     );
+}
+
+/// Without `--fast` the simulated ECU keeps to the wall clock: half a second of monitoring
+/// takes half a second, and shows the same 100 Hz traffic.
+#[test]
+fn the_simulation_follows_the_wall_clock_unless_fast() {
+    let started = std::time::Instant::now();
+    let o = Command::new(env!("CARGO_BIN_EXE_steer-can"))
+        .args(["--iface", "sim", "monitor", "--duration-s", "0.5"])
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let wall = started.elapsed().as_secs_f64();
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Virtual time may lead the wall clock by one 10 ms status period (WallPaced::LEAD_US).
+    assert!(wall >= 0.49, "0.5 s of the simulated bus took {wall:.3} s");
+    assert!(stdout(&o).contains("status 0x101"), "{}", stdout(&o));
+    assert!(stdout(&o).contains("100.0 Hz"), "{}", stdout(&o));
 }
 
 #[test]

@@ -36,6 +36,10 @@ pub struct Cli {
     /// The EPOS4's CANopen node ID.
     #[arg(long, global = true, default_value_t = 1)]
     pub node: u8,
+    /// With `--iface sim`: run as fast as the CPU allows instead of in step with the wall
+    /// clock (tests, quick rehearsals).
+    #[arg(long, global = true)]
+    pub fast: bool,
     /// With `--iface sim`: inject a fault at a time, KIND@SECONDS (encoder, overcurrent, epos).
     #[arg(long, global = true, hide = true, value_name = "KIND@S")]
     pub sim_inject: Option<String>,
@@ -237,7 +241,10 @@ fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
             let at_s: f64 = at.parse().map_err(|_| bad())?;
             sim.inject_at((at_s * 1e6) as u64, injection);
         }
-        return Ok(Box::new(sim));
+        if cli.fast {
+            return Ok(Box::new(sim));
+        }
+        return Ok(Box::new(super::WallPaced::new(sim)));
     }
     #[cfg(target_os = "linux")]
     {
