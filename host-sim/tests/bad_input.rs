@@ -390,6 +390,16 @@ fn convert_reads_gzip_candump_and_names_the_file_in_errors() {
     std::fs::write(&cut, &gz[..gz.len() / 2]).unwrap();
     let o = steer_can(&["convert", s(&cut), "--out", s(&out)]);
     assert_refused(&o, &["cut.candump.gz", "truncated gzip"]);
+
+    // A recording without the vehicle's references: the error names the file it read.
+    let ecu_only: Vec<String> = ramp_lines()
+        .into_iter()
+        .filter(|l| !l.contains(" 100#"))
+        .collect();
+    let dump = dir.path().join("ecu_only.candump");
+    write_lines(&dump, &ecu_only);
+    let o = steer_can(&["convert", s(&dump), "--out", s(&out)]);
+    assert_refused(&o, &["ecu_only.candump: no valid reference frame (0x100)"]);
 }
 
 /// Row 1's last clause: a worker thread that fails fails the run. A record with a NaN in it

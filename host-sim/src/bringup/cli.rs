@@ -355,7 +355,13 @@ fn convert(path: &Path, out: &Path, dec: &Decoder, all_rows: bool) -> Result<(),
         );
     }
     let rows = if all_rows { Rows::All } else { Rows::Active };
-    let built = logbuild::build(&file.frames, dec, rows)?;
+    // The log builder knows frames, not files: name the file the frames came from.
+    let built = logbuild::build(&file.frames, dec, rows).map_err(|e| match e {
+        BringupError::Log { reason } => BringupError::Log {
+            reason: format!("{}: {reason}", path.display()),
+        },
+        e => e,
+    })?;
     campaign::save_log(&built.log, out)?;
     say!(
         "{}: {} frames ({} skipped: not classic 11-bit data), {} references, {} invalid frames",
