@@ -34,14 +34,24 @@
 //!   be evenly spaced.
 //! * **Missing samples.** Any column but `t` may hold `nan` (any letter case) for a sensor
 //!   dropout; it is read as `f64::NAN`. Infinities are refused everywhere: no sensor reports one,
-//!   so one in a file means a bug upstream.
+//!   so one in a file means a bug upstream. A tool that cannot use a gap fills it with
+//!   [`fill_missing`] (linear between the neighbours) and says how many samples it filled.
+//! * **Physical bounds.** Every value, time included, must lie within a bound set by the unit at
+//!   the end of its column's name ([`bound_for`]): `t` and `_s` 1e6 s, `_deg` 1e6 deg, `_rad`
+//!   1e6 rad, `_a` 1e4 A, `_v` 1e4 V, `_m` 1e3 m, `_n` 1e6 N, anything else 1e12. The bounds are
+//!   far beyond the actuator (its motor needs 36 min at full speed to turn 1e6 rad), so they
+//!   only catch garbage such as an uninitialised float or `1e300`, which would otherwise turn
+//!   every figure computed from the log into `inf` or NaN. Refused with line and column.
 //! * **Leniency.** Lines whose first non-blank character is `#` are comments if they come before
 //!   the header; they are skipped and not kept (after the header, `#` is an error, so a stray
 //!   line in the data is not silently dropped). Blank lines are ignored anywhere (trailing ones
 //!   in particular), spaces and tabs around fields are ignored, LF and CRLF line ends are both
 //!   read, and a leading UTF-8 byte-order mark (spreadsheet exports) is skipped.
 //! * **Compression.** [`Log::save`] gzips when the file name ends in `.gz`; [`Log::load`]
-//!   recognises gzip by its magic bytes whatever the name.
+//!   recognises gzip by its magic bytes whatever the name. A gzip file cut short (an interrupted
+//!   copy) is refused as truncated, not read as far as it goes.
+//! * **Other column names.** [`Table`] reads any CSV of numeric columns with one named time
+//!   column by these same rules (a rig's logs for `host-sim gap`, a track reference).
 //! * **Precision.** The writer rounds the required columns to fixed decimals well below what is
 //!   measured (see the constants below); extra columns are written losslessly. A file with the
 //!   header and no rows is a valid, empty log.
@@ -138,6 +148,21 @@ pub enum LogError {
         column: String,
         text: String,
     },
+    /// A value beyond the physical bound of its column ([`bound_for`]).
+    OutOfBounds {
+        line: usize,
+        column: String,
+        value: f64,
+        bound: f64,
+        unit: &'static str,
+    },
+    /// A [`Table`]'s header lacks the named column.
+    MissingNamedColumn {
+        expected: String,
+        found_header: String,
+    },
+    /// A gzip file that ends before its compressed data does.
+    TruncatedGzip,
     /// A time stamp that is `nan`.
     NonFiniteTime { line: usize },
     /// A time stamp not after the one before it.
@@ -157,6 +182,12 @@ pub enum LogError {
     TimeNotWritable { row: usize, reason: &'static str },
     /// Writing: an infinite value, which the reader would refuse (rows count from 0).
     InfiniteValue { row: usize, column: String },
+    /// Writing: a value beyond its column's bound, which the reader would refuse.
+    ValueOutOfBounds {
+        row: usize,
+        column: String,
+        value: f64,
+    },
 }
 
 impl fmt::Display for LogError {
@@ -204,6 +235,29 @@ impl fmt::Display for LogError {
                 "line {line}, column `{column}`: cannot read `{text}` as a value; expected a \
                  finite number, or `nan` for a missing sample"
             ),
+            Self::OutOfBounds {
+                line,
+                column,
+                value,
+                bound,
+                unit,
+            } => write!(
+                f,
+                "line {line}, column `{column}`: {value:e} is outside the physical bound of \
+                 +-{bound:e} {unit} for this column"
+            ),
+            Self::MissingNamedColumn {
+                expected,
+                found_header,
+            } => write!(
+                f,
+                "the header lacks the column `{expected}`: found `{found_header}`"
+            ),
+            Self::TruncatedGzip => write!(
+                f,
+                "truncated gzip: the file ends before its compressed data does (an \
+                 interrupted copy or recording?)"
+            ),
             Self::NonFiniteTime { line } => {
                 write!(f, "line {line}: time `t` must be a finite number")
             }
@@ -228,6 +282,10 @@ impl fmt::Display for LogError {
             Self::InfiniteValue { row, column } => write!(
                 f,
                 "row {row}, column `{column}`: infinite value (use NaN for a missing sample)"
+            ),
+            Self::ValueOutOfBounds { row, column, value } => write!(
+                f,
+                "row {row}, column `{column}`: {value:e} is outside the column's physical bound"
             ),
         }
     }
@@ -379,78 +437,25 @@ impl Log {
     }
 
     /// Reads a log in the format of the module doc from plain (not compressed) CSV text.
-    pub fn read_from(mut r: impl BufRead) -> Result<Log, LogError> {
-        let mut text = String::new();
-        let mut line_no = 0;
-
-        // Header: the first line that is neither blank nor a comment.
-        let header = loop {
-            text.clear();
-            if r.read_line(&mut text).map_err(LogError::io)? == 0 {
-                return Err(LogError::Empty);
-            }
-            line_no += 1;
-            let line = if line_no == 1 {
-                text.trim_start_matches('\u{feff}')
-            } else {
-                &text
-            };
-            let line = line.trim();
-            if !line.is_empty() && !line.starts_with('#') {
-                break parse_header(line)?;
-            }
-        };
-
-        let extra_names: Vec<&str> = header[REQUIRED_COLUMNS.len()..]
+    pub fn read_from(r: impl BufRead) -> Result<Log, LogError> {
+        let table = read_table(r, |line| Ok((parse_header(line)?, 0)))?;
+        let mut columns = table.columns.into_iter();
+        let mut next = || columns.next().unwrap_or_default();
+        let (t, ref_sw_deg, sw_deg, motor_rad, current_a) =
+            (next(), next(), next(), next(), next());
+        let extra = table.names[REQUIRED_COLUMNS.len()..]
             .iter()
-            .map(String::as_str)
+            .cloned()
+            .zip(columns)
             .collect();
-        let mut log = Log::with_extra_columns(&extra_names);
-        let mut values = vec![0.0; header.len()];
-        loop {
-            text.clear();
-            if r.read_line(&mut text).map_err(LogError::io)? == 0 {
-                break;
-            }
-            line_no += 1;
-            let line = text.trim();
-            if line.is_empty() {
-                continue;
-            }
-            let found = line.split(',').count();
-            if found != header.len() {
-                return Err(LogError::WrongFieldCount {
-                    line: line_no,
-                    expected: header.len(),
-                    found,
-                });
-            }
-            for ((field, value), name) in line.split(',').zip(&mut values).zip(&header) {
-                *value = parse_value(field.trim(), line_no, name)?;
-            }
-            let t = values[0];
-            if t.is_nan() {
-                return Err(LogError::NonFiniteTime { line: line_no });
-            }
-            if let Some(&previous) = log.t.last()
-                && t <= previous
-            {
-                return Err(LogError::NonMonotonicTime {
-                    line: line_no,
-                    previous,
-                    current: t,
-                });
-            }
-            let row = Row {
-                t,
-                ref_sw_deg: values[1],
-                sw_deg: values[2],
-                motor_rad: values[3],
-                current_a: values[4],
-            };
-            log.push(row, &values[REQUIRED_COLUMNS.len()..]);
-        }
-        Ok(log)
+        Ok(Log {
+            t,
+            ref_sw_deg,
+            sw_deg,
+            motor_rad,
+            current_a,
+            extra,
+        })
     }
 
     /// Writes the log to `path`, gzip-compressed if the name ends in `.gz`, creating missing
@@ -489,22 +494,7 @@ impl Log {
 
     /// Reads a log from `path`, plain or gzip-compressed (recognised by content, not name).
     pub fn load(path: &Path) -> Result<Log, LogError> {
-        let file = File::open(path).map_err(|source| LogError::Io {
-            path: Some(path.to_path_buf()),
-            source,
-        })?;
-        let mut reader = BufReader::new(file);
-        let is_gzip = reader
-            .fill_buf()
-            .map_err(|e| LogError::io(e).in_file(path))?
-            .starts_with(&GZIP_MAGIC);
-        let result = if is_gzip {
-            // Multi-member, so logs appended gzip chunk by gzip chunk read whole.
-            Log::read_from(BufReader::new(MultiGzDecoder::new(reader)))
-        } else {
-            Log::read_from(reader)
-        };
-        result.map_err(|e| e.in_file(path))
+        read_file(path, Log::read_from)
     }
 
     fn check_writable(&self) -> Result<(), LogError> {
@@ -552,7 +542,7 @@ impl Log {
             }
             previous_us = Some(us);
         }
-        for (name, values) in columns {
+        for (name, values) in columns.clone() {
             if let Some(row) = values.iter().position(|v| v.is_infinite()) {
                 return Err(LogError::InfiniteValue {
                     row,
@@ -560,8 +550,251 @@ impl Log {
                 });
             }
         }
+        let time = std::iter::once(("t", &self.t));
+        for (name, values) in time.chain(columns) {
+            let (bound, _) = bound_for(name);
+            if let Some(row) = values.iter().position(|v| v.abs() > bound) {
+                return Err(LogError::ValueOutOfBounds {
+                    row,
+                    column: name.to_string(),
+                    value: values[row],
+                });
+            }
+        }
         Ok(())
     }
+}
+
+/// A CSV of named numeric columns with one time column, read and checked by the rules of the
+/// module doc (comments, `nan`, bounds, strictly increasing finite time, gzip), whatever the
+/// names: a rig's logs for `host-sim gap` and a track reference name their own columns.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Table {
+    /// Column names, in file order.
+    pub names: Vec<String>,
+    /// One vector per name, all as long as the time column.
+    pub columns: Vec<Vec<f64>>,
+    /// The file's line number of each row, for errors found after reading.
+    pub lines: Vec<usize>,
+}
+
+impl Table {
+    /// Reads plain CSV text whose header names `time_column`.
+    pub fn read_from(r: impl BufRead, time_column: &str) -> Result<Table, LogError> {
+        read_table(r, |line| {
+            let names: Vec<String> = line.split(',').map(|f| f.trim().to_string()).collect();
+            let mut seen: Vec<&str> = Vec::new();
+            for name in &names {
+                check_column_name(name, &seen)?;
+                seen.push(name);
+            }
+            let time = names.iter().position(|n| n == time_column).ok_or_else(|| {
+                LogError::MissingNamedColumn {
+                    expected: time_column.to_string(),
+                    found_header: line.to_string(),
+                }
+            })?;
+            Ok((names, time))
+        })
+    }
+
+    /// Reads `path`, plain or gzip-compressed (recognised by content); errors name the file.
+    pub fn load(path: &Path, time_column: &str) -> Result<Table, LogError> {
+        read_file(path, |r| Table::read_from(r, time_column))
+    }
+
+    /// The column of this name.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| self.columns[i].as_slice())
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.lines.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.lines.is_empty()
+    }
+}
+
+/// Fills each run of missing samples (NaN) linearly between the samples on either side; a run
+/// at the start or the end takes the nearest sample. Returns how many were filled, or `None`
+/// when there is no sample at all to fill from. Interpolation, not zero or a hold, because a
+/// dropout of a few samples in a smooth signal is best guessed by its neighbours, and a step
+/// would look like an effect to the diagnosis.
+pub fn fill_missing(values: &mut [f64]) -> Option<usize> {
+    let first = values.iter().position(|v| !v.is_nan())?;
+    let head = values[first];
+    values[..first].fill(head);
+    let mut filled = first;
+    let mut last_good = first;
+    for i in first + 1..values.len() {
+        if values[i].is_nan() {
+            continue;
+        }
+        let gap = i - last_good;
+        for k in 1..gap {
+            let s = k as f64 / gap as f64;
+            values[last_good + k] = values[last_good] + s * (values[i] - values[last_good]);
+            filled += 1;
+        }
+        last_good = i;
+    }
+    let tail = values[last_good];
+    filled += values.len() - last_good - 1;
+    values[last_good + 1..].fill(tail);
+    Some(filled)
+}
+
+/// The largest magnitude a column may hold and its unit, from the unit at the end of its name
+/// (module doc). Generous on purpose: the bound is for garbage, not for physics.
+pub fn bound_for(column: &str) -> (f64, &'static str) {
+    let suffix = match column.rsplit_once('_') {
+        Some((_, unit)) => unit.to_ascii_lowercase(),
+        None if column == "t" => "s".to_string(),
+        None => String::new(),
+    };
+    match suffix.as_str() {
+        "s" => (1e6, "s"),
+        "deg" => (1e6, "deg"),
+        "rad" => (1e6, "rad"),
+        "a" => (1e4, "A"),
+        "v" => (1e4, "V"),
+        "m" => (1e3, "m"),
+        "n" => (1e6, "N"),
+        _ => (1e12, "(no unit in the name)"),
+    }
+}
+
+/// Opens `path`, unpacks gzip if its content is gzip, and reads it with `read`; every error
+/// names the file, and a gzip stream cut short is said to be one.
+fn read_file<T>(
+    path: &Path,
+    read: impl FnOnce(Box<dyn BufRead>) -> Result<T, LogError>,
+) -> Result<T, LogError> {
+    let file = File::open(path).map_err(|source| LogError::Io {
+        path: Some(path.to_path_buf()),
+        source,
+    })?;
+    let mut reader = BufReader::new(file);
+    let is_gzip = reader
+        .fill_buf()
+        .map_err(|e| LogError::io(e).in_file(path))?
+        .starts_with(&GZIP_MAGIC);
+    let result = if is_gzip {
+        // Multi-member, so logs appended gzip chunk by gzip chunk read whole.
+        read(Box::new(BufReader::new(MultiGzDecoder::new(reader)))).map_err(|e| match e {
+            LogError::Io { path: None, source }
+                if source.kind() == io::ErrorKind::UnexpectedEof =>
+            {
+                LogError::TruncatedGzip
+            }
+            e => e,
+        })
+    } else {
+        read(Box::new(reader))
+    };
+    result.map_err(|e| e.in_file(path))
+}
+
+/// The one CSV reader behind [`Log`] and [`Table`]: `header` checks the first line that is
+/// neither blank nor a comment and returns the names and the index of the time column.
+fn read_table(
+    mut r: impl BufRead,
+    header: impl FnOnce(&str) -> Result<(Vec<String>, usize), LogError>,
+) -> Result<Table, LogError> {
+    let mut text = String::new();
+    let mut line_no = 0;
+
+    let (names, time) = loop {
+        text.clear();
+        if r.read_line(&mut text).map_err(LogError::io)? == 0 {
+            return Err(LogError::Empty);
+        }
+        line_no += 1;
+        let line = if line_no == 1 {
+            text.trim_start_matches('\u{feff}')
+        } else {
+            &text
+        };
+        let line = line.trim();
+        if !line.is_empty() && !line.starts_with('#') {
+            break header(line)?;
+        }
+    };
+    let bounds: Vec<(f64, &'static str)> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            if i == time {
+                bound_for("t")
+            } else {
+                bound_for(n)
+            }
+        })
+        .collect();
+
+    let mut table = Table {
+        columns: vec![Vec::new(); names.len()],
+        names,
+        lines: Vec::new(),
+    };
+    let mut values = vec![0.0; table.names.len()];
+    loop {
+        text.clear();
+        if r.read_line(&mut text).map_err(LogError::io)? == 0 {
+            break;
+        }
+        line_no += 1;
+        let line = text.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let found = line.split(',').count();
+        if found != table.names.len() {
+            return Err(LogError::WrongFieldCount {
+                line: line_no,
+                expected: table.names.len(),
+                found,
+            });
+        }
+        for (i, (field, value)) in line.split(',').zip(&mut values).enumerate() {
+            let name = &table.names[i];
+            *value = parse_value(field.trim(), line_no, name)?;
+            let (bound, unit) = bounds[i];
+            if value.abs() > bound {
+                return Err(LogError::OutOfBounds {
+                    line: line_no,
+                    column: name.clone(),
+                    value: *value,
+                    bound,
+                    unit,
+                });
+            }
+        }
+        let t = values[time];
+        if t.is_nan() {
+            return Err(LogError::NonFiniteTime { line: line_no });
+        }
+        if let Some(&previous) = table.columns[time].last()
+            && t <= previous
+        {
+            return Err(LogError::NonMonotonicTime {
+                line: line_no,
+                previous,
+                current: t,
+            });
+        }
+        for (column, &v) in table.columns.iter_mut().zip(&values) {
+            column.push(v);
+        }
+        table.lines.push(line_no);
+    }
+    Ok(table)
 }
 
 fn is_gz_name(path: &Path) -> bool {
@@ -972,6 +1205,105 @@ mod tests {
             text.lines().nth(1),
             Some("0.000000,0.0000,0.0000,0.00000,0.0000")
         );
+    }
+
+    #[test]
+    fn values_beyond_their_physical_bound_are_refused_with_line_and_column() {
+        let head = "t,ref_sw_deg,sw_deg,motor_rad,current_a,voltage_v,gain\n0,1,2,3,4,5,6\n";
+        for (row, column) in [
+            ("0.1,1e300,2,3,4,5,6", "ref_sw_deg"),
+            ("0.1,1,2,-2e6,4,5,6", "motor_rad"),
+            ("0.1,1,2,3,1e5,5,6", "current_a"),
+            ("0.1,1,2,3,4,2e4,6", "voltage_v"),
+            ("0.1,1,2,3,4,5,1e13", "gain"),
+            ("1e300,1,2,3,4,5,6", "t"),
+        ] {
+            let err = read_str(&format!("{head}{row}\n")).expect_err(row);
+            assert!(
+                matches!(&err, LogError::OutOfBounds { line: 3, column: c, .. } if c == column),
+                "{row}: {err:?}"
+            );
+            assert!(err.to_string().contains("physical bound"), "{err}");
+        }
+        // Within the bounds: a long log's motor angle, a large unitless value.
+        read_str(&format!("{head}0.1,90,-90,9e5,-20,24,9e11\n")).expect("in bounds");
+    }
+
+    #[test]
+    fn bounds_follow_the_unit_at_the_end_of_the_name() {
+        assert_eq!(bound_for("t"), (1e6, "s"));
+        assert_eq!(bound_for("t_s"), (1e6, "s"));
+        assert_eq!(bound_for("vir_V"), (1e4, "V"));
+        assert_eq!(bound_for("current_setpoint_a"), (1e4, "A"));
+        assert_eq!(bound_for("qm_m"), (1e3, "m"));
+        assert_eq!(bound_for("gain").0, 1e12);
+    }
+
+    #[test]
+    fn writer_refuses_a_value_beyond_its_bound() {
+        let mut log = sample_log(&["voltage_v"]);
+        log.extra[0].1[7] = 1e300;
+        assert!(matches!(
+            log.write_to(Vec::new()),
+            Err(LogError::ValueOutOfBounds { row: 7, .. })
+        ));
+        let mut log = sample_log(&[]);
+        for t in &mut log.t {
+            *t += 2e6;
+        }
+        assert!(matches!(
+            log.write_to(Vec::new()),
+            Err(LogError::ValueOutOfBounds { row: 0, column, .. }) if column == "t"
+        ));
+    }
+
+    #[test]
+    fn a_truncated_gzip_log_is_named_truncated() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("run.csv.gz");
+        sample_log(&[]).save(&path).expect("save");
+        let bytes = fs::read(&path).expect("read back");
+        fs::write(&path, &bytes[..bytes.len() / 2]).expect("cut");
+        let err = Log::load(&path).expect_err("must fail");
+        assert!(matches!(err.root(), LogError::TruncatedGzip), "{err:?}");
+        assert!(
+            err.to_string().contains("run.csv.gz: truncated gzip"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_table_reads_any_names_by_the_log_rules() {
+        let text = "# EMPS\nt_s,qg_m,vir_V\n0,0.1,1\n0.001,nan,2\n0.002,0.3,3\n";
+        let table = Table::read_from(text.as_bytes(), "t_s").expect("valid");
+        assert_eq!(table.len(), 3);
+        assert_eq!(table.lines, [3, 4, 5]);
+        assert!(table.column("qg_m").expect("column")[1].is_nan());
+        assert_eq!(table.column("vir_V"), Some(&[1.0, 2.0, 3.0][..]));
+
+        let err = Table::read_from(text.as_bytes(), "t").expect_err("no such time column");
+        assert!(
+            matches!(err, LogError::MissingNamedColumn { .. }),
+            "{err:?}"
+        );
+        let back = "t_s,x\n0,1\n0.002,1\n0.001,1\n";
+        let err = Table::read_from(back.as_bytes(), "t_s").expect_err("time back");
+        assert!(
+            matches!(err, LogError::NonMonotonicTime { line: 4, .. }),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn missing_samples_are_filled_between_neighbours_and_counted() {
+        let nan = f64::NAN;
+        let mut v = [nan, 1.0, nan, nan, 4.0, 5.0, nan];
+        assert_eq!(fill_missing(&mut v), Some(4));
+        assert_eq!(v, [1.0, 1.0, 2.0, 3.0, 4.0, 5.0, 5.0]);
+        let mut clean = [1.0, 2.0];
+        assert_eq!(fill_missing(&mut clean), Some(0));
+        assert_eq!(fill_missing(&mut [nan, nan]), None);
+        assert_eq!(fill_missing(&mut []), None);
     }
 
     #[test]

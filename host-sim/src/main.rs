@@ -66,6 +66,8 @@ enum Command {
     },
     /// A driverless track run (section 4.4): the built-in 120 s profile or a CSV `t,ref_sw_deg`.
     Track {
+        /// The reference, CSV `t,ref_sw_deg` (s, deg; plain or gzip; any rate, further columns
+        /// ignored, so a project log works); the built-in 120 s profile without it.
         #[arg(long, value_name = "CSV")]
         csv: Option<PathBuf>,
         #[command(flatten)]
@@ -73,8 +75,10 @@ enum Command {
     },
     /// A step at the wheel.
     Step {
+        /// Height of the step at the steering wheel, deg.
         #[arg(long, default_value_t = 20.0, value_name = "DEG")]
         amplitude_deg: f64,
+        /// Length of the run, s.
         #[arg(long, default_value_t = 1.5, value_name = "S")]
         duration_s: f64,
         #[command(flatten)]
@@ -82,8 +86,10 @@ enum Command {
     },
     /// Realtime factor of the 120 s track at full rates (20 kHz / 2 kHz / 100 Hz), one thread.
     Bench {
+        /// Runs to time (each with and without the 1 kHz log); the median is reported.
         #[arg(long, default_value_t = 5)]
         repeats: u32,
+        /// Write the figures as JSON.
         #[arg(long, value_name = "PATH")]
         json: Option<PathBuf>,
     },
@@ -133,6 +139,10 @@ struct Common {
     /// 1, 2, 4); the controller keeps its own tuning, so this is how its robustness is checked.
     #[arg(long, value_name = "FILE")]
     plant: Option<PathBuf>,
+    /// Run without the current guard, the voltage clamp that holds the current within 20 A
+    /// (to see the overshoot it prevents).
+    #[arg(long)]
+    no_current_guard: bool,
 }
 
 impl Common {
@@ -161,6 +171,7 @@ impl Common {
             log_rate_hz: self.log_rate_hz,
             supply_v: self.supply_v,
             controller: self.controller,
+            current_guard: !self.no_current_guard,
             ..RunConfig::default()
         })
     }

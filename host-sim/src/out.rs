@@ -14,3 +14,26 @@ pub fn stdout_line(program: &str, args: std::fmt::Arguments<'_>) {
         std::process::exit(1);
     }
 }
+
+/// Whether progress lines are drawn: only when stderr is a terminal. They redraw one line with
+/// `\r`; in a pipe or a CI log that would be one endless line of redraws, where the reader
+/// wants one line per event.
+pub fn progress_shown() -> bool {
+    use std::io::IsTerminal;
+    static SHOWN: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *SHOWN.get_or_init(|| std::io::stderr().is_terminal())
+}
+
+/// Redraws the progress line on stderr, on a terminal only.
+pub fn progress_line(args: std::fmt::Arguments<'_>) {
+    if progress_shown() {
+        eprint!("\r{args}");
+    }
+}
+
+/// Ends the progress line (a newline, on a terminal only).
+pub fn progress_end() {
+    if progress_shown() {
+        eprintln!();
+    }
+}

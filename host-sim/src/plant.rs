@@ -1,7 +1,7 @@
 //! The paper's steering actuator as a linear plant: the winding (eq. 1-3) and the 3-DOF
 //! mechanics (eqs. 5-8), with the parameters of Tables 1, 2 and 4 as defaults.
 //!
-//! Two printing errors of the paper are corrected (see `shared/docs/plant-and-control.md`):
+//! Two printing errors of the paper are corrected (see `host-sim/MODEL.md`):
 //! the belt factor in eqs. 5-6 is 1/2 (the nut turns at half the motor speed), and the
 //! torsion-bar terms of eq. 6 carry (tauBS/tauP)^2. With both, the mechanical poles are
 //! 0, -334 rad/s and complex pairs of magnitude 30.6 and 138.8 rad/s, against the paper's

@@ -1,6 +1,7 @@
 //! The references the actuator is run against, as 100 Hz samples at the steering wheel (deg):
 //! the paper's sine sweep (section 4.2), a driverless track run (section 4.4) and a step.
 
+use crate::logfmt::{LogError, Table};
 use crate::sim::REFERENCE_RATE_HZ;
 use std::f64::consts::PI;
 use std::path::Path;
@@ -151,20 +152,15 @@ pub fn builtin_track() -> Vec<f64> {
 /// Why a reference file could not be used.
 #[derive(Debug)]
 pub enum ReferenceFileError {
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    /// The file could not be read or breaks the log format's rules (`logfmt`): file, line and
+    /// reason are in the error.
+    Log(LogError),
     Header {
         path: String,
         found: String,
     },
-    BadLine {
-        path: String,
-        line: usize,
-        text: String,
-    },
-    TimeNotIncreasing {
+    /// A reference sample marked missing (`nan`): a reference has no gaps to fill.
+    MissingSample {
         path: String,
         line: usize,
     },
@@ -176,20 +172,16 @@ pub enum ReferenceFileError {
 impl std::fmt::Display for ReferenceFileError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            ReferenceFileError::Io { path, source } => write!(f, "{path}: {source}"),
+            ReferenceFileError::Log(e) => write!(f, "{e}"),
             ReferenceFileError::Header { path, found } => write!(
                 f,
                 "{path}: expected a header starting with `t,ref_sw_deg`, found `{found}`"
             ),
-            ReferenceFileError::BadLine { path, line, text } => {
-                write!(
-                    f,
-                    "{path}:{line}: expected two finite numbers, found `{text}`"
-                )
-            }
-            ReferenceFileError::TimeNotIncreasing { path, line } => {
-                write!(f, "{path}:{line}: time must increase strictly")
-            }
+            ReferenceFileError::MissingSample { path, line } => write!(
+                f,
+                "{path}: line {line}: `ref_sw_deg` is nan; a reference cannot have missing \
+                 samples"
+            ),
             ReferenceFileError::TooShort { path } => {
                 write!(f, "{path}: needs at least two samples")
             }
@@ -201,57 +193,35 @@ impl std::error::Error for ReferenceFileError {}
 
 /// A track profile from a CSV with columns `t,ref_sw_deg` (any sampling, further columns
 /// ignored, `#` comments skipped; a full project log works too), resampled to 100 Hz by linear
-/// interpolation from `t = 0` (the first sample is held before its time).
+/// interpolation from `t = 0` (the first sample is held before its time). Read by the log
+/// reader (`logfmt::Table`), so plain or gzip, time strictly increasing, values within their
+/// physical bounds, every error with file and line.
 pub fn track_from_csv(path: &Path) -> Result<Vec<f64>, ReferenceFileError> {
     let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| ReferenceFileError::Io {
-        path: name.clone(),
-        source,
+    let table = Table::load(path, "t").map_err(|e| match e.root() {
+        LogError::MissingNamedColumn { found_header, .. } => ReferenceFileError::Header {
+            path: name.clone(),
+            found: found_header.clone(),
+        },
+        _ => ReferenceFileError::Log(e),
     })?;
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
-    let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
-    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-    if cols.len() < 2 || cols[0] != "t" || cols[1] != "ref_sw_deg" {
+    if table.names.len() < 2 || table.names[0] != "t" || table.names[1] != "ref_sw_deg" {
         return Err(ReferenceFileError::Header {
             path: name,
-            found: header.to_string(),
+            found: table.names.join(","),
         });
     }
-    let mut t = Vec::new();
-    let mut r = Vec::new();
-    for (i, line) in lines {
-        let mut fields = line.split(',').map(str::trim);
-        let parse = |s: Option<&str>| {
-            s.and_then(|s| s.parse::<f64>().ok())
-                .filter(|v| v.is_finite())
-        };
-        match (parse(fields.next()), parse(fields.next())) {
-            (Some(ti), Some(ri)) => {
-                if t.last().is_some_and(|&last| ti <= last) {
-                    return Err(ReferenceFileError::TimeNotIncreasing {
-                        path: name,
-                        line: i + 1,
-                    });
-                }
-                t.push(ti);
-                r.push(ri);
-            }
-            _ => {
-                return Err(ReferenceFileError::BadLine {
-                    path: name,
-                    line: i + 1,
-                    text: line.to_string(),
-                });
-            }
-        }
+    let (t, r) = (&table.columns[0], &table.columns[1]);
+    if let Some(row) = r.iter().position(|v| v.is_nan()) {
+        return Err(ReferenceFileError::MissingSample {
+            path: name,
+            line: table.lines[row],
+        });
     }
     if t.len() < 2 {
         return Err(ReferenceFileError::TooShort { path: name });
     }
-    Ok(resample_to_reference_rate(&t, &r))
+    Ok(resample_to_reference_rate(t, r))
 }
 
 /// Linear interpolation of `(t, y)` onto the 100 Hz grid from 0 to the last time.
@@ -341,7 +311,7 @@ mod tests {
         let p = dir.path().join("bad.csv");
         std::fs::write(&p, "t,ref_sw_deg\n0,1\n0.01,oops\n").unwrap();
         let e = track_from_csv(&p).unwrap_err().to_string();
-        assert!(e.contains(":3:") && e.contains("oops"), "{e}");
+        assert!(e.contains("bad.csv: line 3") && e.contains("oops"), "{e}");
         std::fs::write(&p, "time,angle\n0,1\n").unwrap();
         assert!(matches!(
             track_from_csv(&p),
@@ -350,7 +320,13 @@ mod tests {
         std::fs::write(&p, "t,ref_sw_deg\n0,1\n0,2\n").unwrap();
         assert!(matches!(
             track_from_csv(&p),
-            Err(ReferenceFileError::TimeNotIncreasing { line: 3, .. })
+            Err(ReferenceFileError::Log(e))
+                if matches!(e.root(), LogError::NonMonotonicTime { line: 3, .. })
+        ));
+        std::fs::write(&p, "t,ref_sw_deg\n0,1\n0.01,nan\n").unwrap();
+        assert!(matches!(
+            track_from_csv(&p),
+            Err(ReferenceFileError::MissingSample { line: 3, .. })
         ));
         std::fs::write(&p, "# from the MPC\nt,ref_sw_deg,extra\n0,1,9\n0.02,3,9\n").unwrap();
         assert_eq!(track_from_csv(&p).unwrap(), vec![1.0, 2.0, 3.0]);

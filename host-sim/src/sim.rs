@@ -56,6 +56,10 @@ pub struct RunConfig {
     pub supply_v: f64,
     /// Log rate, Hz; must divide the 2 kHz position-loop rate. 0 = no log (benchmarks).
     pub log_rate_hz: u32,
+    /// The current guard (README, "Current guard"): the voltage clamp that keeps the current
+    /// predicted at the end of each period within the limit. `false` runs without it, to see
+    /// the overshoot it prevents; it replaces an undocumented environment switch.
+    pub current_guard: bool,
     pub controller: Controller,
     /// What the log's angle columns hold (the control loop is not affected).
     pub logged_angles: LoggedAngles,
@@ -85,6 +89,7 @@ impl Default for RunConfig {
             log_rate_hz: 1000,
             controller: Controller::Paper,
             logged_angles: LoggedAngles::Sensors,
+            current_guard: true,
         }
     }
 }
@@ -204,9 +209,6 @@ pub fn run_tapped(
             c.set_anti_windup(cfg.anti_windup);
             c.set_winding(cfg.plant.ra as f32, cfg.plant.la as f32);
             c.set_voltage_limit(Volts(cfg.supply_v as f32));
-            if std::env::var("X_NOGUARD").is_ok() {
-                c.set_winding(f32::NAN, 0.0);
-            }
             SteeringController::Paper(c)
         }
         Controller::Ecu => {
@@ -217,6 +219,10 @@ pub fn run_tapped(
             SteeringController::Ecu(c)
         }
     };
+    if !cfg.current_guard {
+        // The guard needs the winding model; a winding it refuses (NaN) leaves it off.
+        cascade.set_winding(f32::NAN, 0.0);
+    }
     let encoder = ColumnEncoder { zero_raw: 0 };
 
     plant.set_at_rest(first.to_radians());

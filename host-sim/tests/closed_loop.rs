@@ -164,3 +164,27 @@ fn higher_supply_raises_the_speed_limited_bandwidth() {
     };
     assert!(run(&Sweep::PAPER.samples(), &bad).is_err());
 }
+
+/// The current guard holds the sweep's peak within the 20 A limit (README: 19.95 A); without
+/// it, the PI following a set-point that jumps by 20 A every 0.5 ms overshoots. The switch is
+/// a typed option (`--no-current-guard`), no longer an environment variable.
+#[test]
+fn the_current_guard_keeps_the_peak_within_the_limit_and_can_be_switched_off() {
+    let sweep = host_sim::scenario::Sweep::PAPER.samples();
+    let guarded = host_sim::sim::run(&sweep, &paper()).unwrap().summary;
+    let free = host_sim::sim::run(
+        &sweep,
+        &RunConfig {
+            current_guard: false,
+            ..paper()
+        },
+    )
+    .unwrap()
+    .summary;
+    assert!(guarded.max_current_a <= 20.0, "{}", guarded.max_current_a);
+    assert!(
+        free.max_current_a > 20.0,
+        "without the guard the peak is {} A",
+        free.max_current_a
+    );
+}

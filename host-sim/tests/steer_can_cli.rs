@@ -5,9 +5,12 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
+/// The simulated ECU at CPU speed (`--fast`, a global option, so it may go last): the tests
+/// would otherwise wait for the wall clock.
 fn steer_can(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_steer-can"))
         .args(args)
+        .arg("--fast")
         .stdin(Stdio::null())
         .output()
         .unwrap()
@@ -115,6 +118,50 @@ fn send_without_finish_leaves_the_ecu_to_time_out() {
     assert!(out.contains("reference 0x100"), "own frames counted: {out}");
 }
 
+/// The README's order (`send step --as-state driving`, options after the profile and the
+/// global ones last) works as well as the order above; piped stderr has no progress redraws.
+#[test]
+fn options_after_the_subcommand_work_and_piped_progress_stays_quiet() {
+    let o = steer_can(&[
+        "send",
+        "step",
+        "--as-state",
+        "driving",
+        "--amplitude-deg",
+        "2",
+        "--iface",
+        "sim",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    let column = number_after(&out, "ECU        column");
+    assert!((column - 2.0).abs() < 0.5, "column {column} deg: {out}");
+    let err = stderr(&o);
+    assert!(!err.contains('\r'), "progress redraws in a pipe: {err:?}");
+    assert!(
+        err.lines().all(|l| !l.trim().is_empty()),
+        "blank lines: {err:?}"
+    );
+}
+
+/// Without `--fast` the simulated ECU keeps to the wall clock: half a second of monitoring
+/// takes half a second, and shows the same 100 Hz traffic.
+#[test]
+fn the_simulation_follows_the_wall_clock_unless_fast() {
+    let started = std::time::Instant::now();
+    let o = Command::new(env!("CARGO_BIN_EXE_steer-can"))
+        .args(["--iface", "sim", "monitor", "--duration-s", "0.5"])
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let wall = started.elapsed().as_secs_f64();
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Virtual time may lead the wall clock by one 10 ms status period (WallPaced::LEAD_US).
+    assert!(wall >= 0.49, "0.5 s of the simulated bus took {wall:.3} s");
+    assert!(stdout(&o).contains("status 0x101"), "{}", stdout(&o));
+    assert!(stdout(&o).contains("100.0 Hz"), "{}", stdout(&o));
+}
+
 #[test]
 fn send_needs_the_as_state_said() {
     let o = steer_can(&["--iface", "sim", "send", "sine"]);
@@ -141,7 +188,9 @@ fn campaign_sweep_writes_a_log_that_convert_reproduces_from_the_recording() {
         out.contains("completed: 1001 profile samples sent"),
         "{out}"
     );
-    assert!(stderr(&o).contains("100 %"), "progress bar");
+    // Piped, as here, there is no progress bar: it redraws a line, so it is drawn only on a
+    // terminal (issue 13).
+    assert!(!stderr(&o).contains('\r'), "progress bar in a pipe");
     let recording = dir.path().join("sweep.csv.candump");
     assert!(recording.exists());
     let converted = dir.path().join("converted.csv");

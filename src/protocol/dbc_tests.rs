@@ -2,6 +2,8 @@
 //! start bit, length, byte order, sign, factor and offset gives what the Rust decoder gives.
 
 use super::*;
+use crate::faults::Fault;
+use crate::steering::EcuState;
 use can_dbc::{ByteOrder, Dbc, Message, MessageId, Signal, ValueDescription, ValueType};
 use proptest::prelude::*;
 
@@ -130,6 +132,67 @@ fn reference_range_and_as_state_table_agree() {
             .iter()
             .all(|v| matches!(v, ValueDescription::Signal { .. }))
     );
+}
+
+/// The README's worked CRC example, byte for byte, is what the codec sends: reference,
+/// counter 1, AS Driving, 12.34 deg. The ID goes into the CRC low byte first (0x00, 0x01);
+/// high byte first would give 0x71.
+#[test]
+fn readme_crc_example_is_what_the_codec_sends() {
+    let cfg = ProtocolConfig::DEFAULT;
+    let frame = cfg.encode_reference(&Reference {
+        angle: SteeringDeg(12.34),
+        as_state: AsState::Driving,
+        counter: AliveCounter::new(1).unwrap(),
+        clear_faults: false,
+    });
+    assert_eq!(frame.id().raw(), 0x100);
+    assert_eq!(frame.data(), [0x3C, 0x21, 0xD2, 0x04, 0, 0, 0, 0]);
+    let payload: [u8; 8] = frame.data().try_into().unwrap();
+    assert_eq!(frame_crc(frame.id(), &payload), 0x3C);
+    let ids_high_first = super::crc::crc8_autosar([0x01u8, 0x00].iter().chain(&payload[1..]));
+    assert_eq!(ids_high_first, 0x71);
+}
+
+/// cantools and SavvyCAN show these names; every state the firmware can report has one, and
+/// every name is the state's own.
+#[test]
+fn ecu_state_table_names_every_state_code() {
+    let dbc = dbc();
+    let status = message(&dbc, "SteeringStatus");
+    let table = dbc
+        .value_descriptions_for_signal(status.id, "STA_EcuState")
+        .expect("a value table for STA_EcuState");
+    let mut named = std::collections::BTreeSet::new();
+    for entry in table {
+        let code = u8::try_from(entry.id).unwrap();
+        let state = EcuState::from_code(code).expect("a defined ECU state");
+        assert_eq!(format!("{state:?}"), entry.description);
+        named.insert(code);
+    }
+    let defined: std::collections::BTreeSet<u8> = (0..=u8::MAX)
+        .filter(|&c| EcuState::from_code(c).is_some())
+        .collect();
+    assert_eq!(named, defined, "every state code named, no other");
+}
+
+/// The fault field's table: 0 is "None", each single bit is its fault's name.
+#[test]
+fn fault_table_names_each_fault_bit() {
+    let dbc = dbc();
+    let status = message(&dbc, "SteeringStatus");
+    let table = dbc
+        .value_descriptions_for_signal(status.id, "STA_Faults")
+        .expect("a value table for STA_Faults");
+    let mut expected: Vec<(u64, String)> = vec![(0, "None".to_string())];
+    for fault in Fault::ALL {
+        expected.push((1u64 << fault.bit(), format!("{fault:?}")));
+    }
+    let found: Vec<(u64, String)> = table
+        .iter()
+        .map(|e| (u64::try_from(e.id).unwrap(), e.description.clone()))
+        .collect();
+    assert_eq!(found, expected);
 }
 
 proptest! {

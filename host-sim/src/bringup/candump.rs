@@ -20,7 +20,21 @@ pub struct CandumpFile {
     pub frames: Vec<Stamped>,
     /// Lines that are valid candump but not classic 11-bit data frames.
     pub skipped: usize,
+    /// Frames dropped because they were stamped more than [`BACKWARDS_TOLERANCE_S`] before the
+    /// latest frame kept, and the line of the first of them.
+    pub dropped_backwards: usize,
+    pub first_dropped_line: Option<usize>,
 }
+
+/// How far a frame may be stamped before the one read just before it and still be kept (at the
+/// later time). One socket's stamps never go back, but a file merged from two captures can
+/// jitter by a little; a frame a second back is out of place, and clamping it would move it
+/// and everything it carries, so it is dropped and counted instead.
+pub const BACKWARDS_TOLERANCE_S: f64 = 1e-3;
+
+/// The latest time stamp a candump line may carry: year 2286 in Unix time. `candump -l` writes
+/// Unix time; a stamp beyond this is garbage, and it would leave every later frame "before" it.
+pub const LATEST_STAMP_S: f64 = 1e10;
 
 /// One parsed line.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -43,6 +57,11 @@ fn parse_line(line: &str) -> Result<Line, String> {
         .ok()
         .filter(|t: &f64| t.is_finite())
         .ok_or_else(|| format!("time stamp `{seconds}` is not a number of seconds"))?;
+    if !(0.0..=LATEST_STAMP_S).contains(&t_s) {
+        return Err(format!(
+            "time stamp `{seconds}` is not a Unix time in seconds (0 to {LATEST_STAMP_S:e})"
+        ));
+    }
     let _iface = parts
         .next()
         .ok_or_else(|| "missing interface name after the time stamp".to_string())?;
@@ -86,20 +105,48 @@ fn parse_line(line: &str) -> Result<Line, String> {
     Ok(Line::Frame { t_s, frame })
 }
 
-/// Reads a candump log; blank lines are skipped, anything else malformed is an error naming
+/// Reads a candump log, plain or gzip-compressed (recognised by content, so `.candump.gz`
+/// works); blank lines are skipped, anything else malformed is an error naming the file and
 /// the line.
 pub fn read(path: &Path) -> Result<CandumpFile, BringupError> {
     let file = std::fs::File::open(path).map_err(|source| BringupError::Io {
         context: format!("cannot open candump file {}", path.display()),
         source,
     })?;
-    read_from(std::io::BufReader::new(file), path)
+    let mut reader = std::io::BufReader::new(file);
+    let is_gzip = reader
+        .fill_buf()
+        .map_err(|source| BringupError::Io {
+            context: format!("cannot read candump file {}", path.display()),
+            source,
+        })?
+        .starts_with(&[0x1f, 0x8b]);
+    if is_gzip {
+        let unpacked = std::io::BufReader::new(flate2::read::MultiGzDecoder::new(reader));
+        read_from(unpacked, path).map_err(|e| match e {
+            BringupError::Io { context, source }
+                if source.kind() == std::io::ErrorKind::UnexpectedEof =>
+            {
+                BringupError::Io {
+                    context: format!(
+                        "{context}: truncated gzip (the file ends before its compressed data \
+                         does)"
+                    ),
+                    source,
+                }
+            }
+            e => e,
+        })
+    } else {
+        read_from(reader, path)
+    }
 }
 
 /// As [`read`], from any reader; `path` names it in errors.
 pub fn read_from(reader: impl BufRead, path: &Path) -> Result<CandumpFile, BringupError> {
     let mut out = CandumpFile::default();
     let mut first: Option<f64> = None;
+    let mut latest_s = f64::NEG_INFINITY;
     let mut last_us = 0u64;
     for (i, line) in reader.lines().enumerate() {
         let line_no = i + 1;
@@ -118,14 +165,16 @@ pub fn read_from(reader: impl BufRead, path: &Path) -> Result<CandumpFile, Bring
         match parse_line(&line).map_err(err)? {
             Line::NotOurs => out.skipped += 1,
             Line::Frame { t_s, frame } => {
+                if t_s < latest_s - BACKWARDS_TOLERANCE_S {
+                    out.dropped_backwards += 1;
+                    out.first_dropped_line.get_or_insert(line_no);
+                    continue;
+                }
+                latest_s = latest_s.max(t_s);
                 let t0 = *first.get_or_insert(t_s);
                 let rel = t_s - t0;
-                if rel < -1e-6 {
-                    return Err(err(format!(
-                        "time stamp {t_s:.6} s is before the first line's {t0:.6} s"
-                    )));
-                }
-                // Round to the µs the file carries; never go backwards (equal stamps are fine).
+                // Round to the µs the file carries; never go backwards (equal stamps, and the
+                // small steps back within the tolerance, take the latest time).
                 let t_us = ((rel.max(0.0) * 1e6).round() as u64).max(last_us);
                 last_us = t_us;
                 out.frames.push(Stamped { t_us, frame });
@@ -252,6 +301,36 @@ mod tests {
                 "{bad}"
             );
         }
+    }
+
+    #[test]
+    fn absurd_time_stamps_are_refused_with_their_line() {
+        for stamp in ["1e300", "-5.0", "2e10"] {
+            let text = format!("(1.0) can0 101#00\n({stamp}) can0 101#01\n");
+            match parse(&text) {
+                Err(BringupError::Candump { line, message, .. }) => {
+                    assert_eq!(line, 2, "{stamp}");
+                    assert!(message.contains(stamp), "{message}");
+                }
+                other => panic!("{stamp}: {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn frames_stamped_back_are_dropped_and_counted_not_moved() {
+        let text = "(10.000) can0 101#00\n(10.010) can0 101#01\n(9.020) can0 101#02\n\
+                    (10.0095) can0 101#03\n(10.030) can0 101#04\n";
+        let f = parse(text).unwrap();
+        assert_eq!(f.dropped_backwards, 1);
+        assert_eq!(f.first_dropped_line, Some(3));
+        let kept: Vec<(u64, u8)> = f
+            .frames
+            .iter()
+            .map(|s| (s.t_us, s.frame.data()[0]))
+            .collect();
+        // Half a millisecond back is within the tolerance: kept, at the latest time.
+        assert_eq!(kept, [(0, 0), (10_000, 1), (10_000, 3), (30_000, 4)]);
     }
 
     #[test]

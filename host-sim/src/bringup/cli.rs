@@ -36,6 +36,10 @@ pub struct Cli {
     /// The EPOS4's CANopen node ID.
     #[arg(long, global = true, default_value_t = 1)]
     pub node: u8,
+    /// With `--iface sim`: run as fast as the CPU allows instead of in step with the wall
+    /// clock (tests, quick rehearsals).
+    #[arg(long, global = true)]
+    pub fast: bool,
     /// With `--iface sim`: inject a fault at a time, KIND@SECONDS (encoder, overcurrent, epos).
     #[arg(long, global = true, hide = true, value_name = "KIND@S")]
     pub sim_inject: Option<String>,
@@ -67,10 +71,11 @@ pub enum Command {
     /// Send a reference profile at 100 Hz (counter, CRC) in the AS state you name.
     Send {
         /// The AS state the frames claim: off, ready, driving, finished, emergency, manual.
-        #[arg(long, value_parser = parse_as_state)]
+        /// Accepted before or after the profile's name.
+        #[arg(long, global = true, value_parser = parse_as_state)]
         as_state: Option<AsState>,
         /// Stop sending at the end instead of 0.2 s of AS Finished (to see the timeout fault).
-        #[arg(long)]
+        #[arg(long, global = true)]
         no_finish: bool,
         #[command(subcommand)]
         profile: SendProfile,
@@ -82,6 +87,7 @@ pub enum Command {
     },
     /// Record the bus to a candump file (can-utils `-l` format).
     Record {
+        /// The candump file to write.
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
         /// Stop after this long, s (default: until Ctrl-C).
@@ -111,19 +117,25 @@ pub enum EposCommand {
 pub enum SendProfile {
     /// A step at the wheel (sent as a ramp at the ECU's 400 deg/s).
     Step {
+        /// Height of the step at the steering wheel, deg.
         #[arg(long, default_value_t = 2.0, value_name = "DEG")]
         amplitude_deg: f64,
+        /// When the step starts, s after the first frame.
         #[arg(long, default_value_t = 0.5, value_name = "S")]
         at_s: f64,
+        /// Length of the whole profile, s.
         #[arg(long, default_value_t = 2.0, value_name = "S")]
         duration_s: f64,
     },
     /// A sine at the wheel.
     Sine {
+        /// Amplitude at the steering wheel, deg.
         #[arg(long, default_value_t = 2.0, value_name = "DEG")]
         amplitude_deg: f64,
+        /// Frequency, Hz.
         #[arg(long, default_value_t = 1.0, value_name = "HZ")]
         freq_hz: f64,
+        /// Length of the profile, s.
         #[arg(long, default_value_t = 5.0, value_name = "S")]
         duration_s: f64,
     },
@@ -138,18 +150,23 @@ pub enum SendProfile {
 
 #[derive(Args, Debug, Clone)]
 pub struct SweepArgs {
+    /// Amplitude of the chirp at the steering wheel, deg.
     #[arg(long, default_value_t = 10.0, value_name = "DEG")]
     pub amplitude_deg: f64,
+    /// Frequency at the start, Hz.
     #[arg(long, default_value_t = 0.0, value_name = "HZ")]
     pub f_start_hz: f64,
+    /// Frequency at the end, Hz.
     #[arg(long, default_value_t = 10.0, value_name = "HZ")]
     pub f_end_hz: f64,
+    /// Length of the chirp, s.
     #[arg(long, default_value_t = 10.0, value_name = "S")]
     pub duration_s: f64,
 }
 
 #[derive(Args, Debug, Clone)]
 pub struct TrackArgs {
+    /// The profile, CSV `t,ref_sw_deg` (plain or gzip); the built-in 120 s one without it.
     #[arg(long, value_name = "CSV")]
     pub csv: Option<PathBuf>,
 }
@@ -224,7 +241,10 @@ fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
             let at_s: f64 = at.parse().map_err(|_| bad())?;
             sim.inject_at((at_s * 1e6) as u64, injection);
         }
-        return Ok(Box::new(sim));
+        if cli.fast {
+            return Ok(Box::new(sim));
+        }
+        return Ok(Box::new(super::WallPaced::new(sim)));
     }
     #[cfg(target_os = "linux")]
     {
@@ -324,8 +344,24 @@ fn to_sweep(a: &SweepArgs) -> Sweep {
 
 fn convert(path: &Path, out: &Path, dec: &Decoder, all_rows: bool) -> Result<(), BringupError> {
     let file = candump::read(path)?;
+    if file.dropped_backwards > 0 {
+        eprintln!(
+            "steer-can: warning: {}: {} frames stamped more than {} ms before the frame read \
+             before them were dropped (the first at line {})",
+            path.display(),
+            file.dropped_backwards,
+            candump::BACKWARDS_TOLERANCE_S * 1e3,
+            file.first_dropped_line.unwrap_or(0)
+        );
+    }
     let rows = if all_rows { Rows::All } else { Rows::Active };
-    let built = logbuild::build(&file.frames, dec, rows)?;
+    // The log builder knows frames, not files: name the file the frames came from.
+    let built = logbuild::build(&file.frames, dec, rows).map_err(|e| match e {
+        BringupError::Log { reason } => BringupError::Log {
+            reason: format!("{}: {reason}", path.display()),
+        },
+        e => e,
+    })?;
     campaign::save_log(&built.log, out)?;
     say!(
         "{}: {} frames ({} skipped: not classic 11-bit data), {} references, {} invalid frames",
@@ -433,17 +469,17 @@ fn record(
         if let Some(e) = err {
             return Err(io(e));
         }
-        eprint!(
-            "\rrecording {}: {n} frames, {:.1} s",
+        crate::out::progress_line(format_args!(
+            "recording {}: {n} frames, {:.1} s",
             out.display(),
             (t.now_us() - start) as f64 * 1e-6
-        );
+        ));
         if end.is_some_and(|e| t.now_us() >= e) || stop.load(Ordering::SeqCst) {
             break;
         }
     }
     w.flush().map_err(io)?;
-    eprintln!();
+    crate::out::progress_end();
     say!("{n} frames written to {}", out.display());
     say!("{}", m.summary().trim_end());
     Ok(())
@@ -458,8 +494,8 @@ fn progress(l: &Live, profile_s: f64) {
     let width = 24;
     let filled = (share * width as f64).round() as usize;
     let err = l.ref_deg - l.column_deg;
-    eprint!(
-        "\r[{}{}] {:3.0} % {:>7}  t {:6.2} s / {:.1} s  ref {:+7.2} deg  column {:+7.2} deg  \
+    crate::out::progress_line(format_args!(
+        "[{}{}] {:3.0} % {:>7}  t {:6.2} s / {:.1} s  ref {:+7.2} deg  column {:+7.2} deg  \
          error {:+6.2} deg  current {:+6.2} A ",
         "#".repeat(filled),
         "-".repeat(width - filled),
@@ -471,7 +507,7 @@ fn progress(l: &Live, profile_s: f64) {
         l.column_deg,
         err,
         l.current_a
-    );
+    ));
 }
 
 fn confirm(text: &str) -> Result<(), BringupError> {
@@ -533,7 +569,7 @@ fn campaign_cmd(
     };
     let profile_s = c.profile.duration_s();
     let run = c.run(t, dec, &ready, |l| progress(l, profile_s))?;
-    eprintln!();
+    crate::out::progress_end();
     let record_path = args.record.clone().unwrap_or_else(|| {
         let mut p = args.out.clone().into_os_string();
         p.push(".candump");
@@ -656,15 +692,15 @@ fn send(
             .map(|(_, s)| (f64::from(s.angle.0), f64::from(s.current.0), s.faults))
             .unwrap_or((f64::NAN, f64::NAN, 0));
         if i % 10 == 9 || i + 1 == n {
-            eprint!(
-                "\r{:5.2} s  ref {angle:+7.2} deg  column {column:+7.2} deg  current {current:+6.2} A  faults: {} ",
+            crate::out::progress_line(format_args!(
+                "{:5.2} s  ref {angle:+7.2} deg  column {column:+7.2} deg  current {current:+6.2} A  faults: {} ",
                 (i + 1) as f64 / profile::RATE_HZ,
                 faults_in_words(faults)
-            );
+            ));
         }
         next = next.max(t.now_us()) + PERIOD_US as u64;
     }
-    eprintln!();
+    crate::out::progress_end();
     if finish && as_state.actuator_may_be_powered() {
         // Leave the drive disabled rather than timing out: 0.2 s of AS Finished.
         for _ in 0..20 {
@@ -690,4 +726,68 @@ fn send(
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// Every option and argument of every subcommand says what it is in `--help`.
+    #[test]
+    fn every_option_has_help_text() {
+        fn walk(cmd: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for arg in cmd.get_arguments() {
+                let builtin = matches!(arg.get_id().as_str(), "help" | "version");
+                if !builtin && !arg.is_hide_set() && arg.get_help().is_none() {
+                    missing.push(format!("{path} --{}", arg.get_id()));
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                walk(sub, &format!("{path} {}", sub.get_name()), missing);
+            }
+        }
+        let mut missing = Vec::new();
+        walk(&Cli::command(), "steer-can", &mut missing);
+        assert!(missing.is_empty(), "no help text: {missing:?}");
+    }
+
+    /// The global options and the AS state are accepted before or after the subcommand.
+    #[test]
+    fn global_options_are_accepted_anywhere() {
+        let parse = |args: &[&str]| Cli::try_parse_from(args).map_err(|e| e.to_string());
+        let late = parse(&[
+            "steer-can",
+            "send",
+            "step",
+            "--as-state",
+            "driving",
+            "--iface",
+            "sim",
+            "--node",
+            "3",
+        ])
+        .unwrap();
+        let early = parse(&[
+            "steer-can",
+            "--iface",
+            "sim",
+            "--node",
+            "3",
+            "send",
+            "--as-state",
+            "driving",
+            "step",
+        ])
+        .unwrap();
+        for cli in [late, early] {
+            assert_eq!((cli.iface.as_str(), cli.node), ("sim", 3));
+            match cli.command {
+                Command::Send { as_state, .. } => assert_eq!(as_state, Some(AsState::Driving)),
+                other => panic!("{other:?}"),
+            }
+        }
+        let epos = parse(&["steer-can", "epos", "check", "--iface", "sim"]).unwrap();
+        assert_eq!(epos.iface, "sim");
+    }
 }

@@ -152,3 +152,66 @@ pub fn pump(
     }
     Ok(false)
 }
+
+/// A simulated transport held to the wall clock: its virtual time never runs more than
+/// [`WallPaced::LEAD_US`] ahead of the time since it was opened, so `steer-can --iface sim`
+/// behaves like the car in time (a `record` or `monitor` without `--duration-s` runs for as
+/// long as it is left running, not as fast as the CPU allows). `--fast` leaves it out.
+#[derive(Debug)]
+pub struct WallPaced<T> {
+    inner: T,
+    opened: std::time::Instant,
+}
+
+impl<T: Transport> WallPaced<T> {
+    /// How far virtual time may run ahead of the wall clock: one status period, so frames come
+    /// out in 10 ms bursts at most.
+    pub const LEAD_US: u64 = 10_000;
+
+    pub fn new(inner: T) -> Self {
+        WallPaced {
+            inner,
+            opened: std::time::Instant::now(),
+        }
+    }
+
+    fn wall_us(&self) -> u64 {
+        u64::try_from(self.opened.elapsed().as_micros()).unwrap_or(u64::MAX)
+    }
+}
+
+impl<T: Transport> Clock for WallPaced<T> {
+    fn now_us(&self) -> u64 {
+        self.inner.now_us()
+    }
+}
+
+impl<T: Transport> Transport for WallPaced<T> {
+    fn send(&mut self, frame: &Frame) -> Result<(), BringupError> {
+        self.inner.send(frame)
+    }
+
+    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, BringupError> {
+        loop {
+            let horizon = self.wall_us().saturating_add(Self::LEAD_US);
+            if let Some(rx) = self.inner.recv_until(deadline_us.min(horizon))? {
+                return Ok(Some(rx));
+            }
+            let now = self.inner.now_us();
+            if now >= deadline_us {
+                return Ok(None);
+            }
+            // Ahead of the wall clock: wait for it, in steps short enough for Ctrl-C.
+            let ahead = now.saturating_sub(self.wall_us());
+            std::thread::sleep(std::time::Duration::from_micros(ahead.clamp(100, 20_000)));
+        }
+    }
+
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+
+    fn epoch_s(&self) -> f64 {
+        self.inner.epoch_s()
+    }
+}

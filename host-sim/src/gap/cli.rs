@@ -17,7 +17,7 @@ pub struct GapArgs {
     #[arg(long, value_name = "LOG2")]
     pub validate: Option<PathBuf>,
     /// Rig file (JSON, see host-sim/rigs/); `paper` (default) and `emps` are built in.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "paper|emps|FILE")]
     pub rig: Option<PathBuf>,
     /// Refit Table 4 to LOG first (`identify`) and diagnose against that model.
     #[arg(long)]
@@ -29,10 +29,10 @@ pub struct GapArgs {
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
     /// Candidate effects, comma-separated (default: the four core ones).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_name = "LIST")]
     pub effects: Vec<String>,
     /// Worker threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// selftest: number of cases.
     #[arg(long, default_value_t = 50)]
@@ -56,8 +56,19 @@ pub struct IdentifyArgs {
     /// LM iterations.
     #[arg(long, default_value_t = 12)]
     pub iterations: usize,
+    /// Write the fitted parameters as JSON.
     #[arg(long, value_name = "PATH")]
     pub json: Option<PathBuf>,
+}
+
+/// A log on the rig's grid; what the reader had to fill in (missing samples) goes to stderr, so
+/// the figures are never computed on a repaired log without a word.
+fn load_log(rig: &Rig, path: &Path) -> Result<super::Record> {
+    let (record, notes) = rig.load_record_noting(path)?;
+    for note in notes {
+        eprintln!("warning: {note}");
+    }
+    Ok(record)
 }
 
 fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
@@ -102,9 +113,9 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         Some(p) => Rig::load(p)?,
         None => Rig::paper(),
     };
-    let rec = rig.load_record(&args.log)?;
+    let rec = load_log(&rig, &args.log)?;
     let val = match &args.validate {
-        Some(p) => Some(rig.load_record(p)?),
+        Some(p) => Some(load_log(&rig, p)?),
         None => None,
     };
     let opts = options(args, &rig)?;
@@ -193,7 +204,7 @@ pub fn identify(args: &IdentifyArgs) -> Result<()> {
         Some(p) => Rig::load(p)?,
         None => Rig::paper(),
     };
-    let rec = rig.load_record(&args.log)?;
+    let rec = load_log(&rig, &args.log)?;
     let id = super::identify::identify(&rig, &rec, args.iterations, true)?;
     print!("{}", id.summary());
     if let Some(path) = &args.json {

@@ -484,16 +484,16 @@ impl Progress {
             let t = self.total.load(Ordering::Relaxed).max(d);
             let w = 30;
             let f = d * w / t;
-            eprint!(
-                "\rfitting [{}{}] {d}/{t} simulations",
+            crate::out::progress_line(format_args!(
+                "fitting [{}{}] {d}/{t} simulations",
                 "#".repeat(f),
                 " ".repeat(w - f)
-            );
+            ));
         }
     }
     pub fn finish(&self) {
         if self.on {
-            eprintln!();
+            crate::out::progress_end();
         }
     }
     pub fn done(&self) -> usize {
@@ -603,8 +603,10 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             });
             out.push(handle);
         }
+        // A worker that panicked fails the run: dropping its candidates would rank the rest
+        // and print a verdict as if nothing had happened.
         out.into_iter()
-            .flat_map(|h| h.join().unwrap_or_default())
+            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
             .collect()
     });
     for (k, (values, errs, c, evals)) in results {
@@ -681,7 +683,10 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                     })
                 })
                 .collect();
-            handles.into_iter().filter_map(|h| h.join().ok()).collect()
+            handles
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
         });
         let mut best_pair: Option<Candidate> = None;
         for cand in pair_fits {

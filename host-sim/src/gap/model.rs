@@ -331,7 +331,7 @@ pub fn replay_downstream(m: &PaperModel, rec: &Record, fx: &Effects) -> Option<V
     Some(out)
 }
 
-/// The EMPS axis under its P-PD controller (README of `shared/data/emps`), on the record's
+/// The EMPS axis under its P-PD controller (`host-sim/data/emps/README.md`), on the record's
 /// 1 kHz grid: `c(k) = kv (kp (qg(k) - q(k)) - dq(k))`, `vir(k) = sat(c(k-1)) + pulse(k)`,
 /// `M q'' = gtau vir - Fv q' - Fc sign(q') - offset`, integrated with `substeps` per sample.
 pub fn simulate_emps(m: &EmpsModel, rec: &Record, fx: &Effects) -> SimOut {

@@ -3,8 +3,8 @@
 //! (`host-sim/rigs/`): the paper's actuator (the default, built in) and EMPS.
 
 use super::Record;
+use crate::logfmt::{LogError, Table, fill_missing};
 use crate::plant::PlantParams;
-use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 use steering_ecu::gains::EposGains;
 
@@ -140,6 +140,13 @@ pub enum RigError {
     TooShort {
         path: String,
     },
+    /// The log could not be read, or breaks the log format's rules (file, line, reason).
+    Log(LogError),
+    /// A required column holds no sample, only `nan`.
+    NoSamples {
+        path: String,
+        column: String,
+    },
 }
 
 impl std::fmt::Display for RigError {
@@ -154,6 +161,10 @@ impl std::fmt::Display for RigError {
                 )
             }
             RigError::TooShort { path } => write!(f, "{path}: fewer than 20 samples"),
+            RigError::Log(e) => write!(f, "{e}"),
+            RigError::NoSamples { path, column } => {
+                write!(f, "{path}: column {column:?} holds no sample, only nan")
+            }
         }
     }
 }
@@ -239,51 +250,68 @@ impl Rig {
 
     /// Read a CSV (or .csv.gz) log with the rig's columns onto the rig's grid.
     pub fn load_record(&self, path: &Path) -> Result<Record, RigError> {
+        self.load_record_noting(path).map(|(record, _)| record)
+    }
+
+    /// As [`Rig::load_record`], with a note for each column whose missing samples (`nan`) were
+    /// filled, for the caller to show. The file is read and checked by the project's log reader
+    /// (`logfmt::Table`): time strictly increasing, values within physical bounds, errors with
+    /// file and line.
+    pub fn load_record_noting(&self, path: &Path) -> Result<(Record, Vec<String>), RigError> {
         let name = path.display().to_string();
-        let file = std::fs::File::open(path).map_err(|source| RigError::Io {
-            path: name.clone(),
-            source,
-        })?;
-        let mut raw = BufReader::new(file);
-        let gz = raw
-            .fill_buf()
-            .map(|b| b.starts_with(&[0x1f, 0x8b]))
-            .unwrap_or(false);
-        let reader: Box<dyn Read> = if gz {
-            Box::new(flate2::read::GzDecoder::new(raw))
-        } else {
-            Box::new(raw)
+        let table = Table::load(path, &self.columns.time).map_err(RigError::Log)?;
+        let mut notes = Vec::new();
+        // Missing samples are filled so that no NaN reaches the simulation and the costs; a
+        // required column with no sample at all is refused, an optional one is left out.
+        let mut col = |c: &str, required: bool| -> Result<Option<Vec<f64>>, RigError> {
+            let Some(values) = table.column(c) else {
+                return if required {
+                    Err(RigError::MissingColumn {
+                        path: name.clone(),
+                        column: c.to_string(),
+                    })
+                } else {
+                    Ok(None)
+                };
+            };
+            let mut values = values.to_vec();
+            match fill_missing(&mut values) {
+                Some(0) => {}
+                Some(n) => notes.push(format!(
+                    "{name}: column `{c}`: {n} missing samples (nan) of {} filled by linear \
+                     interpolation between their neighbours",
+                    values.len()
+                )),
+                None if required && !values.is_empty() => {
+                    return Err(RigError::NoSamples {
+                        path: name.clone(),
+                        column: c.to_string(),
+                    });
+                }
+                None if !values.is_empty() => {
+                    notes.push(format!("{name}: column `{c}` is all nan; left out"));
+                    return Ok(None);
+                }
+                None => {}
+            }
+            Ok(Some(values))
         };
-        let table = read_csv(BufReader::new(reader)).map_err(|message| RigError::Parse {
-            path: name.clone(),
-            message,
-        })?;
-        let col = |c: &str| -> Result<Vec<f64>, RigError> {
-            table
-                .iter()
-                .find(|(h, _)| h == c)
-                .map(|(_, v)| v.clone())
-                .ok_or(RigError::MissingColumn {
-                    path: name.clone(),
-                    column: c.to_string(),
-                })
-        };
-        let t = col(&self.columns.time)?;
-        if t.len() < 20 {
-            return Err(RigError::TooShort { path: name });
-        }
-        let reference = col(&self.columns.reference)?;
-        let output = col(&self.columns.output)?;
-        let effort = col(&self.columns.effort)?;
+        let t = col(&self.columns.time, true)?.unwrap_or_default();
+        let reference = col(&self.columns.reference, true)?.unwrap_or_default();
+        let output = col(&self.columns.output, true)?.unwrap_or_default();
+        let effort = col(&self.columns.effort, true)?.unwrap_or_default();
         let motor = match &self.columns.motor {
-            Some(c) => col(c).ok(),
+            Some(c) => col(c, false)?,
             None => None,
         };
         let disturbance = match &self.columns.disturbance {
-            Some(c) => col(c).ok(),
+            Some(c) => col(c, false)?,
             None => None,
         };
-        Ok(match &self.model {
+        if t.len() < 20 {
+            return Err(RigError::TooShort { path: name });
+        }
+        let record = match &self.model {
             RigModel::Paper(m) => {
                 let per = m.plant.motor_per_pinion();
                 let motor_deg = motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
@@ -297,47 +325,7 @@ impl Rig {
                 motor: None,
                 disturbance,
             },
-        })
+        };
+        Ok((record, notes))
     }
-}
-
-/// A CSV with one header row; `#` lines and blank lines skipped.
-fn read_csv(r: impl BufRead) -> Result<Vec<(String, Vec<f64>)>, String> {
-    let mut cols: Vec<(String, Vec<f64>)> = Vec::new();
-    for (n, line) in r.lines().enumerate() {
-        let line = line.map_err(|e| e.to_string())?;
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        if cols.is_empty() {
-            cols = line
-                .split(',')
-                .map(|h| (h.trim().to_string(), Vec::new()))
-                .collect();
-            continue;
-        }
-        let mut count = 0;
-        for (i, field) in line.split(',').enumerate() {
-            let v: f64 = field
-                .trim()
-                .parse()
-                .map_err(|_| format!("line {}: {field:?} is not a number", n + 1))?;
-            if let Some(c) = cols.get_mut(i) {
-                c.1.push(v);
-            }
-            count += 1;
-        }
-        if count != cols.len() {
-            return Err(format!(
-                "line {}: {count} fields, the header has {}",
-                n + 1,
-                cols.len()
-            ));
-        }
-    }
-    if cols.is_empty() {
-        return Err("no header".into());
-    }
-    Ok(cols)
 }

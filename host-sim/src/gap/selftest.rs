@@ -229,7 +229,8 @@ pub fn run(
             .collect();
         handles
             .into_iter()
-            .flat_map(|h| h.join().unwrap_or_default())
+            // A case whose worker panicked fails the selftest rather than leaving the table.
+            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
             .collect()
     });
     results.sort_by_key(|r| r.case.index);

@@ -1,0 +1,431 @@
+//! Issue 13's bad-input table, row by row, through the real binaries: every input has a defined
+//! outcome (handled with a warning, or refused with file, line and reason), never a panic and
+//! never a plausible-looking answer computed from garbage.
+#![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn run(exe: &str, args: &[&str]) -> Output {
+    Command::new(exe)
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap()
+}
+
+fn host_sim(args: &[&str]) -> Output {
+    run(env!("CARGO_BIN_EXE_host-sim"), args)
+}
+
+fn steer_can(args: &[&str]) -> Output {
+    run(env!("CARGO_BIN_EXE_steer-can"), args)
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Refused as the issue asks: a failure exit (not the 101 of a panic), no panic message, and
+/// every piece of `expected` in the error.
+fn assert_refused(o: &Output, expected: &[&str]) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "accepted: {}\n{err}", stdout(o));
+    assert_ne!(o.status.code(), Some(101), "panicked: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for piece in expected {
+        assert!(err.contains(piece), "`{piece}` not in: {err}");
+    }
+}
+
+/// The lines of a log that host-sim itself wrote: a 1.5 s step at 1 kHz, header on line 1.
+fn step_log(dir: &Path) -> Vec<String> {
+    let path = dir.join("step.csv");
+    let o = host_sim(&["step", "--log", s(&path)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::read_to_string(&path)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+fn write_lines(path: &Path, lines: &[String]) {
+    std::fs::write(path, lines.join("\n") + "\n").unwrap();
+}
+
+/// Sets field `column` of file line `line` (1-based, as an editor shows it).
+fn set_field(lines: &mut [String], line: usize, column: usize, value: &str) {
+    let mut fields: Vec<String> = lines[line - 1].split(',').map(str::to_string).collect();
+    fields[column] = value.to_string();
+    lines[line - 1] = fields.join(",");
+}
+
+/// Row 1: `nan` cells (the format's missing-sample marker) on six rows, to `gap`.
+#[test]
+fn gap_fills_nan_cells_says_so_and_prints_finite_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = step_log(dir.path());
+    for line in [40, 41, 42] {
+        set_field(&mut lines, line, 2, "nan"); // sw_deg
+    }
+    for line in [300, 650, 651] {
+        set_field(&mut lines, line, 4, "NaN"); // current_a
+    }
+    let log = dir.path().join("holes.csv");
+    write_lines(&log, &lines);
+    let json = dir.path().join("gap.json");
+    let o = host_sim(&["gap", s(&log), "--threads", "2", "--json", s(&json)]);
+    let (out, err) = (stdout(&o), stderr(&o));
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("holes.csv: column `sw_deg`: 3 missing samples (nan)"),
+        "{err}"
+    );
+    assert!(
+        err.contains("holes.csv: column `current_a`: 3 missing samples (nan)"),
+        "{err}"
+    );
+    // The filled log reads as the clean one does: no NaN or inf that the clean log's report
+    // does not have too (a regime with no time in it has no GoF either way), and a noise floor
+    // of the clean log's order, not the 8.5e23 of a NaN that got through.
+    let clean_log = dir.path().join("step.csv");
+    let clean = host_sim(&["gap", s(&clean_log), "--threads", "2"]);
+    assert!(clean.status.success(), "{}", stderr(&clean));
+    let clean_out = stdout(&clean);
+    for garbage in ["NaN", "inf"] {
+        assert_eq!(
+            out.matches(garbage).count(),
+            clean_out.matches(garbage).count(),
+            "`{garbage}` in the report:\n{out}\nclean:\n{clean_out}"
+        );
+    }
+    let floor = |text: &str| -> f64 {
+        let rest = &text[text.find("noise floor ").unwrap() + "noise floor ".len()..];
+        rest.split(|c: char| c == ';' || c == ')' || c.is_whitespace())
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let (filled, original) = (floor(&out), floor(&clean_out));
+    assert!(
+        filled.is_finite() && (filled - original).abs() <= 0.1 * original,
+        "noise floor {filled} against {original} on the clean log"
+    );
+    // Piped, the progress bar stays off: stderr is one line per event.
+    assert!(!err.contains('\r'), "{err:?}");
+    // serde_json writes a non-finite figure as null.
+    let text = std::fs::read_to_string(&json).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert!(v["baseline"]["gof"].is_f64(), "{}", v["baseline"]);
+}
+
+/// Row 1 again, for `identify`.
+#[test]
+fn identify_fills_nan_cells_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = step_log(dir.path());
+    for line in [100, 500, 900, 901, 902, 1200] {
+        set_field(&mut lines, line, 3, "nan"); // motor_rad
+    }
+    let log = dir.path().join("holes.csv");
+    write_lines(&log, &lines);
+    let o = host_sim(&["identify", s(&log), "--iterations", "1"]);
+    let (out, err) = (stdout(&o), stderr(&o));
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("column `motor_rad`: 6 missing samples (nan)"),
+        "{err}"
+    );
+    assert!(!out.contains("NaN"), "{out}");
+}
+
+/// A column with no sample at all cannot be filled: refused, not diagnosed.
+#[test]
+fn gap_refuses_a_required_column_that_is_all_nan() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = step_log(dir.path());
+    for line in 2..=lines.len() {
+        set_field(&mut lines, line, 4, "nan");
+    }
+    let log = dir.path().join("no_current.csv");
+    write_lines(&log, &lines);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert_refused(&o, &["no_current.csv", "current_a", "only nan"]);
+}
+
+/// Row 2: duplicated time, time going back, and t = 1e300.
+#[test]
+fn gap_refuses_time_that_does_not_increase_with_file_line_and_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines = step_log(dir.path());
+
+    let mut dup = lines.clone();
+    let t_before = dup[99].split(',').next().unwrap().to_string();
+    set_field(&mut dup, 101, 0, &t_before);
+    let log = dir.path().join("dup.csv");
+    write_lines(&log, &dup);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert_refused(&o, &["dup.csv", "line 101", "strictly increase"]);
+
+    let mut back = lines.clone();
+    set_field(&mut back, 700, 0, "0.1");
+    let log = dir.path().join("back.csv");
+    write_lines(&log, &back);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert_refused(&o, &["back.csv", "line 700", "strictly increase"]);
+
+    let mut far = lines;
+    set_field(&mut far, 800, 0, "1e300");
+    let log = dir.path().join("far.csv");
+    write_lines(&log, &far);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert_refused(&o, &["far.csv", "line 800", "column `t`", "physical bound"]);
+}
+
+/// Row 3: a value of 1e300, to `gap` (in any column) and to `track --csv`.
+#[test]
+fn values_beyond_physical_bounds_are_refused_with_their_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines = step_log(dir.path());
+    for (column, name) in [
+        (1, "ref_sw_deg"),
+        (2, "sw_deg"),
+        (3, "motor_rad"),
+        (4, "current_a"),
+    ] {
+        let mut bad = lines.clone();
+        set_field(&mut bad, 321, column, "1e300");
+        let log = dir.path().join(format!("big_{name}.csv"));
+        write_lines(&log, &bad);
+        let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+        let col = format!("column `{name}`");
+        assert_refused(&o, &[s(&log), "line 321", &col, "physical bound"]);
+    }
+
+    let track = dir.path().join("track.csv");
+    std::fs::write(&track, "t,ref_sw_deg\n0,0\n1,1e300\n2,0\n").unwrap();
+    let o = host_sim(&["track", "--csv", s(&track)]);
+    assert_refused(
+        &o,
+        &[
+            "track.csv",
+            "line 3",
+            "column `ref_sw_deg`",
+            "physical bound",
+        ],
+    );
+}
+
+/// Row 3 for `track --csv` with a full project log as the reference: an extra column is
+/// checked too, not skipped over.
+#[test]
+fn track_refuses_a_project_log_with_garbage_in_any_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = step_log(dir.path());
+    set_field(&mut lines, 10, 4, "-1e300");
+    let log = dir.path().join("as_reference.csv");
+    write_lines(&log, &lines);
+    let o = host_sim(&["track", "--csv", s(&log)]);
+    assert_refused(&o, &["as_reference.csv", "line 10", "column `current_a`"]);
+}
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    gz.write_all(bytes).unwrap();
+    gz.finish().unwrap()
+}
+
+/// A 3 s track reference with enough samples that its gzip is several blocks long.
+fn track_text() -> String {
+    let mut text = String::from("t,ref_sw_deg\n");
+    for i in 0..=3000 {
+        let t = i as f64 * 1e-3;
+        text += &format!("{t:.3},{:.6}\n", 5.0 * (2.0 * t).sin());
+    }
+    text
+}
+
+/// Row 5: `track --csv file.csv.gz` is read as gzip; a truncated one is said to be truncated.
+#[test]
+fn track_reads_gzip_and_names_a_truncated_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dir.path().join("ref.csv");
+    let packed = dir.path().join("ref.csv.gz");
+    let text = track_text();
+    std::fs::write(&plain, &text).unwrap();
+    let gz = gzip(text.as_bytes());
+    std::fs::write(&packed, &gz).unwrap();
+    let (a, b) = (dir.path().join("a.json"), dir.path().join("b.json"));
+    let o = host_sim(&["track", "--csv", s(&plain), "--json", s(&a)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = host_sim(&["track", "--csv", s(&packed), "--json", s(&b)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::read_to_string(&a).unwrap(),
+        std::fs::read_to_string(&b).unwrap(),
+        "the same reference, plain or gzip, gives the same run"
+    );
+
+    let cut = dir.path().join("cut.csv.gz");
+    std::fs::write(&cut, &gz[..gz.len() * 2 / 3]).unwrap();
+    let o = host_sim(&["track", "--csv", s(&cut)]);
+    assert_refused(&o, &["cut.csv.gz", "truncated gzip"]);
+    assert!(!stderr(&o).contains("UTF-8"), "{}", stderr(&o));
+}
+
+/// Row 5 for `gap` too, which reads through the same reader.
+#[test]
+fn gap_names_a_truncated_gzip_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines = step_log(dir.path());
+    let gz = gzip((lines.join("\n") + "\n").as_bytes());
+    let cut = dir.path().join("cut.csv.gz");
+    std::fs::write(&cut, &gz[..gz.len() / 2]).unwrap();
+    let o = host_sim(&["gap", s(&cut), "--threads", "2"]);
+    assert_refused(&o, &["cut.csv.gz", "truncated gzip"]);
+}
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+fn ramp_lines() -> Vec<String> {
+    std::fs::read_to_string(fixture("bringup_ramp.candump"))
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+/// Replaces the time stamp of candump line `line` (1-based).
+fn set_stamp(lines: &mut [String], line: usize, stamp: &str) {
+    let rest = lines[line - 1].split_once(' ').unwrap().1.to_string();
+    lines[line - 1] = format!("({stamp}) {rest}");
+}
+
+fn stamp_of(lines: &[String], line: usize) -> f64 {
+    let l = &lines[line - 1];
+    l[1..l.find(')').unwrap()].parse().unwrap()
+}
+
+/// Row 4: `steer-can convert` with a time stamp of 1e300: refused with file and line.
+#[test]
+fn convert_refuses_an_absurd_time_stamp_with_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = ramp_lines();
+    set_stamp(&mut lines, 20, "1e300");
+    let dump = dir.path().join("far.candump");
+    write_lines(&dump, &lines);
+    let out = dir.path().join("far.csv");
+    let o = steer_can(&["convert", s(&dump), "--out", s(&out)]);
+    assert_refused(&o, &["far.candump:20", "1e300", "Unix time"]);
+    assert!(!out.exists(), "no log from a refused file");
+}
+
+/// Row 4: a frame stamped 1 s back is dropped, counted and warned about; the rest converts as
+/// before, nothing moved in time.
+#[test]
+fn convert_drops_a_frame_a_second_back_with_count_and_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = ramp_lines();
+    let line = 25;
+    let back = stamp_of(&lines, line) - 1.0;
+    set_stamp(&mut lines, line, &format!("{back:.6}"));
+    let dump = dir.path().join("back.candump");
+    write_lines(&dump, &lines);
+    let out = dir.path().join("back.csv");
+    let o = steer_can(&["convert", s(&dump), "--out", s(&out)]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("warning: ") && err.contains("back.candump: 1 frames stamped"),
+        "{err}"
+    );
+    assert!(err.contains("dropped (the first at line 25)"), "{err}");
+    let said = stdout(&o);
+    let clean = steer_can(&[
+        "convert",
+        s(&fixture("bringup_ramp.candump")),
+        "--out",
+        s(&dir.path().join("clean.csv")),
+    ]);
+    let frames = |text: &str| -> usize {
+        let after = &text[text.find(": ").unwrap() + 2..];
+        after.split_whitespace().next().unwrap().parse().unwrap()
+    };
+    assert_eq!(frames(&said) + 1, frames(&stdout(&clean)), "{said}");
+}
+
+/// Section 4, and row 5 for candump: `convert` reads `.candump.gz`, and its errors name the
+/// file.
+#[test]
+fn convert_reads_gzip_candump_and_names_the_file_in_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let packed = dir.path().join("ramp.candump.gz");
+    let raw = std::fs::read(fixture("bringup_ramp.candump")).unwrap();
+    std::fs::write(&packed, gzip(&raw)).unwrap();
+    let out = dir.path().join("ramp.csv");
+    let o = steer_can(&["convert", s(&packed), "--out", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::read_to_string(&out).unwrap(),
+        std::fs::read_to_string(fixture("bringup_ramp.csv")).unwrap()
+    );
+
+    let cut = dir.path().join("cut.candump.gz");
+    let gz = gzip(&raw);
+    std::fs::write(&cut, &gz[..gz.len() / 2]).unwrap();
+    let o = steer_can(&["convert", s(&cut), "--out", s(&out)]);
+    assert_refused(&o, &["cut.candump.gz", "truncated gzip"]);
+
+    // A recording without the vehicle's references: the error names the file it read.
+    let ecu_only: Vec<String> = ramp_lines()
+        .into_iter()
+        .filter(|l| !l.contains(" 100#"))
+        .collect();
+    let dump = dir.path().join("ecu_only.candump");
+    write_lines(&dump, &ecu_only);
+    let o = steer_can(&["convert", s(&dump), "--out", s(&out)]);
+    assert_refused(&o, &["ecu_only.candump: no valid reference frame (0x100)"]);
+}
+
+/// Row 1's last clause: a worker thread that fails fails the run. A record with a NaN in it
+/// (what the reader now fills, forced here past the reader) must not come back as a diagnosis
+/// with the failed candidates silently left out.
+#[test]
+fn a_failed_worker_fails_the_diagnosis() {
+    use host_sim::gap::rig::Rig;
+    use host_sim::gap::{Options, diagnose};
+    let dir = tempfile::tempdir().unwrap();
+    step_log(dir.path());
+    let rig = Rig::paper();
+    let mut record = rig.load_record(&dir.path().join("step.csv")).unwrap();
+    for v in &mut record.output[40..46] {
+        *v = f64::NAN;
+    }
+    let opts = Options {
+        threads: 2,
+        ..Options::default()
+    };
+    let outcome = std::panic::catch_unwind(|| diagnose(&rig, &record, None, &opts));
+    match outcome {
+        Err(_) => {}
+        Ok(d) => {
+            // If no worker fails on it, every candidate must still be in the ranking.
+            assert_eq!(d.ranking.len(), opts.effects.len(), "{}", d.summary());
+        }
+    }
+}
