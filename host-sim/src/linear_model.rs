@@ -756,6 +756,20 @@ impl PhysicalLimit {
         }
     }
 
+    /// The same plant driven by a saturated (bang-bang) controller: a current or voltage clipped
+    /// at +-L is at most a square wave, whose fundamental is `4 L / pi`. A chirp's H1 estimate
+    /// reads the fundamental, so this is the upper bound a saturating controller can approach
+    /// (ECU mode at 10 deg is saturated 30 % of the time): 25.5 A and 30.6 V on the paper's
+    /// 20 A / 24 V. It is an upper bound: current and voltage cannot both be square at once.
+    pub fn saturated(&self) -> Self {
+        let k = 4.0 / std::f64::consts::PI;
+        PhysicalLimit {
+            current_limit_a: k * self.current_limit_a,
+            voltage_limit_v: k * self.voltage_limit_v,
+            ..*self
+        }
+    }
+
     /// `(current A, voltage V)` amplitudes per radian of pinion amplitude at `f_hz`.
     pub fn per_pinion_rad(&self, f_hz: f64) -> (f64, f64) {
         let (a, b) = self.params.electromechanical_state_space();

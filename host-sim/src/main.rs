@@ -147,6 +147,13 @@ struct Common {
 
 impl Common {
     fn config(&self) -> Result<RunConfig> {
+        if self.ideal_sensors && self.controller == Controller::Ecu {
+            return Err(
+                "--ideal-sensors applies to paper mode only: ECU mode times the Hall \
+                        edges, so it always runs on the Hall sensors"
+                    .into(),
+            );
+        }
         let plant = match &self.plant {
             None => PlantParams::PAPER,
             Some(path) => match host_sim::gap::rig::Rig::load(path)?.model {
@@ -492,14 +499,24 @@ fn limits_cmd(amplitude_deg: f64, supply_v: f64, json: Option<&Path>) -> Result<
     if !amplitudes.contains(&amplitude_deg) {
         amplitudes.insert(0, amplitude_deg);
     }
+    say!(
+        "  (sinusoidal drive within the limits; saturated drive: a current or voltage clipped at \
+         the limit has a fundamental of up to 4/pi of it, {:.1} A / {:.1} V, which a chirp's H1 \
+         reads)",
+        limit.saturated().current_limit_a,
+        limit.saturated().voltage_limit_v
+    );
     let mut bounds = Vec::new();
+    let hz = |b: Option<f64>| b.map_or("above 50 Hz".to_string(), |b| format!("{b:6.2} Hz"));
     for a in amplitudes {
         let b = limit.bandwidth_bound_hz(a);
-        match b {
-            Some(b) => say!("  {a:5} deg: {b:6.2} Hz"),
-            None => say!("  {a:5} deg: above 50 Hz"),
-        }
-        bounds.push(serde_json::json!({"amplitude_deg": a, "bandwidth_bound_hz": b}));
+        let sat = limit.saturated().bandwidth_bound_hz(a);
+        say!("  {a:5} deg: {} sinusoidal, {} saturated", hz(b), hz(sat));
+        bounds.push(serde_json::json!({
+            "amplitude_deg": a,
+            "bandwidth_bound_hz": b,
+            "saturated_bandwidth_bound_hz": sat,
+        }));
     }
     if let Some(path) = json {
         write_json(
@@ -556,13 +573,21 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
     }
     let limit = physical_limit(&cfg);
     let bound = limit.bandwidth_bound_hz(sweep.amplitude_deg);
+    let saturated = limit.saturated().bandwidth_bound_hz(sweep.amplitude_deg);
+    let hz = |b: Option<f64>| b.map_or("above 50 Hz".to_string(), |b| format!("{b:6.2} Hz"));
     say!(
-        "  physical bound     {}  ({} A / {} V on this plant, any controller: `host-sim limits`); \
-         the bandwidth is {} of it",
-        bound.map_or("above 50 Hz".to_string(), |b| format!("{b:6.2} Hz")),
+        "  physical bound     {}  ({} A / {} V sinusoidal on this plant, any controller: \
+         `host-sim limits`); the bandwidth is {} of it",
+        hz(bound),
         limit.current_limit_a,
         limit.voltage_limit_v,
         share_of_bound(rep.bandwidth_hz, bound)
+    );
+    say!(
+        "  saturated bound    {}  (the same limits as square waves: fundamentals 4/pi higher); \
+         the bandwidth is {} of it",
+        hz(saturated),
+        share_of_bound(rep.bandwidth_hz, saturated)
     );
     // The linear model of the paper cascade (exact sensors, no limits); not for other controllers.
     let analytic = match cfg.controller {
@@ -615,6 +640,7 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
         v["bandwidth_bound_hz"] = serde_json::json!(bound);
         v["bandwidth_share_of_bound"] =
             serde_json::json!(rep.bandwidth_hz.zip(bound).map(|(bw, b)| bw / b));
+        v["saturated_bandwidth_bound_hz"] = serde_json::json!(saturated);
         v["small_signal_bandwidth_bound_hz"] = serde_json::json!(small_bound);
         v["analytic_bandwidth_hz"] = serde_json::json!(analytic.as_ref().and_then(|a| a.1));
         write_json(path, &v)?;
@@ -637,10 +663,12 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
 }
 
 fn sensors_label(common: &Common) -> &'static str {
-    if common.ideal_sensors {
-        "exact motor angle fed back"
-    } else {
-        "paper mode: Hall feedback, 12-bit column encoder"
+    match (common.controller, common.ideal_sensors) {
+        (Controller::Ecu, _) => {
+            "ECU mode: Hall feedback and timing, 12-bit column encoder at 500 Hz"
+        }
+        (Controller::Paper, true) => "paper mode, exact motor angle fed back",
+        (Controller::Paper, false) => "paper mode: Hall feedback, 12-bit column encoder",
     }
 }
 

@@ -2,11 +2,14 @@
 //! README compares with the paper.
 #![allow(clippy::unwrap_used)] // test helpers: a failed unwrap is a failed test
 
+use host_sim::linear_model::{LinearModel, PhysicalLimit};
 use host_sim::logfmt::Log;
+use host_sim::plant::PlantParams;
 use host_sim::report;
 use host_sim::scenario::{self, Sweep};
-use host_sim::sim::{RunConfig, run};
+use host_sim::sim::{Controller, RunConfig, run};
 use steering_ecu::control::AntiWindup;
+use steering_ecu::gains::EposGains;
 
 fn paper() -> RunConfig {
     RunConfig::default()
@@ -81,22 +84,37 @@ fn large_step_recovers_without_windup_overshoot() {
     );
 }
 
+/// Paper mode on the paper's plant is held back by the soft belt, not by the supply: its -3 dB
+/// point is what the linear model of the same loop says (a second method: the lifted discrete
+/// closed loop of `linear_model.rs`, no limits), the same at 1 deg as at 10 deg, and well below
+/// what the 20 A / 24 V allow at 10 deg. (Before the acceleration-feedforward fix of issue 10 it
+/// read 4.27 Hz: the motor ran ahead of its own set-point at the current limit.)
 #[test]
-fn sweep_bandwidth_is_speed_limited_near_the_papers_5_hz() {
+fn paper_mode_bandwidth_is_belt_limited_as_the_linear_model_says() {
     let (big, _) = report::sweep(&Sweep::PAPER, &paper()).unwrap();
     let bw = big
         .bandwidth_hz
         .expect("the 10 deg sweep falls below -3 dB");
-    // Paper: 5 Hz suspended. At 10 deg the 24 V supply caps the speed near 4.9 Hz
-    // (plant-and-control.md), so a figure much above 7 Hz would be unphysical.
-    assert!(bw > 3.5 && bw < 6.0, "bandwidth {bw} Hz");
+    let model = LinearModel::new(PlantParams::PAPER, &EposGains::PAPER).unwrap();
+    let linear = model
+        .bandwidth_hz(report::BANDWIDTH_SEARCH_FROM_HZ, 10.0, 1000)
+        .unwrap();
+    assert!(
+        (bw - linear).abs() < 0.25,
+        "sweep {bw} Hz, linear model {linear} Hz"
+    );
     let small = Sweep {
         amplitude_deg: 1.0,
         ..Sweep::PAPER
     };
     let (small, _) = report::sweep(&small, &paper()).unwrap();
-    let small_bw = small.bandwidth_hz.unwrap_or(f64::INFINITY);
-    assert!(small_bw > bw + 2.0, "small signal {small_bw} Hz vs {bw} Hz");
+    let small_bw = small.bandwidth_hz.unwrap();
+    assert!(
+        (small_bw - bw).abs() < 0.4,
+        "1 deg {small_bw} Hz vs 10 deg {bw} Hz"
+    );
+    let bound = PhysicalLimit::paper().bandwidth_bound_hz(10.0).unwrap();
+    assert!(bw < 0.7 * bound, "{bw} Hz against a bound of {bound} Hz");
 }
 
 #[test]
@@ -145,18 +163,34 @@ fn ideal_sensors_change_little_at_10_deg() {
     assert!((a - b).abs() < 0.3, "Hall {a} Hz vs exact {b} Hz");
 }
 
+/// A charged 7S pack (29.4 V) lifts the bandwidth only where the voltage binds: ECU mode at 10
+/// deg (saturated, near the physical bound), not paper mode (belt-limited, far below it).
 #[test]
-fn higher_supply_raises_the_speed_limited_bandwidth() {
-    // At 10 deg the 24 V limit sets the bandwidth; a charged 7S pack (29.4 V) lifts it.
-    let (at_24, _) = report::sweep(&Sweep::PAPER, &paper()).unwrap();
-    let charged = RunConfig {
-        supply_v: 29.4,
-        ..paper()
+fn higher_supply_raises_the_bandwidth_only_where_the_voltage_binds() {
+    let bandwidth = |controller, supply_v| {
+        let cfg = RunConfig {
+            supply_v,
+            controller,
+            ..paper()
+        };
+        let (rep, _) = report::sweep(&Sweep::PAPER, &cfg).unwrap();
+        assert!(rep.max_voltage_v <= supply_v);
+        rep.bandwidth_hz.unwrap()
     };
-    let (at_29, _) = report::sweep(&Sweep::PAPER, &charged).unwrap();
-    let (a, b) = (at_24.bandwidth_hz.unwrap(), at_29.bandwidth_hz.unwrap());
-    assert!(b > a + 0.3, "24 V: {a} Hz, 29.4 V: {b} Hz");
-    assert!(at_29.max_voltage_v <= 29.4 && at_29.max_voltage_v > 24.0);
+    let (ecu_24, ecu_29) = (
+        bandwidth(Controller::Ecu, 24.0),
+        bandwidth(Controller::Ecu, 29.4),
+    );
+    let (paper_24, paper_29) = (
+        bandwidth(Controller::Paper, 24.0),
+        bandwidth(Controller::Paper, 29.4),
+    );
+    println!("ECU mode {ecu_24} -> {ecu_29} Hz, paper mode {paper_24} -> {paper_29} Hz");
+    assert!(ecu_29 > ecu_24 + 0.3, "ECU mode: {ecu_24} -> {ecu_29} Hz");
+    assert!(
+        (paper_29 - paper_24).abs() < 0.15,
+        "paper mode: {paper_24} -> {paper_29} Hz"
+    );
 
     let bad = RunConfig {
         supply_v: f64::NAN,
