@@ -226,6 +226,12 @@ impl Ecu {
     }
 
     fn apply(&mut self, now_us: u64, out: Output) -> Output {
+        // The enable is judged here, against the demand the drive last got, not only from the
+        // machine's flag: one ECU event may call the machine twice (an encoder sample, then
+        // the tracking check), and the flag is true in the first call only.
+        let mut out = out;
+        out.drive_just_enabled =
+            self.last.demand == DriveDemand::Disabled && out.demand != DriveDemand::Disabled;
         if out.drive_just_enabled {
             // The first reference sample after enabling is the one to track.
             self.reference = None;
@@ -490,5 +496,92 @@ impl Ecu {
             current_mean,
             counter: self.motor_counter,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::Reference;
+    use crate::sensors::hall_from_motor;
+
+    const MS: u64 = 1000;
+
+    /// Sends reference frames with consecutive counters, as the vehicle computer does.
+    struct Vehicle {
+        protocol: ProtocolConfig,
+        counter: AliveCounter,
+    }
+
+    impl Vehicle {
+        fn new() -> Self {
+            Vehicle {
+                protocol: ProtocolConfig::default(),
+                counter: AliveCounter::wrapping(0),
+            }
+        }
+
+        fn frame(&mut self, as_state: AsState, deg: f32, clear_faults: bool) -> Frame {
+            self.counter = self.counter.next();
+            self.protocol.encode_reference(&Reference {
+                angle: SteeringDeg(deg),
+                as_state,
+                counter: self.counter,
+                clear_faults,
+            })
+        }
+
+        fn send(&mut self, ecu: &mut Ecu, now_us: u64, as_state: AsState, deg: f32) -> Output {
+            let f = self.frame(as_state, deg, false);
+            ecu.on_reference_frame(now_us, &f)
+        }
+    }
+
+    /// The Hall count of a motor standing at `deg` at the wheel (power-up at column 0).
+    fn hall_at(deg: f32) -> i32 {
+        let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(deg).into());
+        hall_from_motor(f64::from(motor.0))
+    }
+
+    #[test]
+    fn an_enable_by_an_encoder_sample_resets_the_cascade() {
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        // Tracking 0 deg for 100 ms.
+        let mut t = 0;
+        while t < 100 * MS {
+            let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+            let _ = vehicle.send(&mut ecu, t, AsState::Driving, 0.0);
+            for _ in 0..20 {
+                let _ = ecu.position_tick(0);
+            }
+            t += 10 * MS;
+        }
+        assert_eq!(ecu.output().demand, DriveDemand::Track);
+        // AS Finished: disabled. The driver turns the wheel to 30 deg; the encoder task is
+        // late (no sample for 40 ms, allowed while the drive may not be powered).
+        let _ = vehicle.send(&mut ecu, t, AsState::Finished, 0.0);
+        for k in 1..=50u16 {
+            let deg = 0.6 * f32::from(k);
+            let _ = ecu.position_tick(hall_at(deg));
+            let _ = ecu.on_encoder(t + u64::from(k) * 2 * MS, SteeringDeg(deg));
+        }
+        let hall = hall_at(30.0);
+        t += 140 * MS;
+        // AS Driving with the vehicle already asking for 30 deg: no fresh encoder sample yet.
+        let out = vehicle.send(&mut ecu, t, AsState::Driving, 30.0);
+        assert_eq!(out.demand, DriveDemand::Disabled, "encoder not fresh yet");
+        // The encoder sample is the event that enables the drive.
+        let out = ecu.on_encoder(t + MS, SteeringDeg(30.0));
+        assert_eq!(out.demand, DriveDemand::Track);
+        // The motor is where the vehicle wants it: the loop must not push it anywhere.
+        for k in 0..20 {
+            let current = ecu.position_tick(hall);
+            assert!(
+                current.0.abs() < 1.0,
+                "position tick {k}: {} A with the motor at the reference",
+                current.0
+            );
+        }
     }
 }
