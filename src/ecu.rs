@@ -46,7 +46,7 @@ use crate::canopen::epos4::{Epos4Link, LinkError, Outbox, Phase};
 use crate::gearing::Gearing;
 use crate::paper_mode::Cascade;
 use crate::protocol::{AliveCounter, E2eChecker, E2eVerdict, MotorStatus, ProtocolConfig, Status};
-use crate::sensors::motor_from_hall;
+use crate::sensors::{HALL_COUNTS_PER_REV, hall_from_motor, motor_from_hall};
 use crate::steering::{Config, DriveDemand, Output, SteeringStateMachine};
 use crate::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts};
 
@@ -115,6 +115,11 @@ pub struct Ecu {
     current_seen_us: u64,
     /// The last reference sample the drive was given (wheel deg), for the tracking check.
     reference: Option<SteeringDeg>,
+    /// The motor sensor's count (Hall count in direct mode, EPOS4 increments) that reads as
+    /// column 0, from the column encoder through the gearing ([`Ecu::motor_angle`]). `None`
+    /// until the first column sample with a known motor position; the disagreement check
+    /// waits for it.
+    origin_counts: Option<i32>,
     /// The state machine's over-current threshold (its configuration never changes).
     overcurrent_threshold: Amps,
     motor_counter: AliveCounter,
@@ -156,6 +161,7 @@ impl Ecu {
             last_link_reset_us: None,
             current_seen_us: 0,
             reference: None,
+            origin_counts: None,
             overcurrent_threshold,
             motor_counter: AliveCounter::wrapping(0),
             current_sum: 0.0,
@@ -190,12 +196,71 @@ impl Ecu {
         }
     }
 
-    /// The motor angle the ECU believes: the Hall count of the last position tick (direct) or
-    /// the EPOS4's last position actual.
+    /// The motor angle the ECU believes, aligned to the column (0 = column 0 through the
+    /// gearing): the Hall count of the last position tick (direct) or the EPOS4's last
+    /// position actual, less the origin. NaN while the origin is not known (no column sample
+    /// yet, or the EPOS4 has not reported its position).
     pub fn motor_angle(&self) -> MotorRad {
+        self.aligned_motor().unwrap_or(MotorRad(f32::NAN))
+    }
+
+    /// The motor origin in the drive's own counts (Hall counts or EPOS4 increments), see
+    /// [`Ecu::motor_angle`].
+    pub fn motor_origin_counts(&self) -> Option<i32> {
+        self.origin_counts
+    }
+
+    /// The motor sensor's raw count: the Hall count (it starts at 0 wherever the motor stands
+    /// at power-up), or the EPOS4's position actual once the drive has reported one.
+    fn motor_counts(&self) -> Option<i32> {
         match &self.drive {
-            Drive::Direct(_) => motor_from_hall(self.hall_count),
-            Drive::Epos4(link) => link.motor_position(),
+            Drive::Direct(_) => Some(self.hall_count),
+            Drive::Epos4(link) => link
+                .position_known()
+                .then_some(link.feedback().position_inc),
+        }
+    }
+
+    /// The nearest count of a motor angle, in the drive's unit; `None` if not finite.
+    fn counts_from_motor(&self, motor: MotorRad) -> Option<i32> {
+        match &self.drive {
+            Drive::Direct(_) => motor.is_finite().then(|| {
+                // `hall_from_motor` floors: half a count more rounds to the nearest.
+                let half_count = core::f64::consts::PI / f64::from(HALL_COUNTS_PER_REV);
+                hall_from_motor(f64::from(motor.0) + half_count)
+            }),
+            Drive::Epos4(link) => link.scale().inc_from_motor(motor),
+        }
+    }
+
+    fn motor_from_counts(&self, counts: i32) -> MotorRad {
+        match &self.drive {
+            Drive::Direct(_) => motor_from_hall(counts),
+            Drive::Epos4(link) => link.scale().motor_from_inc(counts),
+        }
+    }
+
+    /// The motor's count relative to the origin: what the cascade and the disagreement check
+    /// see.
+    fn aligned_counts(&self) -> Option<i32> {
+        Some(self.motor_counts()?.saturating_sub(self.origin_counts?))
+    }
+
+    fn aligned_motor(&self) -> Option<MotorRad> {
+        self.aligned_counts().map(|c| self.motor_from_counts(c))
+    }
+
+    /// Takes the motor origin from the last column sample: the motor count now, less the
+    /// count the column's angle reads as through the gearing. Nothing changes while the
+    /// column or the motor position is unknown.
+    fn align_origin(&mut self) {
+        let motor_at_column = self
+            .gearing
+            .motor_from_steering(SteeringRad::from(self.column));
+        if let (Some(counts), Some(column_counts)) =
+            (self.motor_counts(), self.counts_from_motor(motor_at_column))
+        {
+            self.origin_counts = Some(counts.saturating_sub(column_counts));
         }
     }
 
@@ -235,11 +300,16 @@ impl Ecu {
         if out.drive_just_enabled {
             // The first reference sample after enabling is the one to track.
             self.reference = None;
+            // Every enable takes the motor origin from the column encoder afresh: the motor
+            // may have been turned (driver, tyres) while the drive was off, and the Hall
+            // count or the drive's position only ever counted relative steps.
+            self.align_origin();
         }
+        let aligned = self.aligned_counts();
         match &mut self.drive {
             Drive::Direct(cascade) => {
                 if out.drive_just_enabled {
-                    cascade.reset(self.hall_count);
+                    cascade.reset(aligned.unwrap_or(self.hall_count));
                 }
             }
             Drive::Epos4(link) => {
@@ -265,8 +335,14 @@ impl Ecu {
             }
             Drive::Epos4(link) => {
                 let motor = self.gearing.motor_from_steering(SteeringRad::from(angle));
-                // Out of the increment range (impossible within +-90 deg): the target stays.
-                let _ = link.set_target(motor);
+                // The drive counts from where it powered up: its target is the column-derived
+                // angle plus the origin. Not finite, or no origin yet: the target stays (the
+                // link keeps it at the drive's actual position until it is enabled).
+                if let (Some(inc), Some(origin)) =
+                    (link.scale().inc_from_motor(motor), self.origin_counts)
+                {
+                    link.set_target_inc(inc.saturating_add(origin));
+                }
             }
         }
     }
@@ -306,8 +382,17 @@ impl Ecu {
     /// A column-encoder sample, checked against the motor angle of the last position tick.
     pub fn on_encoder(&mut self, now_us: u64, column: SteeringDeg) -> Output {
         self.column = column;
-        let motor = self.motor_angle();
-        let out = self.machine.on_encoder(now_us, column, motor);
+        if self.motor_counts().is_none() {
+            // The EPOS4 restarted (a new origin of its own) or has not reported yet.
+            self.origin_counts = None;
+        }
+        if self.origin_counts.is_none() && column.is_finite() {
+            self.align_origin();
+        }
+        let out = match self.aligned_motor() {
+            Some(motor) => self.machine.on_encoder(now_us, column, motor),
+            None => self.machine.on_column(now_us, column),
+        };
         let out = match (out.demand, self.reference) {
             (DriveDemand::Track | DriveDemand::Hold, Some(reference)) => {
                 self.machine.on_tracking(now_us, reference, column)
@@ -345,7 +430,12 @@ impl Ecu {
         };
         match self.last.demand {
             DriveDemand::Disabled => Amps::ZERO,
-            DriveDemand::Hold | DriveDemand::Track => cascade.position_step(hall_count).current,
+            // The cascade runs in the column-aligned frame; the origin is set on the enable
+            // that switched the drive on, so it is known here.
+            DriveDemand::Hold | DriveDemand::Track => {
+                let aligned = hall_count.saturating_sub(self.origin_counts.unwrap_or(0));
+                cascade.position_step(aligned).current
+            }
         }
     }
 
@@ -503,7 +593,6 @@ impl Ecu {
 mod tests {
     use super::*;
     use crate::protocol::Reference;
-    use crate::sensors::hall_from_motor;
 
     const MS: u64 = 1000;
 

@@ -551,11 +551,28 @@ impl SteeringStateMachine {
         self.output()
     }
 
-    /// A column-encoder sample with the motor angle taken at the same time. `motor` is in the
-    /// cascade's frame (Hall count 0 = column 0, as [`crate::paper_mode::Cascade`] assumes).
-    /// Call only with readings the sensor vouches for; report its errors with
-    /// [`SteeringStateMachine::on_encoder_fault`].
+    /// A column-encoder sample with the motor angle taken at the same time. `motor` is aligned
+    /// to the column (0 = column 0 through the gearing; the ECU takes the origin from the
+    /// column encoder, [`crate::ecu::Ecu::motor_angle`]). Call only with readings the sensor
+    /// vouches for; report its errors with [`SteeringStateMachine::on_encoder_fault`].
     pub fn on_encoder(&mut self, now_us: u64, column: SteeringDeg, motor: MotorRad) -> Output {
+        self.encoder_sample(now_us, column, Some(motor))
+    }
+
+    /// A column-encoder sample while the motor angle is not known (no motor origin yet: the
+    /// EPOS4 has not reported its position). Every check of [`SteeringStateMachine::on_encoder`]
+    /// but the disagreement, which has nothing to compare; a disagreement in progress is
+    /// forgotten (its cause is not shown any more).
+    pub fn on_column(&mut self, now_us: u64, column: SteeringDeg) -> Output {
+        self.encoder_sample(now_us, column, None)
+    }
+
+    fn encoder_sample(
+        &mut self,
+        now_us: u64,
+        column: SteeringDeg,
+        motor: Option<MotorRad>,
+    ) -> Output {
         let now = self.advance(now_us);
         if !column.is_finite() {
             self.previous_column = None;
@@ -566,7 +583,7 @@ impl SteeringStateMachine {
             );
             return self.output();
         }
-        if !motor.is_finite() {
+        if motor.is_some_and(|m| !m.is_finite()) {
             self.raise(
                 now,
                 Fault::Encoder,
@@ -577,8 +594,17 @@ impl SteeringStateMachine {
         self.active.remove(Fault::Encoder);
         self.last_encoder_us = Some(now);
         self.check_jump(now, column.0);
-        let motor_as_column = SteeringDeg::from(self.config.gearing.steering_from_motor(motor));
-        self.check_disagreement(now, column.0 - motor_as_column.0);
+        match motor {
+            Some(motor) => {
+                let motor_as_column =
+                    SteeringDeg::from(self.config.gearing.steering_from_motor(motor));
+                self.check_disagreement(now, column.0 - motor_as_column.0);
+            }
+            None => {
+                self.disagreement_since_us = None;
+                self.active.remove(Fault::EncoderMotorDisagreement);
+            }
+        }
         self.output()
     }
 

@@ -35,7 +35,7 @@ static SERIAL: StdMutex<()> = StdMutex::new(());
 
 const STEP_US: u64 = 50;
 /// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
-const RUNS: usize = 8;
+const RUNS: usize = 24;
 const PERIOD_STEPS: u64 = 10_000 / STEP_US;
 
 fn node() -> NodeId {
@@ -122,6 +122,12 @@ struct Run {
 }
 
 fn run(script: &[Event], faults: RandomFaults, seed: u64) -> Run {
+    run_from(0.0, script, faults, seed)
+}
+
+/// [`run`] with the actuator at rest at `column_deg` when the drive powers up (its position
+/// counts from there, as the real drive's does).
+fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) -> Run {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     MockDriver::get().reset();
     while REFERENCE_FRAMES.try_receive().is_ok() {}
@@ -139,8 +145,15 @@ fn run(script: &[Event], faults: RandomFaults, seed: u64) -> Run {
     let ecu_port = bus.attach();
     let drive_port = bus.attach();
     bus.set_random_faults(faults);
-    let mut sim =
-        Epos4Sim::new(node(), PositionScale::new(config.counts_per_rev).unwrap()).unwrap();
+    let mut sim = Epos4Sim::new_at(
+        node(),
+        PositionScale::new(config.counts_per_rev).unwrap(),
+        column_deg.to_radians(),
+    )
+    .unwrap();
+    if let Ok(mut c) = COLUMN_RAD.lock() {
+        *c = sim.column_rad();
+    }
     // The drive boots before the ECU's link starts: its boot-up message is on the bus first.
     for f in sim.advance(0) {
         bus.send(drive_port, f, 0);
@@ -397,4 +410,29 @@ fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault() {
     }
     eprintln!("{tracked} of 4 lossy runs tracked");
     assert!(tracked >= 2, "only {tracked} of 4 lossy runs tracked");
+}
+
+/// Issue 12 defect 1, EPOS4 mode: the drive's position counts from where the motor stood at
+/// power-up; the CSP target must be the drive's position plus the column-derived offset.
+#[test]
+fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up() {
+    use AsState::*;
+    let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
+    script.extend(repeat(Event::Ref(Driving, 0.0), 101)); // 60-160: 1 s at 0 deg
+    for column_deg in [-30.0, -12.0, 5.0, 15.0, 30.0] {
+        let r = run_from(column_deg, &script, RandomFaults::default(), 5);
+        let s = &r.samples;
+        assert!(
+            s.iter().all(|x| x.faults == 0),
+            "{column_deg}: a fault latched: {:?}",
+            s.iter().find(|x| x.faults != 0)
+        );
+        assert_eq!(s[160].drive, State::OperationEnabled, "{column_deg}");
+        assert!(
+            s[160].column_deg.abs() < 1.0,
+            "power-up at {column_deg} deg: column at {:.2} deg 1 s after AS Driving at 0 deg",
+            s[160].column_deg
+        );
+        assert_eq!(r.refusals, 0);
+    }
 }

@@ -31,7 +31,7 @@ static INJECT: StdMutex<Inject> = StdMutex::new(Inject::None);
 /// One scenario at a time: the mock clock and the queues are shared by the whole binary.
 static SERIAL: StdMutex<()> = StdMutex::new(());
 /// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
-const RUNS: usize = 6;
+const RUNS: usize = 16;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Inject {
@@ -109,6 +109,16 @@ struct Sample {
 /// Runs the tasks for `script.len()` periods of 10 ms; `at_period` may act on the ECU (the
 /// clear request, which has no frame yet).
 fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample> {
+    run_from(0.0, script, at_period)
+}
+
+/// [`run`] with the actuator at rest at `column_deg` at power-up (the Hall count starts at 0
+/// wherever the motor stands, as the real decoder's does).
+fn run_from(
+    column_deg: f64,
+    script: &[Send],
+    at_period: impl Fn(usize, &mut Ecu, u64),
+) -> Vec<Sample> {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     MockDriver::get().reset();
     while REFERENCE_FRAMES.try_receive().is_ok() {}
@@ -122,6 +132,10 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
     let mut plant = LinearPlant::new(PlantParams::PAPER, 50e-6).unwrap();
+    plant.set_at_rest(column_deg.to_radians());
+    if let Ok(mut c) = COLUMN_RAD.lock() {
+        *c = plant.column_rad();
+    }
     let mut counter = AliveCounter::wrapping(0);
     let mut samples = Vec::new();
     let mut fast = FastLoop::new(0, Volts(SUPPLY_V as f32));
@@ -327,6 +341,35 @@ fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
         assert_eq!(s[at].demand, DriveDemand::Disabled, "{name}");
         assert_eq!(s[99].state, EcuState::Faulted, "{name}: stays latched");
         assert!(s[99].current_a.abs() < 0.5, "{name}: current taken to zero");
+    }
+}
+
+/// Issue 12 defect 1: the Hall count starts at 0 wherever the motor stands at power-up, so the
+/// motor's origin must be taken from the column encoder, or the ECU steers to the wrong angle
+/// (or latches the disagreement for good).
+#[test]
+fn the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up() {
+    // 0-9 AS Off, then 1 s of AS Driving at 0 deg.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 101]);
+    for column_deg in [-30.0, -12.0, 5.0, 15.0, 30.0] {
+        let s = run_from(column_deg, &script, |_, _, _| {});
+        assert!(
+            (s[5].column_deg - column_deg).abs() < 0.1,
+            "{column_deg}: the car stands where it was powered up"
+        );
+        assert!(
+            s.iter().all(|x| x.faults == 0),
+            "{column_deg}: a fault latched: {:?}",
+            s.iter().find(|x| x.faults != 0)
+        );
+        let end = s[110];
+        assert_eq!(end.state, EcuState::Tracking, "{column_deg}");
+        assert!(
+            end.column_deg.abs() < 1.0,
+            "power-up at {column_deg} deg: column at {:.2} deg 1 s after AS Driving at 0 deg",
+            end.column_deg
+        );
     }
 }
 

@@ -476,6 +476,8 @@ pub struct Epos4Link {
     /// The one best-effort "disable voltage" after a failure was sent.
     failsafe_sent: bool,
     next_ecu_heartbeat_us: u64,
+    /// See [`Epos4Link::position_known`].
+    position_known: bool,
 }
 
 impl Epos4Link {
@@ -537,6 +539,7 @@ impl Epos4Link {
             power: false,
             failsafe_sent: false,
             next_ecu_heartbeat_us: now_us,
+            position_known: false,
         })
     }
 
@@ -657,6 +660,14 @@ impl Epos4Link {
         self.scale
     }
 
+    /// The drive has reported its position (TPDO1 or the enable walk's read of 0x6064) since
+    /// the link last (re)configured it; until then [`Epos4Link::motor_position`] is a default
+    /// 0, not a measurement. A drive that rebooted counts from a new origin, so a restart of
+    /// the bring-up forgets the position.
+    pub fn position_known(&self) -> bool {
+        self.position_known
+    }
+
     /// The motor angle the drive last reported.
     pub fn motor_position(&self) -> MotorRad {
         self.scale.motor_from_inc(self.feedback.position_inc)
@@ -758,6 +769,7 @@ impl Epos4Link {
             _ => {
                 self.step = 0;
                 self.started = false;
+                self.position_known = false;
                 self.phase = Phase::Configuring { step: 0, total: 0 };
                 self.run_script(now_us, &mut out);
             }
@@ -996,6 +1008,7 @@ impl Epos4Link {
         self.feedback.statusword = statusword;
         self.feedback.position_inc = position;
         self.feedback.updated_us = now_us;
+        self.position_known = true;
         self.missed_tpdos = 0;
         match self.phase {
             Phase::Cyclic | Phase::Disabling | Phase::Standby
@@ -1107,6 +1120,7 @@ impl Epos4Link {
             }
             (EnableStep::ReadPosition, SdoOutcome::Read { value, .. }) => {
                 self.feedback.position_inc = value as i32;
+                self.position_known = true;
                 self.target_inc = value as i32;
                 self.enable_issue(EnableStep::WriteTarget, now_us, out);
             }
