@@ -137,18 +137,22 @@ mod tests {
     use crate::steering::DriveDemand;
     use crate::units::SteeringDeg;
 
-    /// An ECU tracking 5 deg: AS Driving, a fresh reference and encoder sample.
+    /// An ECU tracking 5 deg: AS Driving, a fresh reference and encoder sample; two frames,
+    /// 10 ms apart, so the enable ramp (which starts at the column) has moved toward 5 deg.
     fn tracking_ecu(now_us: u64) -> Ecu {
         let mut ecu = Ecu::paper().unwrap();
-        let frame = ProtocolConfig::default().encode_reference(&Reference {
-            angle: SteeringDeg(5.0),
-            as_state: AsState::Driving,
-            counter: AliveCounter::wrapping(1),
-            clear_faults: false,
-        });
-        let _ = ecu.on_encoder(now_us, SteeringDeg(0.0));
-        let out = ecu.on_reference_frame(now_us, &frame);
-        assert_eq!(out.demand, DriveDemand::Track);
+        for k in 0..2u8 {
+            let t = now_us.saturating_sub(10_000 * u64::from(1 - k));
+            let frame = ProtocolConfig::default().encode_reference(&Reference {
+                angle: SteeringDeg(5.0),
+                as_state: AsState::Driving,
+                counter: AliveCounter::wrapping(1 + k),
+                clear_faults: false,
+            });
+            let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+            let out = ecu.on_reference_frame(t, &frame);
+            assert_eq!(out.demand, DriveDemand::Track);
+        }
         ecu
     }
 

@@ -68,6 +68,15 @@ const PENDING_DEPTH: usize = 4;
 /// What one drive call puts on the bus: the pending demand-change frames and the link's.
 pub type DriveFrames = heapless::Vec<Frame, { PENDING_DEPTH + 4 }>;
 
+/// After every enable the reference given to the drive starts at the measured column and
+/// moves toward the vehicle's reference at most this fast, deg/s at the wheel, until it meets
+/// it. Why 100 deg/s: a third of the motor's 306 deg/s on 24 V, so the cascade follows the
+/// ramp with current to spare (no saturated step, which the paper's loop answers with 20 A),
+/// and slow enough that a driver's hands on the wheel are not struck: 60 deg take 0.6 s.
+/// Fast enough that the wheels are where the vehicle wants them well within the 1 s the
+/// vehicle computer gives the steering in AS Ready.
+pub const ENABLE_RAMP_DPS: f32 = 100.0;
+
 /// Time between automatic resets of a failed EPOS4 link in AS Off, us.
 pub const LINK_RESET_INTERVAL_US: u64 = 1_000_000;
 
@@ -120,6 +129,9 @@ pub struct Ecu {
     /// until the first column sample with a known motor position; the disagreement check
     /// waits for it.
     origin_counts: Option<i32>,
+    /// The enable ramp ([`ENABLE_RAMP_DPS`]): the last angle given to the drive and when;
+    /// `None` once the ramp has met the vehicle's reference.
+    ramp: Option<(SteeringDeg, u64)>,
     /// The state machine's over-current threshold (its configuration never changes).
     overcurrent_threshold: Amps,
     motor_counter: AliveCounter,
@@ -162,6 +174,7 @@ impl Ecu {
             current_seen_us: 0,
             reference: None,
             origin_counts: None,
+            ramp: None,
             overcurrent_threshold,
             motor_counter: AliveCounter::wrapping(0),
             current_sum: 0.0,
@@ -304,6 +317,10 @@ impl Ecu {
             // may have been turned (driver, tyres) while the drive was off, and the Hall
             // count or the drive's position only ever counted relative steps.
             self.align_origin();
+            // ... and the reference starts where the column is. The demand is Track or Hold
+            // only with a fresh, finite column sample; should it not be finite, the ramp
+            // starts at the first reference sample instead (see `push_reference`).
+            self.ramp = Some((self.column, now_us));
         }
         let aligned = self.aligned_counts();
         match &mut self.drive {
@@ -325,7 +342,47 @@ impl Ecu {
         out
     }
 
-    fn push_reference(&mut self, angle: SteeringDeg) {
+    /// The angle the drive is given for the vehicle's `target`: the enable ramp while it
+    /// runs, then the target itself.
+    fn ramped(&mut self, now_us: u64, target: SteeringDeg) -> SteeringDeg {
+        let Some((at, since)) = self.ramp else {
+            return target;
+        };
+        if let Drive::Epos4(link) = &self.drive
+            && link.phase() != Phase::Cyclic
+        {
+            // The EPOS4 is not in Operation enabled yet (the link walks CiA 402 for a few
+            // SDO round trips): the ramp waits at the measured column.
+            self.ramp = Some((self.column, now_us)).filter(|(c, _)| c.is_finite());
+            return self.column;
+        }
+        if !at.is_finite() {
+            self.ramp = None;
+            return target;
+        }
+        // At most one reference period of ramp per sample: a late frame moves the angle no
+        // further than an on-time one, so the interpolated set-point never exceeds the rate.
+        let dt_us = now_us
+            .saturating_sub(since)
+            .min(u64::from(self.protocol.period_us));
+        let max_step = ENABLE_RAMP_DPS * (dt_us as f32 * 1e-6);
+        let gap = target.0 - at.0;
+        // NaN compares false: a non-finite target ends nothing and moves nothing.
+        if gap.abs() <= max_step {
+            self.ramp = None;
+            return target;
+        }
+        let next = if gap.is_finite() {
+            SteeringDeg(at.0 + max_step * gap.signum())
+        } else {
+            at
+        };
+        self.ramp = Some((next, now_us));
+        next
+    }
+
+    fn push_reference(&mut self, now_us: u64, target: SteeringDeg) {
+        let angle = self.ramped(now_us, target);
         self.reference = Some(angle);
         match &mut self.drive {
             // The E2E check already bounds the angle to the cascade's range; a refusal here
@@ -361,7 +418,7 @@ impl Ecu {
                 }
                 let out = self.apply(now_us, out);
                 if out.demand == DriveDemand::Track {
-                    self.push_reference(reference.angle);
+                    self.push_reference(now_us, reference.angle);
                 }
                 return out;
             }
@@ -672,5 +729,56 @@ mod tests {
                 current.0
             );
         }
+    }
+
+    /// The set-point the direct cascade holds, wheel deg.
+    fn setpoint_deg(ecu: &Ecu) -> f32 {
+        let Drive::Direct(cascade) = ecu.drive() else {
+            panic!("direct mode")
+        };
+        let motor = cascade.setpoint().position;
+        SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0
+    }
+
+    #[test]
+    fn an_enable_ramps_from_the_measured_column_to_a_far_reference() {
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+        // The vehicle asks for 60 deg in the very first AS Driving frame.
+        let mut t = MS;
+        let out = vehicle.send(&mut ecu, t, AsState::Driving, 60.0);
+        assert!(out.drive_just_enabled);
+        let mut previous = 0.0f32;
+        let mut first_current = None;
+        // The motor and the column follow the set-point of the previous period (a drive that
+        // keeps up; the tracking check would otherwise see a jammed actuator).
+        let mut column = 0.0f32;
+        for _period in 0..100 {
+            for _ in 0..20 {
+                let current = ecu.position_tick(hall_at(column));
+                first_current.get_or_insert(current.0);
+                let setpoint = setpoint_deg(&ecu);
+                // One position tick is 0.5 ms: the ramp allows 0.05 deg per tick.
+                let step = setpoint - previous;
+                assert!(
+                    step.abs() <= ENABLE_RAMP_DPS * 0.5e-3 + 1e-3,
+                    "set-point moved {step} deg in one tick at {t} us"
+                );
+                previous = setpoint;
+            }
+            t += 10 * MS;
+            column = previous;
+            let _ = ecu.on_encoder(t, SteeringDeg(column));
+            let _ = vehicle.send(&mut ecu, t, AsState::Driving, 60.0);
+        }
+        assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output());
+        let first = first_current.unwrap_or(f32::NAN);
+        assert!(
+            first.abs() < 2.0,
+            "{first} A on the first tick after the enable"
+        );
+        // 60 deg at the documented rate take 0.6 s: the set-point is there within 1 s.
+        assert!((previous - 60.0).abs() < 0.1, "set-point at {previous} deg");
     }
 }

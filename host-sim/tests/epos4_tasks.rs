@@ -15,9 +15,10 @@ use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
 use steering_ecu::canopen::NodeId;
 use steering_ecu::canopen::cia402::State;
-use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale};
+use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale, od};
 use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
+use steering_ecu::gearing::Gearing;
 use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
 use steering_ecu::sensors::ColumnEncoder;
@@ -112,6 +113,9 @@ struct Sample {
     current_a: f64,
     /// The last status frame's current, A (what the vehicle computer sees).
     status_current_a: f32,
+    /// The drive's target position (0x607A), deg at the wheel from the drive's power-up
+    /// position.
+    target_deg: f64,
 }
 
 struct Run {
@@ -185,6 +189,13 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
                     column_deg: sim.column_rad().to_degrees(),
                     current_a: sim.current_a(),
                     status_current_a: status_current,
+                    target_deg: {
+                        let inc = sim.object(od::TARGET_POSITION).unwrap_or(0) as i32;
+                        let motor = PositionScale::new(config.counts_per_rev)
+                            .unwrap()
+                            .motor_from_inc(inc);
+                        f64::from(SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0)
+                    },
                 });
                 let (as_state, deg, clear) = match script.get(period) {
                     Some(Event::Ref(a, d)) => (*a, *d, false),
@@ -435,4 +446,33 @@ fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up() {
         );
         assert_eq!(r.refusals, 0);
     }
+}
+
+/// Issue 12 defect 3, EPOS4 mode: the first cyclic target is the drive's own position, and the
+/// target then ramps to a far reference at the documented rate instead of stepping to it.
+#[test]
+fn an_epos4_enable_ramps_the_target_from_the_measured_position() {
+    use AsState::*;
+    // The vehicle asks for 60 deg all along (the protocol's rate rule judges the frames, not
+    // the AS state); the column stands at 0 until AS Driving.
+    let mut script = repeat(Event::Ref(Off, 60.0), 60); // 0-59: bring-up, power off
+    script.extend(repeat(Event::Ref(Driving, 60.0), 100)); // 60-159
+    let r = run(&script, RandomFaults::default(), 6);
+    let s = &r.samples;
+    let per_period = f64::from(steering_ecu::ecu::ENABLE_RAMP_DPS) * 0.010;
+    for p in 60..s.len() {
+        let step = s[p].target_deg - s[p - 1].target_deg;
+        assert!(
+            step.abs() <= per_period + 0.2,
+            "period {p}: the target moved {step:.2} deg in 10 ms ({:?} -> {:?})",
+            s[p - 1].drive,
+            s[p].drive
+        );
+    }
+    assert!(
+        (s[159].column_deg - 60.0).abs() < 1.0,
+        "column at {:.2} deg",
+        s[159].column_deg
+    );
+    assert!(s.iter().all(|x| x.faults == 0));
 }
