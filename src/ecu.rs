@@ -113,6 +113,8 @@ pub struct Ecu {
     column: SteeringDeg,
     current: Amps,
     clear_refusals: u16,
+    /// The clear bit of the last valid reference frame: a request is its rising edge.
+    clear_bit: bool,
     /// EPOS4 mode: frames from demand changes, for the next drive call.
     pending: heapless::Vec<Frame, PENDING_DEPTH>,
     /// Pending frames that did not fit (saturating); the link's supervision covers a lost one.
@@ -166,6 +168,7 @@ impl Ecu {
             column: SteeringDeg(f32::NAN),
             current: Amps(f32::NAN),
             clear_refusals: 0,
+            clear_bit: false,
             pending: heapless::Vec::new(),
             pending_overflow: 0,
             link_up: false,
@@ -298,7 +301,8 @@ impl Ecu {
         &self.e2e
     }
 
-    /// Clear requests (reference frame bit) the state machine refused, saturating.
+    /// Clear requests (rising edges of the reference frame's bit) the state machine refused,
+    /// saturating.
     pub fn clear_refusals(&self) -> u16 {
         self.clear_refusals
     }
@@ -409,7 +413,11 @@ impl Ecu {
         let out = match self.e2e.check(frame, now_us) {
             E2eVerdict::Valid(reference) => {
                 let mut out = self.machine.on_reference(now_us, reference.as_state);
-                if reference.clear_faults {
+                // A request is the bit's rising edge: a bit held (a stuck button, a vehicle
+                // computer that sets it every period) clears once, not every period.
+                let request = reference.clear_faults && !self.clear_bit;
+                self.clear_bit = reference.clear_faults;
+                if request {
                     // Refused unless AS Off with every cause gone; the faults stay then.
                     if self.machine.request_clear_faults(now_us).is_err() {
                         self.clear_refusals = self.clear_refusals.saturating_add(1);
@@ -780,5 +788,33 @@ mod tests {
         );
         // 60 deg at the documented rate take 0.6 s: the set-point is there within 1 s.
         assert!((previous - 60.0).abs() < 0.1, "set-point at {previous} deg");
+    }
+
+    #[test]
+    fn only_the_rising_edge_of_the_clear_bit_clears() {
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+        let _ = vehicle.send(&mut ecu, 0, AsState::Off, 0.0);
+        // A fault latches while the vehicle holds the clear bit; a valid frame then proves
+        // the bus is back (the cause is gone).
+        let f = vehicle.frame(AsState::Off, 0.0, true);
+        let _ = ecu.on_reference_frame(10 * MS, &f);
+        let _ = ecu.on_bus_off(15 * MS, 255);
+        for k in 2..10 {
+            let _ = ecu.on_encoder(k * 10 * MS, SteeringDeg(0.0));
+            let f = vehicle.frame(AsState::Off, 0.0, true);
+            let out = ecu.on_reference_frame(k * 10 * MS, &f);
+            assert!(
+                out.faults.contains(crate::faults::Fault::BusOff),
+                "cleared by a held bit at {k}0 ms"
+            );
+        }
+        // Released, then set again: that is a request.
+        let _ = ecu.on_encoder(100 * MS, SteeringDeg(0.0));
+        let _ = vehicle.send(&mut ecu, 100 * MS, AsState::Off, 0.0);
+        let f = vehicle.frame(AsState::Off, 0.0, true);
+        let out = ecu.on_reference_frame(110 * MS, &f);
+        assert!(out.faults.is_empty(), "{:?}", out.faults);
     }
 }

@@ -731,7 +731,8 @@ impl SteeringStateMachine {
 
     /// Clears every latched fault, if the AS state is Off (from a frame within the reference
     /// timeout) and the cause of each is gone; otherwise nothing changes. The fault log is
-    /// kept. The next call's [`Output`] shows the result.
+    /// kept, and no detector's timer or count is reset. The next call's [`Output`] shows the
+    /// result. The ECU calls it on the rising edge of the frame's clear bit only.
     pub fn request_clear_faults(&mut self, now_us: u64) -> Result<(), ClearRefused> {
         let now = self.advance(now_us);
         let stale = self
@@ -747,10 +748,10 @@ impl SteeringStateMachine {
         if !still.is_empty() {
             return Err(ClearRefused::CauseActive { faults: still });
         }
+        // Only the latch goes: the detectors' timers and counts are left alone. A cause that
+        // is gone has already reset them; one that is building up (not latched yet) must keep
+        // building, or a vehicle asking to clear every period would mask it for ever.
         self.latched = FaultSet::EMPTY;
-        self.overcurrent_count = 0;
-        self.disagreement_since_us = None;
-        self.tracking_since = None;
         Ok(())
     }
 
@@ -1296,6 +1297,29 @@ mod tests {
         let _ = sm.on_tracking(t, SteeringDeg(90.0), SteeringDeg(0.0));
         let _ = sm.on_not_tracking(t + MS);
         assert!(sm.active.is_empty());
+    }
+
+    #[test]
+    fn a_clear_request_never_resets_a_detector() {
+        // AS Off, the vehicle asks to clear every 10 ms (the reference period) while the column
+        // and the motor disagree by 20 deg and the current reads 30 A: both must latch.
+        let mut sm = SteeringStateMachine::default();
+        let mut t = 0;
+        for _ in 0..400 {
+            let _ = sm.on_reference(t, AsState::Off);
+            for j in 0..5 {
+                let _ = sm.on_encoder(t + j * 2 * MS, SteeringDeg(20.0), motor_at(0.0));
+            }
+            let _ = sm.on_current(t, Amps(30.0));
+            let _ = sm.request_clear_faults(t);
+            t += 10 * MS;
+        }
+        let faults = sm.faults();
+        assert!(
+            faults.contains(Fault::EncoderMotorDisagreement),
+            "{faults:?}"
+        );
+        assert!(faults.contains(Fault::OverCurrent), "{faults:?}");
     }
 
     #[test]
