@@ -435,6 +435,15 @@ impl Ecu {
                 .machine
                 .on_invalid_frames_fault(now_us, u16::from(invalid_in_row)),
         };
+        // A dropped frame whose ID, length, CRC and counter were good carries the AS state
+        // the vehicle did send: any state that does not allow power disables at once, whatever
+        // the angle. (Ready/Driving from it refresh nothing: the reference was not accepted.)
+        let out = match self.e2e.authentic_as_state() {
+            Some(as_state) if !as_state.actuator_may_be_powered() => {
+                self.machine.on_as_state(now_us, as_state)
+            }
+            _ => out,
+        };
         self.apply(now_us, out)
     }
 
@@ -816,5 +825,25 @@ mod tests {
         let f = vehicle.frame(AsState::Off, 0.0, true);
         let out = ecu.on_reference_frame(110 * MS, &f);
         assert!(out.faults.is_empty(), "{:?}", out.faults);
+    }
+
+    #[test]
+    fn an_emergency_frame_disables_at_once_whatever_its_angle() {
+        // 60 deg fails the rate rule after 0 deg, 95 deg the range rule: the frame is still
+        // authentic and in sequence, so its AS Emergency holds.
+        for deg in [60.0, 95.0, -95.0] {
+            let mut ecu = Ecu::paper().unwrap();
+            let mut vehicle = Vehicle::new();
+            let mut t = 0;
+            for _ in 0..5 {
+                let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                let _ = vehicle.send(&mut ecu, t, AsState::Driving, 0.0);
+                t += 10 * MS;
+            }
+            assert_eq!(ecu.output().demand, DriveDemand::Track);
+            let out = vehicle.send(&mut ecu, t, AsState::Emergency, deg);
+            assert_eq!(out.demand, DriveDemand::Disabled, "{deg} deg");
+            assert_eq!(out.state, crate::steering::EcuState::Emergency, "{deg} deg");
+        }
     }
 }

@@ -27,6 +27,10 @@
 //! reference is plausible again, and a burst of late frames still gets one period each.
 //! A receive time earlier than the last accepted one counts as one period.
 //!
+//! A frame that fails only the angle rules (range, rate) still carries an AS state the sender
+//! did send: [`E2eChecker::authentic_as_state`] gives it, so AS Emergency in such a frame still
+//! disables the drive at once.
+//!
 //! The checker does not latch the fault: a valid frame ends the invalid run. Latching, and
 //! what the drive does meanwhile, is the state machine's decision.
 
@@ -120,6 +124,8 @@ pub struct E2eChecker {
     last_accepted: Option<Accepted>,
     invalid_in_row: u8,
     drops: DropCounters,
+    /// See [`E2eChecker::authentic_as_state`].
+    authentic_as_state: Option<AsState>,
 }
 
 impl E2eChecker {
@@ -138,6 +144,7 @@ impl E2eChecker {
             last_accepted: None,
             invalid_in_row: 0,
             drops: DropCounters::default(),
+            authentic_as_state: None,
         })
     }
 
@@ -147,6 +154,7 @@ impl E2eChecker {
 
     /// Checks one received frame, `now_us` its receive time (any monotonic microsecond clock).
     pub fn check(&mut self, frame: &Frame, now_us: u64) -> E2eVerdict {
+        self.authentic_as_state = None;
         match self.rules(frame, now_us) {
             Ok(reference) => {
                 self.invalid_in_row = 0;
@@ -198,6 +206,9 @@ impl E2eChecker {
 
         let code = field(word, 12, 4) as u8;
         let as_state = AsState::from_code(code).ok_or(FrameError::UnknownAsState { code })?;
+        // ID, length, CRC and counter are good: the sender did send this AS state now, even if
+        // the angle fails a rule below.
+        self.authentic_as_state = Some(as_state);
 
         let angle_raw = field(word, 16, 16) as u16 as i16;
         let clear_faults = field(word, 32, 1) == 1;
@@ -236,6 +247,14 @@ impl E2eChecker {
         let dt_us = elapsed_us.max(u64::from(self.config.period_us));
         // Saturate: past a few seconds the budget exceeds any possible step anyway.
         self.max_rate_raw_per_s.saturating_mul(dt_us) / 1_000_000
+    }
+
+    /// The AS state of the frame just checked, if that frame was authentic and in sequence
+    /// (ID, length, CRC and counter good, known AS code), whether or not its angle passed the
+    /// range and rate rules; `None` otherwise. The angle of such a frame is not used, but its
+    /// AS state is the vehicle's word: AS Emergency in it must disable the drive at once.
+    pub fn authentic_as_state(&self) -> Option<AsState> {
+        self.authentic_as_state
     }
 
     /// Frames dropped so far, per reason.
