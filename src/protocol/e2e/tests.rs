@@ -238,8 +238,32 @@ fn early_frames_get_one_period_of_budget() {
     let mut c = checker();
     assert!(is_valid(c.check(&frame(0, DRIVING, 0), 0)));
     assert!(is_valid(c.check(&frame(1, DRIVING, 400), 2_000)));
-    // A clock that steps back counts as one period too.
-    assert!(is_valid(c.check(&frame(2, DRIVING, 800), 1_000)));
+    // ... but one period of budget in all, not one per early frame: a second full step that
+    // early (here with a clock that steps back) is dropped.
+    assert!(matches!(
+        error(c.check(&frame(2, DRIVING, 800), 1_000)),
+        Some(FrameError::RateTooHigh { .. })
+    ));
+}
+
+#[test]
+fn frames_sent_faster_than_the_period_cannot_beat_the_rate_limit() {
+    // Issue 12 defect 6: 20 frames 1 ms apart, +4 deg each (a period's full step each).
+    let mut c = checker();
+    let mut accepted = 0i16;
+    for n in 0..20u8 {
+        let angle = i16::from(n) * 400;
+        if is_valid(c.check(&frame(n, DRIVING, angle), u64::from(n) * 1_000)) {
+            accepted = angle;
+        }
+    }
+    // 400 deg/s over the 19 ms, plus one period's 4 deg: 11.6 deg at most.
+    assert!(
+        accepted <= 1160,
+        "moved {} deg in 19 ms",
+        f32::from(accepted) / 100.0
+    );
+    assert_eq!(c.early_frames(), 19, "every frame but the first came early");
 }
 
 #[test]
