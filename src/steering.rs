@@ -76,7 +76,7 @@
 //! | fault | detection | cause gone when |
 //! |---|---|---|
 //! | `ReferenceTimeout` | AS Ready/Driving and no valid frame for 130 ms (30 + hold), counted from the later of the last frame and the moment the AS state allowed power | a valid frame is fresh |
-//! | `InvalidFrames` | the protocol layer reports too many invalid frames in a row | a valid frame arrives |
+//! | `InvalidFrames` | the protocol layer's invalid-frame score (+1 invalid, -1 valid) reaches its limit | a valid frame arrives |
 //! | `Encoder` | the sensor reports an error, a reading is not finite, or no sample for 30 ms while AS Ready/Driving | a finite sample arrives |
 //! | `EncoderJump` | column moved more than `1 deg + 1000 deg/s x dt` since the previous sample | the next sample is plausible |
 //! | `EncoderMotorDisagreement` | \|column - motor / gear ratio\| > 15 deg for 20 ms | a sample within the window |
@@ -544,7 +544,8 @@ impl SteeringStateMachine {
         self.output()
     }
 
-    /// The protocol layer saw `count` invalid reference frames in a row, above its limit.
+    /// The protocol layer's invalid-frame score reached its limit (`count`, see
+    /// [`crate::protocol::e2e`]).
     pub fn on_invalid_frames_fault(&mut self, now_us: u64, count: u16) -> Output {
         let now = self.advance(now_us);
         self.raise(now, Fault::InvalidFrames, i32::from(count));

@@ -14,10 +14,10 @@
 //!       |  no: Stale / Counter -> invalid
 //!  AS code? |angle| <= max? step <= budget? --no--> invalid
 //!       |
-//!  Valid(Reference): last accepted := (angle, now_us), invalid run := 0
+//!  Valid(Reference): last accepted := (angle, now_us), invalid score -= 1 (not below 0)
 //!
-//!  invalid: counted per reason (saturating u16), invalid run += 1 (saturating u8);
-//!           run >= max_invalid_in_row -> Fault, else Dropped.
+//!  invalid: counted per reason (saturating u16), invalid score += 1 (at most the limit);
+//!           score >= max_invalid_in_row -> Fault, else Dropped.
 //! ```
 //!
 //! The first frame after [`E2eChecker::new`] or [`E2eChecker::reset`] may carry any counter,
@@ -38,7 +38,9 @@
 //! did send: [`E2eChecker::authentic_as_state`] gives it, so AS Emergency in such a frame still
 //! disables the drive at once.
 //!
-//! The checker does not latch the fault: a valid frame ends the invalid run. Latching, and
+//! The checker does not latch the fault: a valid frame lowers the invalid score (as panda's
+//! wrong-counter count: a good frame decrements, it does not zero, so 4 bad frames in every
+//! 5 still reach the limit). Latching, and
 //! what the drive does meanwhile, is the state machine's decision.
 
 use super::{
@@ -178,14 +180,22 @@ impl E2eChecker {
         self.authentic_as_state = None;
         match self.rules(frame, now_us) {
             Ok(reference) => {
-                self.invalid_in_row = 0;
+                // A good frame takes one off, it does not wipe the score (panda's wrong-counter
+                // count): a link that loses or repeats most frames reaches the limit even with
+                // good frames in between.
+                self.invalid_in_row = self.invalid_in_row.saturating_sub(1);
                 E2eVerdict::Valid(reference)
             }
             Err(error) => {
                 self.drops.count(&error);
                 if !matches!(error, FrameError::WrongId { .. }) {
-                    // Saturate: the run length only needs to say "at least the limit".
-                    self.invalid_in_row = self.invalid_in_row.saturating_add(1);
+                    // Saturate at the limit: the score only needs to say "at least the limit",
+                    // and one good frame after a long burst then leaves the fault verdict
+                    // (the state machine keeps the latch).
+                    self.invalid_in_row = self
+                        .invalid_in_row
+                        .saturating_add(1)
+                        .min(self.config.max_invalid_in_row);
                 }
                 let invalid_in_row = self.invalid_in_row;
                 if self.in_fault() {
@@ -321,7 +331,8 @@ impl E2eChecker {
         &self.drops
     }
 
-    /// Invalid reference frames since the last valid one (saturating at 255).
+    /// The invalid-frame score: +1 per invalid frame, -1 per valid one, between 0 and the
+    /// configured limit (in a clean run of invalid frames, their number).
     pub fn invalid_in_row(&self) -> u8 {
         self.invalid_in_row
     }

@@ -101,7 +101,8 @@
 //! one lost frame costs the next frame too (it is dropped as a jump, and re-synchronises the
 //! counter), and the one after is accepted again. The rate budget is 400 deg/s times the time
 //! since the last accepted reference, at least one 10 ms period: 4.00 deg per sample.
-//! Five invalid frames in a row (configurable) make [`e2e::E2eVerdict::Fault`].
+//! An invalid-frame score of five (configurable; +1 per invalid frame, -1 per valid one) makes
+//! [`e2e::E2eVerdict::Fault`].
 
 pub mod crc;
 pub mod e2e;
@@ -291,7 +292,7 @@ pub struct ProtocolConfig {
     pub max_rate_deg_per_s: f32,
     /// Nominal reference period, us; the smallest time the rate budget is computed for.
     pub period_us: u32,
-    /// This many invalid reference frames in a row are a fault.
+    /// An invalid-frame score this high is a fault (+1 per invalid frame, -1 per valid one).
     pub max_invalid_in_row: u8,
     /// No accepted reference for longer than this, us, is a timeout ([`E2eChecker::timed_out`]).
     pub timeout_us: u32,
