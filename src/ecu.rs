@@ -47,7 +47,7 @@ use crate::gearing::Gearing;
 use crate::paper_mode::Cascade;
 use crate::protocol::{AliveCounter, E2eChecker, E2eVerdict, MotorStatus, ProtocolConfig, Status};
 use crate::sensors::{HALL_COUNTS_PER_REV, hall_from_motor, motor_from_hall};
-use crate::steering::{Config, DriveDemand, Output, SteeringStateMachine};
+use crate::steering::{Config, DriveDemand, EcuState, Output, SteeringStateMachine};
 use crate::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts};
 
 /// How the motor is driven; see the module docs.
@@ -341,6 +341,15 @@ impl Ecu {
                     }
                 }
             }
+        }
+        // Power demanded is not power delivered: until the EPOS4 is in Operation enabled the
+        // status says Arming, so the vehicle computer does not drive off on wheels nobody
+        // steers.
+        if let Drive::Epos4(link) = &self.drive
+            && matches!(out.state, EcuState::Tracking | EcuState::Holding)
+            && link.phase() != Phase::Cyclic
+        {
+            out.state = EcuState::Arming;
         }
         self.last = out;
         out
@@ -844,6 +853,29 @@ mod tests {
             let out = vehicle.send(&mut ecu, t, AsState::Emergency, deg);
             assert_eq!(out.demand, DriveDemand::Disabled, "{deg} deg");
             assert_eq!(out.state, crate::steering::EcuState::Emergency, "{deg} deg");
+        }
+    }
+
+    #[test]
+    fn tracking_is_not_reported_before_the_epos4_is_enabled() {
+        use crate::canopen::NodeId;
+        use crate::canopen::epos4::Epos4Config;
+        let config = Epos4Config::paper(NodeId::new(1).unwrap());
+        let mut ecu = Ecu::paper_epos4(Epos4Link::new(config, 0).unwrap()).unwrap();
+        let _ = ecu.drive_start(0);
+        let mut vehicle = Vehicle::new();
+        // The drive never answers: the link stays in its bring-up.
+        for k in 0..10u64 {
+            let t = k * 10 * MS;
+            let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+            let _ = ecu.drive_poll(t);
+            let out = vehicle.send(&mut ecu, t, AsState::Driving, 0.0);
+            assert_ne!(out.state, EcuState::Tracking, "at {k}0 ms");
+            assert_ne!(ecu.output().state, EcuState::Tracking, "at {k}0 ms");
+            // Until the link gives up on the silent drive (an SDO time-out, EposFault).
+            if out.faults.is_empty() {
+                assert_eq!(out.state, EcuState::Arming, "at {k}0 ms");
+            }
         }
     }
 }

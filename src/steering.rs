@@ -40,7 +40,8 @@
 //! `Track` = position loop on, following the reference.
 //!
 //! Status code of each state ([`EcuState::code`], the status frame): Idle 0, Standby 1,
-//! Tracking 2, Holding 3, Emergency 4, Faulted 5. With AS Emergency and a latched fault at once
+//! Tracking 2, Holding 3, Emergency 4, Faulted 5, Arming 6 (EPOS4 mode: power demanded, the
+//! drive not in Operation enabled yet; the ECU reports it, this machine never does). With AS Emergency and a latched fault at once
 //! the state reads Emergency; the fault bits still carry the faults.
 //!
 //! ## Reference timeout timeline
@@ -195,6 +196,10 @@ pub enum EcuState {
     Emergency = 4,
     /// A fault is latched. Disabled.
     Faulted = 5,
+    /// EPOS4 mode: the machine demands power (it would read Tracking or Holding) but the
+    /// drive is not in Operation enabled yet (the link is still bringing it up or walking
+    /// CiA 402); the wheels are not steered. Set by [`crate::ecu::Ecu`], which knows the link.
+    Arming = 6,
 }
 
 impl EcuState {
@@ -212,6 +217,7 @@ impl EcuState {
             3 => Some(EcuState::Holding),
             4 => Some(EcuState::Emergency),
             5 => Some(EcuState::Faulted),
+            6 => Some(EcuState::Arming),
             _ => None,
         }
     }
@@ -1438,7 +1444,7 @@ mod tests {
         for code in 0..=255u8 {
             match EcuState::from_code(code) {
                 Some(s) => assert_eq!(s.code(), code),
-                None => assert!(code > 5),
+                None => assert!(code > 6),
             }
         }
     }

@@ -132,6 +132,26 @@ fn reference_range_and_as_state_table_agree() {
     );
 }
 
+#[test]
+fn ecu_state_table_agrees_with_the_firmware() {
+    let dbc = dbc();
+    let status = message(&dbc, "SteeringStatus");
+    let table = dbc
+        .value_descriptions_for_signal(status.id, "STA_EcuState")
+        .expect("a value table for STA_EcuState");
+    let mut named = 0;
+    for entry in table {
+        let code = u8::try_from(entry.id).unwrap();
+        let state = crate::steering::EcuState::from_code(code).expect("a defined ECU state");
+        assert_eq!(format!("{state:?}"), entry.description);
+        named += 1;
+    }
+    let defined = (0..=u8::MAX)
+        .filter(|&c| crate::steering::EcuState::from_code(c).is_some())
+        .count();
+    assert_eq!(named, defined, "every ECU state named in the DBC");
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(5_000))]
 
