@@ -478,7 +478,15 @@ impl Ecu {
         };
         let out = match (out.demand, self.reference) {
             (DriveDemand::Track | DriveDemand::Hold, Some(reference)) => {
-                self.machine.on_tracking(now_us, reference, column)
+                let _ = self.machine.on_tracking(now_us, reference, column);
+                // What pushes the motor: the position loop's current set-point (direct), the
+                // drive's measured current (EPOS4: its set-point is not on the bus).
+                let effort = match &self.drive {
+                    Drive::Direct(cascade) => cascade.current_setpoint(),
+                    Drive::Epos4(_) => self.current,
+                };
+                self.machine
+                    .on_drive_effort(now_us, reference, column, effort)
             }
             _ => self.machine.on_not_tracking(now_us),
         };

@@ -85,7 +85,7 @@
 //! | `EposFault` | statusword fault bit or an EMCY from the EPOS4 | the firmware reports the EPOS4 fault reset done |
 //! | `HeartbeatLost` | the CANopen consumer-heartbeat time of the EPOS4 elapsed | a heartbeat arrives |
 //! | `BusOff` | the CAN controller reports bus-off | bus recovered, or a valid frame arrives |
-//! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s | a sample within the window, or the drive off |
+//! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s; or (runaway) the current pushing toward the reference at 18 A or more for 50 ms while the column still moves away at 20 deg/s or more | a sample within the window, or the drive off |
 //!
 //! The plausibility checks (jump, disagreement, current) run in every AS state: a broken
 //! sensor is found in AS Off, before the car is handed to the autonomous system.
@@ -166,6 +166,19 @@ pub const DEFAULT_TRACKING_DEG: f32 = 20.0;
 pub const DEFAULT_TRACKING_PERSIST_US: u32 = 200_000;
 /// ... while the column closes the gap slower than this, deg/s.
 pub const DEFAULT_TRACKING_PROGRESS_DPS: f32 = 30.0;
+/// Runaway: the current toward the reference at least this (90 % of the 20 A loop limit: the
+/// loop is saturated, pushing with all it has) ...
+pub const RUNAWAY_CURRENT: Amps = Amps(18.0);
+/// ... for this long, µs (issue 12: within 50 ms) ...
+pub const RUNAWAY_PERSIST_US: u32 = 50_000;
+/// ... while the column still moves away from the reference at least this fast, deg/s, over
+/// the last [`RUNAWAY_SPEED_WINDOW_US`]. A column that only coasts on (the motor decelerating
+/// after a reversal of the reference: at most about 44 ms from full speed at 20 A) is moving
+/// toward the reference again after 50 ms; 20 deg/s is 2.3 encoder counts per 10 ms, above
+/// the quantisation.
+pub const RUNAWAY_AWAY_DPS: f32 = 20.0;
+/// The speed of [`RUNAWAY_AWAY_DPS`] is measured over at least this, µs (5 encoder samples).
+pub const RUNAWAY_SPEED_WINDOW_US: u32 = 10_000;
 
 /// What the drive must do from this call on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -446,6 +459,11 @@ pub struct SteeringStateMachine {
     disagreement_since_us: Option<u64>,
     /// Start of the current tracking-error interval: (time, column deg).
     tracking_since: Option<(u64, f32)>,
+    /// Since when the current has pushed toward the reference at [`RUNAWAY_CURRENT`].
+    runaway_since: Option<u64>,
+    /// A column sample for the speed away: (time, deg), and the last speed away, deg/s.
+    runaway_probe: Option<(u64, f32)>,
+    away_dps: f32,
     overcurrent_count: u16,
     latched: FaultSet,
     /// Faults whose cause is present now (latched or not yet).
@@ -485,6 +503,9 @@ impl SteeringStateMachine {
             previous_column: None,
             disagreement_since_us: None,
             tracking_since: None,
+            runaway_since: None,
+            runaway_probe: None,
+            away_dps: 0.0,
             overcurrent_count: 0,
             latched: FaultSet::EMPTY,
             active: FaultSet::EMPTY,
@@ -648,6 +669,49 @@ impl SteeringStateMachine {
         self.output()
     }
 
+    /// The runaway check (call with each column sample while the drive is on): `current` is
+    /// what pushes the motor (direct: the position loop's set-point; EPOS4: the drive's
+    /// measured current), positive toward positive angles. When it pushes toward the reference
+    /// at [`RUNAWAY_CURRENT`] or more for [`RUNAWAY_PERSIST_US`] and the column still moves away
+    /// at [`RUNAWAY_AWAY_DPS`] or more, the drive has lost control of the current's direction
+    /// (a sign-flipped current sense, an offset the loop regulates against, swapped motor
+    /// phases): `TrackingError` latches, the detail the error in centi-degrees. Non-finite
+    /// values push nothing and move nothing: the check rests (the encoder and over-current
+    /// checks own them).
+    pub fn on_drive_effort(
+        &mut self,
+        now_us: u64,
+        reference: SteeringDeg,
+        column: SteeringDeg,
+        current: Amps,
+    ) -> Output {
+        let now = self.advance(now_us);
+        let error = reference.0 - column.0;
+        match self.runaway_probe {
+            Some((t, c)) if now.saturating_sub(t) >= u64::from(RUNAWAY_SPEED_WINDOW_US) => {
+                let dt_s = now.saturating_sub(t) as f32 * 1e-6;
+                // Away = moving against the sign of the error.
+                self.away_dps = -(column.0 - c) * error.signum() / dt_s;
+                self.runaway_probe = Some((now, column.0));
+            }
+            Some(_) => {}
+            None => self.runaway_probe = Some((now, column.0)),
+        }
+        // NaN compares false: no push anyone can vouch for.
+        let pushing = current.0 * error.signum() >= RUNAWAY_CURRENT.0;
+        if !pushing {
+            self.runaway_since = None;
+            return self.output();
+        }
+        let since = *self.runaway_since.get_or_insert(now);
+        if now.saturating_sub(since) >= u64::from(RUNAWAY_PERSIST_US)
+            && self.away_dps >= RUNAWAY_AWAY_DPS
+        {
+            self.raise(now, Fault::TrackingError, centideg_detail(error));
+        }
+        self.output()
+    }
+
     /// An over-current run is open: the last current sample was beyond the threshold (or not
     /// a number), so the next sample must go through [`SteeringStateMachine::on_current`]
     /// even if it is within.
@@ -659,6 +723,9 @@ impl SteeringStateMachine {
     pub fn on_not_tracking(&mut self, now_us: u64) -> Output {
         self.advance(now_us);
         self.tracking_since = None;
+        self.runaway_since = None;
+        self.runaway_probe = None;
+        self.away_dps = 0.0;
         self.active.remove(Fault::TrackingError);
         self.output()
     }
@@ -1327,6 +1394,45 @@ mod tests {
             "{faults:?}"
         );
         assert!(faults.contains(Fault::OverCurrent), "{faults:?}");
+    }
+
+    #[test]
+    fn a_runaway_under_a_saturated_push_latches_in_50_ms_and_a_coast_does_not() {
+        // Runaway: 20 A toward +10 deg while the column runs away at 100 deg/s.
+        let (mut sm, t0) = tracking();
+        let mut latched_at = None;
+        let mut t = t0;
+        while t < t0 + 200 * MS && latched_at.is_none() {
+            t += 2 * MS;
+            let column = -100.0 * (t - t0) as f32 * 1e-6;
+            if (t - t0).is_multiple_of(10 * MS) {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            let _ = sm.on_encoder(t, SteeringDeg(column), motor_at(column));
+            let out = sm.on_drive_effort(t, SteeringDeg(10.0), SteeringDeg(column), Amps(20.0));
+            if out.faults.contains(Fault::TrackingError) {
+                latched_at = Some(t - t0);
+            }
+        }
+        let at = latched_at.expect("the runaway latched");
+        assert!((50 * MS..=52 * MS).contains(&at), "at {at} us");
+
+        // A coast: the reference reversed, the column keeps going away for 40 ms while the
+        // loop brakes at 20 A, then comes back.
+        let (mut sm, t0) = tracking();
+        let mut t = t0;
+        while t < t0 + 200 * MS {
+            t += 2 * MS;
+            let s = (t - t0) as f32 * 1e-6;
+            // 300 deg/s decelerating to 0 at 40 ms, then back at the same rate.
+            let column = 300.0 * s - 3750.0 * s * s;
+            if (t - t0).is_multiple_of(10 * MS) {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            let _ = sm.on_encoder(t, SteeringDeg(column), motor_at(column));
+            let out = sm.on_drive_effort(t, SteeringDeg(-5.0), SteeringDeg(column), Amps(-20.0));
+            assert!(out.faults.is_empty(), "at {} ms", (t - t0) / MS);
+        }
     }
 
     #[test]

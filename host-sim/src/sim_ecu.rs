@@ -141,12 +141,24 @@ pub fn direct_drive_period(
     now_us: u64,
     current_offset_a: f64,
 ) {
+    direct_drive_period_sensed(plant, fast, ecu, now_us, |i| i + current_offset_a);
+}
+
+/// [`direct_drive_period`] with any current-sense error: `sense` maps the winding's true
+/// current to what the phase-current ADC reads (an offset, a flipped sign, a wrong gain).
+pub fn direct_drive_period_sensed(
+    plant: &mut LinearPlant,
+    fast: &mut FastLoop,
+    ecu: &SharedEcu,
+    now_us: u64,
+    sense: impl Fn(f64) -> f64,
+) {
     let sector = hall_from_motor(plant.motor_rad()).rem_euclid(6) as u8;
     let mut truth = HallDecoder::new(0);
     let _ = truth.update(code_of(sector));
     let mut phases = [Amps::ZERO; 3];
     if let Some((high, low)) = truth.driven_legs() {
-        let measured = (plant.current_a() + current_offset_a) as f32;
+        let measured = sense(plant.current_a()) as f32;
         phases[high] = Amps(measured);
         phases[low] = Amps(-measured);
     }

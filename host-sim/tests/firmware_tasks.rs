@@ -7,7 +7,7 @@
 use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
 use host_sim::plant::{Actuator, LinearPlant, PlantParams};
-use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period};
+use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period_sensed};
 use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
@@ -43,6 +43,9 @@ enum Inject {
     /// The current sense reads this much more than the winding carries, A (an amplifier
     /// offset).
     CurrentBiasA(f32),
+    /// The current sense reads the winding's current with the wrong sign (swapped shunt
+    /// wires).
+    CurrentSignFlipped,
 }
 
 fn inject() -> Inject {
@@ -194,11 +197,12 @@ fn run_from(
                 while TX_FRAMES.try_receive().is_ok() {}
             }
             // The fast loop, as the firmware's ADC interrupt runs it.
-            let bias = match inject() {
-                Inject::CurrentBiasA(a) => f64::from(a),
-                _ => 0.0,
-            };
-            direct_drive_period(&mut plant, &mut fast, ecu, now_us, bias);
+            let injected = inject();
+            direct_drive_period_sensed(&mut plant, &mut fast, ecu, now_us, |i| match injected {
+                Inject::CurrentBiasA(a) => i + f64::from(a),
+                Inject::CurrentSignFlipped => -i,
+                _ => i,
+            });
             if let Ok(mut c) = COLUMN_RAD.lock() {
                 *c = plant.column_rad();
             }
@@ -341,6 +345,51 @@ fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
         assert_eq!(s[at].demand, DriveDemand::Disabled, "{name}");
         assert_eq!(s[99].state, EcuState::Faulted, "{name}: stays latched");
         assert!(s[99].current_a.abs() < 0.5, "{name}: current taken to zero");
+    }
+}
+
+/// Issue 12 defect 9: a drive that runs away from the reference while the loop pushes toward
+/// it with all it has is a fault within 50 ms of the push, not after the tracking check's
+/// 20 deg for 200 ms.
+#[test]
+fn a_runaway_latches_within_50_ms_of_the_saturated_push() {
+    // 0-9 AS Off, 10-69 AS Driving 5 deg; the current sense breaks at period 30.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 5.0); 60]);
+    for (name, injection) in [
+        ("sense reads 30 A high", Inject::CurrentBiasA(30.0)),
+        ("sense sign flipped", Inject::CurrentSignFlipped),
+    ] {
+        let s = run(&script, |period, _, _| {
+            if period >= 30
+                && let Ok(mut i) = INJECT.lock()
+            {
+                *i = injection;
+            }
+        });
+        assert_eq!(s[29].faults, 0, "{name}");
+        let at = (30..s.len())
+            .find(|&p| s[p].faults != 0)
+            .unwrap_or_else(|| panic!("{name}: nothing latched"));
+        let latched_ms = (at - 30) * 10;
+        eprintln!(
+            "{name}: latched {latched_ms} ms after the injection (column {:.1} deg, faults {:#x})",
+            s[at].column_deg, s[at].faults
+        );
+        // The offset is the runaway check's; the flipped sign makes the current loop a
+        // positive feedback, which the over-current check sees first.
+        let expected = (1 << Fault::TrackingError.bit()) | (1 << Fault::OverCurrent.bit());
+        assert!(s[at].faults & expected != 0, "{name}: {:#x}", s[at].faults);
+        assert!(
+            latched_ms <= 100,
+            "{name}: latched {latched_ms} ms after the injection"
+        );
+        assert!(
+            (s[at].column_deg - 5.0).abs() < 20.0,
+            "{name}: the column ran {:.1} deg away",
+            s[at].column_deg - 5.0
+        );
+        assert_eq!(s[at].demand, DriveDemand::Disabled, "{name}");
     }
 }
 
