@@ -448,7 +448,7 @@ impl Ecu {
         // the vehicle did send: any state that does not allow power disables at once, whatever
         // the angle. (Ready/Driving from it refresh nothing: the reference was not accepted.)
         let out = match self.e2e.authentic_as_state() {
-            Some(as_state) if !as_state.actuator_may_be_powered() => {
+            Some(as_state) if !self.machine.config().actuation().allows(as_state) => {
                 self.machine.on_as_state(now_us, as_state)
             }
             _ => out,

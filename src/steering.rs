@@ -9,7 +9,8 @@
 //! [`SteeringStateMachine::tick`]) first applies the time-based rules up to `now_us`, then the
 //! event, and returns the [`Output`] that holds from then on. The demand is recomputed from
 //! scratch on every call by one function, so there is no path to [`DriveDemand::Track`] other
-//! than: no latched fault, an AS state that allows power (Ready, Driving), a valid reference
+//! than: no latched fault, an AS state that allows power (Ready or Driving under the FS rules,
+//! the default; Driving only under the FSAE DV supplement: [`Config::with_actuation`]), a valid reference
 //! frame within the reference timeout, and a column-encoder sample within the encoder timeout.
 //!
 //! ```text
@@ -137,7 +138,7 @@
 //!   306 deg/s) is not a fault: the column must move toward the reference by less than
 //!   30 deg/s over the 200 ms, i.e. stand still (jammed) or run away (lost control).
 
-use crate::as_state::AsState;
+use crate::as_state::{Actuation, AsState};
 use crate::faults::{EncoderFaultDetail, Fault, FaultLog, FaultRecord, FaultSet};
 use crate::gearing::Gearing;
 use crate::units::{Amps, MotorRad, SteeringDeg};
@@ -281,6 +282,7 @@ pub struct Config {
     tracking_persist_us: u32,
     tracking_progress_dps: f32,
     gearing: Gearing,
+    actuation: Actuation,
 }
 
 impl Default for Config {
@@ -313,6 +315,7 @@ impl Config {
         tracking_persist_us: DEFAULT_TRACKING_PERSIST_US,
         tracking_progress_dps: DEFAULT_TRACKING_PROGRESS_DPS,
         gearing: Gearing::PAPER,
+        actuation: Actuation::ReadyOrDriving,
     };
 
     /// Reference timeout, µs (at least 1).
@@ -391,6 +394,16 @@ impl Config {
         }
         self.overcurrent_samples = samples;
         Ok(self)
+    }
+
+    /// Which AS states may power the drive ([`Actuation`]; default FS: Ready or Driving).
+    pub fn with_actuation(mut self, actuation: Actuation) -> Self {
+        self.actuation = actuation;
+        self
+    }
+
+    pub fn actuation(&self) -> Actuation {
+        self.actuation
     }
 
     /// The gear chain for the disagreement check (already validated by [`Gearing::new`]).
@@ -853,7 +866,7 @@ impl SteeringStateMachine {
     }
 
     fn set_as_state(&mut self, now: u64, as_state: AsState) {
-        if as_state.actuator_may_be_powered() {
+        if self.config.actuation.allows(as_state) {
             if self.powered_since_us.is_none() {
                 self.powered_since_us = Some(now);
             }
@@ -925,7 +938,8 @@ impl SteeringStateMachine {
             encoder_age.is_some_and(|a| a <= u64::from(self.config.encoder_timeout_us));
         let within_hold =
             reference_age.is_some_and(|a| a <= timeout + u64::from(self.config.hold_us));
-        let may_power = self.as_state.is_some_and(AsState::actuator_may_be_powered);
+        let actuation = self.config.actuation;
+        let may_power = self.as_state.is_some_and(|s| actuation.allows(s));
         let engaged = self.last_demand != DriveDemand::Disabled;
 
         let demand = if !may_power || !self.latched.is_empty() {
@@ -1433,6 +1447,24 @@ mod tests {
             let out = sm.on_drive_effort(t, SteeringDeg(-5.0), SteeringDeg(column), Amps(-20.0));
             assert!(out.faults.is_empty(), "at {} ms", (t - t0) / MS);
         }
+    }
+
+    #[test]
+    fn the_driving_only_rule_keeps_the_drive_off_in_as_ready() {
+        let config = Config::DEFAULT.with_actuation(Actuation::DrivingOnly);
+        let mut sm = SteeringStateMachine::new(config);
+        let _ = sm.on_encoder(0, SteeringDeg(0.0), motor_at(0.0));
+        let out = sm.on_reference(MS, AsState::Ready);
+        assert_eq!(out.demand, DriveDemand::Disabled);
+        assert_eq!(out.state, EcuState::Idle);
+        // No reference timeout counts in AS Ready either: nothing is powered.
+        let out = run_encoder(&mut sm, MS, 500 * MS);
+        assert!(out.faults.is_empty(), "{:?}", out.faults);
+        let _ = sm.on_encoder(500 * MS, SteeringDeg(0.0), motor_at(0.0));
+        let out = sm.on_reference(500 * MS, AsState::Driving);
+        assert_eq!(out.demand, DriveDemand::Track);
+        // The FS default powers the drive in AS Ready.
+        assert_eq!(Config::DEFAULT.actuation(), Actuation::ReadyOrDriving);
     }
 
     #[test]
