@@ -886,4 +886,29 @@ mod tests {
             }
         }
     }
+
+    #[test]
+    fn the_enable_ramp_ends_when_a_fast_reference_crosses_it() {
+        // A 4 Hz, 15 deg sine (377 deg/s at its zero crossings, faster than the ramp) from the
+        // enable on: the ramp must hand over to the reference, not chase it for ever.
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        let mut t = 0u64;
+        let mut handed_over_at = None;
+        for k in 0..200u64 {
+            let s = k as f32 * 0.01;
+            let deg = 15.0 * (core::f32::consts::TAU * 4.0 * s).sin() + 20.0;
+            let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+            let _ = vehicle.send(&mut ecu, t, AsState::Driving, deg);
+            if handed_over_at.is_none() && k > 0 && ecu.ramp.is_none() {
+                handed_over_at = Some(k);
+                let given = ecu.reference.map_or(f32::NAN, |r| r.0);
+                assert!((given - deg).abs() < 0.01, "{given} vs {deg}");
+            }
+            t += 10 * MS;
+        }
+        let k = handed_over_at.expect("the ramp handed over to the reference");
+        // 20 deg at 100 deg/s to the sine's centre, then within one of its periods.
+        assert!(k <= 50, "handed over after {k}0 ms");
+    }
 }
