@@ -231,6 +231,12 @@ impl Epos4Sim {
         e(0x603F, 0, U16, Ro, 0);
         e(0x6040, 0, U16, Rw, 0);
         e(0x6041, 0, U16, Ro, 0);
+        // Limits the ECU writes at bring-up (values here are the simulation's power-up ones,
+        // chosen unlike the ECU's so a missing write shows; not the EDS defaults).
+        e(0x3001, 0, U8, Ro, 5);
+        e(0x3001, 2, U32, Rw, 5_000);
+        e(0x6065, 0, U32, Rw, 2_000);
+        e(0x607F, 0, U32, Rw, 25_000);
         e(0x6060, 0, U8, Rw, 1);
         e(0x6061, 0, U8, Ro, 1);
         e(0x6064, 0, U32, Ro, 0);

@@ -13,9 +13,9 @@ use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
-use steering_ecu::canopen::NodeId;
 use steering_ecu::canopen::cia402::State;
 use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale, od};
+use steering_ecu::canopen::{NodeId, ObjectAddress};
 use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
 use steering_ecu::gearing::Gearing;
@@ -120,6 +120,8 @@ struct Sample {
 
 struct Run {
     samples: Vec<Sample>,
+    /// The simulated drive's (0x3001 sub 2, 0x6065, 0x607F) after the run.
+    limits: [Option<u32>; 3],
     refusals: usize,
     dropped: u64,
     corrupted: u64,
@@ -254,8 +256,15 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
         },
     );
     let stats = bus.stats();
+    let limits = [
+        ObjectAddress::new(0x3001, 2),
+        ObjectAddress::new(0x6065, 0),
+        ObjectAddress::new(0x607F, 0),
+    ]
+    .map(|o| sim.object(o));
     Run {
         samples,
+        limits,
         refusals: sim.refusals().len(),
         dropped: stats.dropped,
         corrupted: stats.corrupted,
@@ -475,4 +484,29 @@ fn an_epos4_enable_ramps_the_target_from_the_measured_position() {
         s[159].column_deg
     );
     assert!(s.iter().all(|x| x.faults == 0));
+}
+
+/// Issue 12 defect 11: the bring-up writes the drive's own limits (current, following error,
+/// speed) and reads them back; the drive holds them.
+#[test]
+fn the_bring_up_writes_the_drive_limits() {
+    let script = repeat(Event::Ref(AsState::Off, 0.0), 60);
+    let r = run(&script, RandomFaults::default(), 7);
+    assert_eq!(r.samples[59].faults, 0);
+    let [current_ma, following_inc, velocity_rpm] = r.limits;
+    assert_eq!(
+        current_ma,
+        Some(20_000),
+        "output current limit: the 20 A loop limit"
+    );
+    // 25 deg at the wheel in the drive's increments, 84 per motor turn.
+    let expected_following = {
+        let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(25.0).into());
+        PositionScale::new(84)
+            .unwrap()
+            .inc_from_motor(motor)
+            .map(|i| i as u32)
+    };
+    assert_eq!(following_inc, expected_following, "following error window");
+    assert_eq!(velocity_rpm, Some(5_400), "max profile velocity");
 }
