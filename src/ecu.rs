@@ -115,6 +115,8 @@ pub struct Ecu {
     clear_refusals: u16,
     /// The clear bit of the last valid reference frame: a request is its rising edge.
     clear_bit: bool,
+    /// When a task (the supervisor) last called in: see [`Ecu::supervisor_seen_us`].
+    supervisor_us: Option<u64>,
     /// EPOS4 mode: frames from demand changes, for the next drive call.
     pending: heapless::Vec<Frame, PENDING_DEPTH>,
     /// Pending frames that did not fit (saturating); the link's supervision covers a lost one.
@@ -169,6 +171,7 @@ impl Ecu {
             current: Amps(f32::NAN),
             clear_refusals: 0,
             clear_bit: false,
+            supervisor_us: None,
             pending: heapless::Vec::new(),
             pending_overflow: 0,
             link_up: false,
@@ -417,8 +420,32 @@ impl Ecu {
         }
     }
 
+    /// When the supervisor (the tasks: [`Ecu::tick`], [`Ecu::on_reference_frame`],
+    /// [`Ecu::on_encoder`], [`Ecu::on_encoder_error`]) last called, us; `None` before the first
+    /// call. The direct drive's fast loop turns the bridge off by itself when this is too old
+    /// ([`crate::direct::SUPERVISOR_TIMEOUT_US`]): a hung task must not leave the bridge
+    /// driven on a decision nobody revisits.
+    pub fn supervisor_seen_us(&self) -> Option<u64> {
+        self.supervisor_us
+    }
+
+    /// Direct mode: restart the cascade at the motor's measured angle with empty integrators
+    /// (the fast loop does this after the supervisor came back from a stall, during which the
+    /// bridge was off and the loop not stepped). Nothing in EPOS4 mode.
+    pub fn resync_cascade(&mut self) {
+        let aligned = self.aligned_counts().unwrap_or(self.hall_count);
+        if let Drive::Direct(cascade) = &mut self.drive {
+            cascade.reset(aligned);
+        }
+    }
+
+    fn supervisor_called(&mut self, now_us: u64) {
+        self.supervisor_us = Some(self.supervisor_us.map_or(now_us, |t| t.max(now_us)));
+    }
+
     /// A frame routed to the reference consumer: checked end to end, then handed on.
     pub fn on_reference_frame(&mut self, now_us: u64, frame: &Frame) -> Output {
+        self.supervisor_called(now_us);
         let out = match self.e2e.check(frame, now_us) {
             E2eVerdict::Valid(reference) => {
                 let mut out = self.machine.on_reference(now_us, reference.as_state);
@@ -458,12 +485,14 @@ impl Ecu {
 
     /// Time passes (call at least every reference period): timeouts are found here.
     pub fn tick(&mut self, now_us: u64) -> Output {
+        self.supervisor_called(now_us);
         let out = self.machine.tick(now_us);
         self.apply(now_us, out)
     }
 
     /// A column-encoder sample, checked against the motor angle of the last position tick.
     pub fn on_encoder(&mut self, now_us: u64, column: SteeringDeg) -> Output {
+        self.supervisor_called(now_us);
         self.column = column;
         if self.motor_counts().is_none() {
             // The EPOS4 restarted (a new origin of its own) or has not reported yet.
@@ -495,6 +524,7 @@ impl Ecu {
 
     /// The encoder did not answer or flagged its reading.
     pub fn on_encoder_error(&mut self, now_us: u64, code: u16) -> Output {
+        self.supervisor_called(now_us);
         self.column = SteeringDeg(f32::NAN);
         let out = self.machine.on_encoder_fault(now_us, code);
         self.apply(now_us, out)
