@@ -82,7 +82,7 @@
 //! | `Encoder` | the sensor reports an error, a reading is not finite, or no sample for 30 ms while AS Ready/Driving | a finite sample arrives |
 //! | `EncoderJump` | column moved more than `1 deg + 1000 deg/s x dt` since the previous sample | the next sample is plausible |
 //! | `EncoderMotorDisagreement` | \|column - motor / gear ratio\| > 15 deg for 20 ms | a sample within the window |
-//! | `OverCurrent` | \|I\| > 22 A (or not a number) in 20 consecutive samples | a sample within the threshold |
+//! | `OverCurrent` | \|I\| > 22 A (or not a number) in 20 consecutive samples, or in a run of consecutive samples lasting 10 ms (the EPOS4's 10 ms current samples) | a sample within the threshold |
 //! | `EposFault` | statusword fault bit or an EMCY from the EPOS4 | the firmware reports the EPOS4 fault reset done |
 //! | `HeartbeatLost` | the CANopen consumer-heartbeat time of the EPOS4 elapsed | a heartbeat arrives |
 //! | `BusOff` | the CAN controller reports bus-off | bus recovered, or a valid frame arrives |
@@ -161,6 +161,11 @@ pub const DEFAULT_DISAGREEMENT_PERSIST_US: u32 = 20_000;
 pub const DEFAULT_OVERCURRENT: Amps = Amps(22.0);
 /// Consecutive over-current samples that latch the fault.
 pub const DEFAULT_OVERCURRENT_SAMPLES: u16 = 20;
+/// ... or a run of over-current samples (at least two) lasting this long, µs, whatever the
+/// sample rate: the EPOS4's current comes once per 10 ms SYNC, where 20 samples would be
+/// 200 ms; two samples 10 ms apart latch within 20 ms of the first (issue 12). At 20 kHz the
+/// 20 samples (1 ms) come first.
+pub const OVERCURRENT_PERSIST_US: u64 = 10_000;
 /// |column - reference| beyond this is a tracking error candidate, deg at the wheel.
 pub const DEFAULT_TRACKING_DEG: f32 = 20.0;
 /// ... for this long, µs ...
@@ -478,6 +483,8 @@ pub struct SteeringStateMachine {
     runaway_probe: Option<(u64, f32)>,
     away_dps: f32,
     overcurrent_count: u16,
+    /// When the current over-current run began.
+    overcurrent_since_us: Option<u64>,
     latched: FaultSet,
     /// Faults whose cause is present now (latched or not yet).
     active: FaultSet,
@@ -520,6 +527,7 @@ impl SteeringStateMachine {
             runaway_probe: None,
             away_dps: 0.0,
             overcurrent_count: 0,
+            overcurrent_since_us: None,
             latched: FaultSet::EMPTY,
             active: FaultSet::EMPTY,
             log: FaultLog::new(),
@@ -758,11 +766,15 @@ impl SteeringStateMachine {
         let within = measured.0.abs() <= self.config.overcurrent.0;
         if within {
             self.overcurrent_count = 0;
+            self.overcurrent_since_us = None;
             self.active.remove(Fault::OverCurrent);
         } else {
             self.overcurrent_count = self.overcurrent_count.saturating_add(1);
+            let since = *self.overcurrent_since_us.get_or_insert(now);
             self.active.insert(Fault::OverCurrent);
-            if self.overcurrent_count >= self.config.overcurrent_samples {
+            let lasted =
+                self.overcurrent_count >= 2 && now.saturating_sub(since) >= OVERCURRENT_PERSIST_US;
+            if self.overcurrent_count >= self.config.overcurrent_samples || lasted {
                 let detail = if measured.0.is_nan() {
                     i32::MIN
                 } else {
@@ -1465,6 +1477,25 @@ mod tests {
         assert_eq!(out.demand, DriveDemand::Track);
         // The FS default powers the drive in AS Ready.
         assert_eq!(Config::DEFAULT.actuation(), Actuation::ReadyOrDriving);
+    }
+
+    #[test]
+    fn an_over_current_sampled_every_10_ms_latches_within_20_ms() {
+        // EPOS4 mode: the drive's current comes with each SYNC (TPDO2, every 10 ms).
+        let (mut sm, t0) = tracking();
+        let mut latched_at = None;
+        for k in 1..=30u64 {
+            let t = t0 + k * 10 * MS;
+            let _ = sm.on_reference(t, AsState::Driving);
+            let _ = sm.on_encoder(t, SteeringDeg(0.0), motor_at(0.0));
+            let out = sm.on_current(t, Amps(30.0));
+            if latched_at.is_none() && out.faults.contains(Fault::OverCurrent) {
+                latched_at = Some(k * 10 * MS);
+            }
+        }
+        let at = latched_at.expect("latched");
+        // The first sample above is at 10 ms: latched by the third at the latest.
+        assert!(at <= 30 * MS, "latched {at} us after the first sample");
     }
 
     #[test]
