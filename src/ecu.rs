@@ -117,6 +117,10 @@ pub struct Ecu {
     clear_bit: bool,
     /// When a task (the supervisor) last called in: see [`Ecu::supervisor_seen_us`].
     supervisor_us: Option<u64>,
+    /// Bus-off events (saturating).
+    bus_offs: u16,
+    diagnostic_counter: AliveCounter,
+    diagnostic_page: u8,
     /// EPOS4 mode: frames from demand changes, for the next drive call.
     pending: heapless::Vec<Frame, PENDING_DEPTH>,
     /// Pending frames that did not fit (saturating); the link's supervision covers a lost one.
@@ -172,6 +176,9 @@ impl Ecu {
             clear_refusals: 0,
             clear_bit: false,
             supervisor_us: None,
+            bus_offs: 0,
+            diagnostic_counter: AliveCounter::wrapping(0),
+            diagnostic_page: 0,
             pending: heapless::Vec::new(),
             pending_overflow: 0,
             link_up: false,
@@ -538,6 +545,7 @@ impl Ecu {
     }
 
     pub fn on_bus_off(&mut self, now_us: u64, tec: u8) -> Output {
+        self.bus_offs = self.bus_offs.saturating_add(1);
         let out = self.machine.on_bus_off(now_us, tec);
         self.apply(now_us, out)
     }
@@ -684,6 +692,43 @@ impl Ecu {
             ecu_state: self.last.state.code(),
             faults: self.last.faults.bits(),
             counter: self.status_counter,
+        })
+    }
+
+    /// The next page of the diagnostic frame ([`crate::protocol::Diagnostic`]): the E2E drop
+    /// counters per reason, early frames, bus-off events, refused clears, hold entries, lost
+    /// demand-change frames and the four newest fault records, one page per call, round
+    /// robin, so a reader sees everything within [`crate::protocol::DIAGNOSTIC_PAGES`] calls.
+    pub fn diagnostic_frame(&mut self) -> Frame {
+        use crate::protocol::{DIAGNOSTIC_PAGES, Diagnostic, FIRST_RECORD_PAGE};
+        let page = self.diagnostic_page;
+        self.diagnostic_page = (page + 1) % DIAGNOSTIC_PAGES;
+        self.diagnostic_counter = self.diagnostic_counter.next();
+        let d = *self.e2e.drops();
+        let words = match page {
+            0 => [d.wrong_length, d.crc, d.stale],
+            1 => [d.counter_jump, d.unknown_as_state, d.angle_out_of_range],
+            2 => [d.rate_too_high, self.e2e.early_frames(), self.bus_offs],
+            3 => [
+                self.clear_refusals,
+                self.machine.hold_entries(),
+                self.pending_overflow,
+            ],
+            _ => {
+                let log = self.machine.fault_log();
+                let newest = usize::from(page - FIRST_RECORD_PAGE);
+                let record = log
+                    .len()
+                    .checked_sub(newest + 1)
+                    .and_then(|i| log.get(i))
+                    .map(|r| (r.fault.bit(), r.detail));
+                Diagnostic::record_words(record)
+            }
+        };
+        self.protocol.encode_diagnostic(&Diagnostic {
+            counter: self.diagnostic_counter,
+            page,
+            words,
         })
     }
 
@@ -940,5 +985,36 @@ mod tests {
         let k = handed_over_at.expect("the ramp handed over to the reference");
         // 20 deg at 100 deg/s to the sine's centre, then within one of its periods.
         assert!(k <= 50, "handed over after {k}0 ms");
+    }
+
+    #[test]
+    fn the_diagnostic_pages_carry_the_counters_and_the_newest_faults() {
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        let _ = vehicle.send(&mut ecu, 0, AsState::Off, 0.0);
+        let mut bad = vehicle.frame(AsState::Off, 0.0, false);
+        let mut bytes = [0u8; 8];
+        bytes.copy_from_slice(bad.data());
+        bytes[0] ^= 1;
+        bad = Frame::new(bad.id(), &bytes).unwrap();
+        let _ = ecu.on_reference_frame(10 * MS, &bad);
+        let _ = ecu.on_bus_off(20 * MS, 200);
+        let _ = ecu.machine_mut().on_epos_fault(30 * MS, 0x3210);
+        let protocol = ProtocolConfig::default();
+        let pages: heapless::Vec<_, 8> = (0..8)
+            .map(|_| protocol.decode_diagnostic(&ecu.diagnostic_frame()).unwrap())
+            .collect();
+        assert_eq!(pages[0].words, [0, 1, 0], "one CRC drop");
+        assert_eq!(pages[2].words[2], 1, "one bus-off");
+        use crate::faults::Fault;
+        assert_eq!(pages[4].record(), Some((Fault::EposFault.bit(), 0x3210)));
+        assert_eq!(pages[5].record(), Some((Fault::BusOff.bit(), 200)));
+        assert_eq!(pages[6].record(), None);
+        assert!(
+            pages
+                .iter()
+                .enumerate()
+                .all(|(i, p)| usize::from(p.page) == i)
+        );
     }
 }
