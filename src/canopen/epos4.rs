@@ -1372,6 +1372,7 @@ mod tests {
             frames in proptest::collection::vec(prop_oneof![any_frame(), near_frame()], 1..12),
             phase in 0u8..6,
             dts in proptest::collection::vec(0u64..30_000, 12),
+            powers in proptest::collection::vec(any::<bool>(), 12),
         ) {
             let n = node();
             for f in &frames {
@@ -1400,15 +1401,41 @@ mod tests {
             };
             let mut link = link_in(phase);
             let mut t = 0u64;
-            for (f, dt) in frames.iter().zip(dts) {
+            // "Enable operation" (CiA 402 controlword 0x000F) in any frame the link sends.
+            let enables = |out: &Outbox| {
+                out.iter().any(|f| {
+                    matches!(
+                        super::super::sdo::parse_request(f, n),
+                        Some(super::super::sdo::ServerRequest::Download { object, value, .. })
+                            if object == od::CONTROLWORD
+                                && value as u16 == Command::EnableOperation.controlword()
+                    )
+                })
+            };
+            for ((f, dt), power) in frames.iter().zip(dts).zip(powers) {
                 t += dt;
+                // What the ECU demands for this step.
+                let off = link.set_power(power, t);
+                prop_assert!(!enables(&off));
                 let out = link.on_frame(f, t);
                 prop_assert!(out.len() <= 4);
-                let _ = link.poll(t);
+                let polled = link.poll(t);
+                if !power {
+                    // No power is ever asked of the drive against the ECU's demand.
+                    prop_assert!(!enables(&out) && !enables(&polled), "enable while off");
+                }
                 if link.error().is_some() {
-                    let _ = link.set_power(false, t);
+                    // After a failure, the first "off" sends a disable at once.
+                    let off = link.set_power(false, t);
+                    if power {
+                        let disable = disable_voltage_frame(n);
+                        prop_assert!(
+                            off.iter().any(|f| Some(*f) == disable),
+                            "no disable within one call after a failure"
+                        );
+                    }
+                    prop_assert!(!enables(&off));
                     let _ = link.request_fault_reset(t);
-                    let _ = link.set_power(true, t);
                 }
             }
         }
