@@ -43,9 +43,38 @@ impl AsState {
         }
     }
 
-    /// May the actuator be powered in this state?
+    /// May the actuator be powered in this state under the FS rules (the default
+    /// [`Actuation::ReadyOrDriving`])? See [`Actuation::allows`] for the configured rule.
     pub const fn actuator_may_be_powered(self) -> bool {
-        matches!(self, AsState::Ready | AsState::Driving)
+        Actuation::ReadyOrDriving.allows(self)
+    }
+}
+
+/// Which AS states may power the steering actuator: the rule books differ.
+///
+/// - [`Actuation::ReadyOrDriving`] (the default): Formula Student Germany's rules allow the
+///   steering actuator to be active in AS Ready (the car stands with the brakes applied; the
+///   autonomous system may move the wheels to its start angle) and AS Driving.
+/// - [`Actuation::DrivingOnly`]: the FSAE Driverless supplement (DT.2.1.2) allows actuation
+///   only once the car is ready to drive, i.e. AS Driving; in AS Ready the drive stays off.
+///
+/// Every other state (Off, Manual, Finished, Emergency) powers nothing under either rule.
+/// Chosen with [`crate::steering::Config::with_actuation`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Actuation {
+    #[default]
+    ReadyOrDriving,
+    DrivingOnly,
+}
+
+impl Actuation {
+    /// Does this rule let `state` power the actuator?
+    pub const fn allows(self, state: AsState) -> bool {
+        match self {
+            Actuation::ReadyOrDriving => matches!(state, AsState::Ready | AsState::Driving),
+            Actuation::DrivingOnly => matches!(state, AsState::Driving),
+        }
     }
 }
 

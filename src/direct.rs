@@ -14,6 +14,10 @@
 //!                            Bridge::apply (complementary PWM, dead time in hardware)
 //! ```
 //!
+//! Supervisor watch: when the tasks have not called the ECU for [`SUPERVISOR_TIMEOUT_US`]
+//! (a hung or starved task), the fast loop turns the bridge off by itself, without the state
+//! machine, until they call again; the cascade then restarts at the measured angle.
+//!
 //! Hall faults: an impossible code (000, 111) or a jump of more than one sector switches the
 //! bridge off for that period and keeps the last count; [`HALL_ERRORS_TO_FAULT`] in a row
 //! latch [`crate::faults::Fault::Encoder`] (the motor angle is unusable) with the detail
@@ -32,6 +36,13 @@ pub const HALL_ERRORS_TO_FAULT: u8 = 3;
 pub const HALL_INVALID_CODE: u16 = 0x100;
 /// Fault code base of a Hall jump.
 pub const HALL_JUMP: u16 = 0x200;
+/// The fast loop turns the bridge off by itself when the supervisor (the tasks that tick the
+/// state machine: reference receiver, encoder reader) has not called the ECU for this long, us
+/// (issue 12: 5 ms). Both tasks call every 2 ms, so 5 ms is two missed calls of each plus
+/// scheduling jitter; a stall longer than that is a hung or starved task, and the state
+/// machine's timeouts (which need its calls) cannot act. The bridge stays off until the
+/// supervisor calls again; the cascade then restarts at the measured angle.
+pub const SUPERVISOR_TIMEOUT_US: u64 = 5_000;
 
 /// The state the fast loop keeps between periods.
 #[derive(Debug, Clone)]
@@ -41,6 +52,9 @@ pub struct FastLoop {
     tick: u32,
     hall_errors: u8,
     last: BridgeCommand,
+    /// The bridge is off because the supervisor stalled.
+    supervisor_stalled: bool,
+    supervisor_stalls: u16,
 }
 
 impl FastLoop {
@@ -54,6 +68,8 @@ impl FastLoop {
             tick: 0,
             hall_errors: 0,
             last: BRIDGE_OFF,
+            supervisor_stalled: false,
+            supervisor_stalls: 0,
         }
     }
 
@@ -65,6 +81,11 @@ impl FastLoop {
 
     pub fn hall(&self) -> &HallDecoder {
         &self.hall
+    }
+
+    /// How often the supervisor stalled and the fast loop turned the bridge off (saturating).
+    pub fn supervisor_stalls(&self) -> u16 {
+        self.supervisor_stalls
     }
 
     /// The bridge command of the last period.
@@ -112,6 +133,21 @@ impl FastLoop {
             return BRIDGE_OFF;
         }
         self.hall_errors = 0;
+        let stale = ecu
+            .supervisor_seen_us()
+            .is_none_or(|t| now_us.saturating_sub(t) > SUPERVISOR_TIMEOUT_US);
+        if stale {
+            if !self.supervisor_stalled {
+                self.supervisor_stalled = true;
+                self.supervisor_stalls = self.supervisor_stalls.saturating_add(1);
+            }
+            self.last = BRIDGE_OFF;
+            return BRIDGE_OFF;
+        }
+        if self.supervisor_stalled {
+            self.supervisor_stalled = false;
+            ecu.resync_cascade();
+        }
         if position_tick {
             let _ = ecu.position_tick(self.hall.count());
         }
@@ -137,18 +173,22 @@ mod tests {
     use crate::steering::DriveDemand;
     use crate::units::SteeringDeg;
 
-    /// An ECU tracking 5 deg: AS Driving, a fresh reference and encoder sample.
+    /// An ECU tracking 5 deg: AS Driving, a fresh reference and encoder sample; two frames,
+    /// 10 ms apart, so the enable ramp (which starts at the column) has moved toward 5 deg.
     fn tracking_ecu(now_us: u64) -> Ecu {
         let mut ecu = Ecu::paper().unwrap();
-        let frame = ProtocolConfig::default().encode_reference(&Reference {
-            angle: SteeringDeg(5.0),
-            as_state: AsState::Driving,
-            counter: AliveCounter::wrapping(1),
-            clear_faults: false,
-        });
-        let _ = ecu.on_encoder(now_us, SteeringDeg(0.0));
-        let out = ecu.on_reference_frame(now_us, &frame);
-        assert_eq!(out.demand, DriveDemand::Track);
+        for k in 0..2u8 {
+            let t = now_us.saturating_sub(10_000 * u64::from(1 - k));
+            let frame = ProtocolConfig::default().encode_reference(&Reference {
+                angle: SteeringDeg(5.0),
+                as_state: AsState::Driving,
+                counter: AliveCounter::wrapping(1 + k),
+                clear_faults: false,
+            });
+            let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+            let out = ecu.on_reference_frame(t, &frame);
+            assert_eq!(out.demand, DriveDemand::Track);
+        }
         ecu
     }
 
@@ -201,5 +241,32 @@ mod tests {
             let cmd = fast.step(&mut ecu, 1_050 + i * 50, code_of(0), [Amps(f32::NAN); 3]);
             assert_eq!(cmd, BRIDGE_OFF);
         }
+    }
+
+    #[test]
+    fn the_fast_loop_turns_the_bridge_off_when_the_supervisor_stops() {
+        // Tracking 5 deg, the bridge driven; then the tasks stop (no tick, no frame, no
+        // encoder sample) while the ADC interrupt keeps running.
+        let mut ecu = tracking_ecu(1_000);
+        let mut fast = FastLoop::new(0, Volts(24.0));
+        let mut last_driven = None;
+        for i in 0..400u64 {
+            let now = 1_000 + i * 50;
+            if fast.step(&mut ecu, now, code_of(0), [Amps::ZERO; 3]) != BRIDGE_OFF {
+                last_driven = Some(now);
+            }
+        }
+        let last = last_driven.expect("the bridge was driven");
+        assert!(
+            last <= 1_000 + SUPERVISOR_TIMEOUT_US,
+            "driven {} us after the supervisor's last call",
+            last - 1_000
+        );
+        // The supervisor ticks again: the bridge is driven again.
+        let _ = ecu.tick(21_000);
+        let driven = (0..40u64).any(|i| {
+            fast.step(&mut ecu, 21_000 + i * 50, code_of(0), [Amps::ZERO; 3]) != BRIDGE_OFF
+        });
+        assert!(driven);
     }
 }

@@ -9,7 +9,8 @@
 //! [`SteeringStateMachine::tick`]) first applies the time-based rules up to `now_us`, then the
 //! event, and returns the [`Output`] that holds from then on. The demand is recomputed from
 //! scratch on every call by one function, so there is no path to [`DriveDemand::Track`] other
-//! than: no latched fault, an AS state that allows power (Ready, Driving), a valid reference
+//! than: no latched fault, an AS state that allows power (Ready or Driving under the FS rules,
+//! the default; Driving only under the FSAE DV supplement: [`Config::with_actuation`]), a valid reference
 //! frame within the reference timeout, and a column-encoder sample within the encoder timeout.
 //!
 //! ```text
@@ -40,7 +41,8 @@
 //! `Track` = position loop on, following the reference.
 //!
 //! Status code of each state ([`EcuState::code`], the status frame): Idle 0, Standby 1,
-//! Tracking 2, Holding 3, Emergency 4, Faulted 5. With AS Emergency and a latched fault at once
+//! Tracking 2, Holding 3, Emergency 4, Faulted 5, Arming 6 (EPOS4 mode: power demanded, the
+//! drive not in Operation enabled yet; the ECU reports it, this machine never does). With AS Emergency and a latched fault at once
 //! the state reads Emergency; the fault bits still carry the faults.
 //!
 //! ## Reference timeout timeline
@@ -76,15 +78,15 @@
 //! | fault | detection | cause gone when |
 //! |---|---|---|
 //! | `ReferenceTimeout` | AS Ready/Driving and no valid frame for 130 ms (30 + hold), counted from the later of the last frame and the moment the AS state allowed power | a valid frame is fresh |
-//! | `InvalidFrames` | the protocol layer reports too many invalid frames in a row | a valid frame arrives |
+//! | `InvalidFrames` | the protocol layer's invalid-frame score (+1 invalid, -1 valid) reaches its limit | a valid frame arrives |
 //! | `Encoder` | the sensor reports an error, a reading is not finite, or no sample for 30 ms while AS Ready/Driving | a finite sample arrives |
 //! | `EncoderJump` | column moved more than `1 deg + 1000 deg/s x dt` since the previous sample | the next sample is plausible |
 //! | `EncoderMotorDisagreement` | \|column - motor / gear ratio\| > 15 deg for 20 ms | a sample within the window |
-//! | `OverCurrent` | \|I\| > 22 A (or not a number) in 20 consecutive samples | a sample within the threshold |
+//! | `OverCurrent` | \|I\| > 22 A (or not a number) in 20 consecutive samples, or in a run of consecutive samples lasting 10 ms (the EPOS4's 10 ms current samples) | a sample within the threshold |
 //! | `EposFault` | statusword fault bit or an EMCY from the EPOS4 | the firmware reports the EPOS4 fault reset done |
 //! | `HeartbeatLost` | the CANopen consumer-heartbeat time of the EPOS4 elapsed | a heartbeat arrives |
 //! | `BusOff` | the CAN controller reports bus-off | bus recovered, or a valid frame arrives |
-//! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s | a sample within the window, or the drive off |
+//! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s; or (runaway) the current pushing toward the reference at 18 A or more for 50 ms while the column still moves away at 20 deg/s or more | a sample within the window, or the drive off |
 //!
 //! The plausibility checks (jump, disagreement, current) run in every AS state: a broken
 //! sensor is found in AS Off, before the car is handed to the autonomous system.
@@ -136,7 +138,7 @@
 //!   306 deg/s) is not a fault: the column must move toward the reference by less than
 //!   30 deg/s over the 200 ms, i.e. stand still (jammed) or run away (lost control).
 
-use crate::as_state::AsState;
+use crate::as_state::{Actuation, AsState};
 use crate::faults::{EncoderFaultDetail, Fault, FaultLog, FaultRecord, FaultSet};
 use crate::gearing::Gearing;
 use crate::units::{Amps, MotorRad, SteeringDeg};
@@ -159,12 +161,30 @@ pub const DEFAULT_DISAGREEMENT_PERSIST_US: u32 = 20_000;
 pub const DEFAULT_OVERCURRENT: Amps = Amps(22.0);
 /// Consecutive over-current samples that latch the fault.
 pub const DEFAULT_OVERCURRENT_SAMPLES: u16 = 20;
+/// ... or a run of over-current samples (at least two) lasting this long, µs, whatever the
+/// sample rate: the EPOS4's current comes once per 10 ms SYNC, where 20 samples would be
+/// 200 ms; two samples 10 ms apart latch within 20 ms of the first (issue 12). At 20 kHz the
+/// 20 samples (1 ms) come first.
+pub const OVERCURRENT_PERSIST_US: u64 = 10_000;
 /// |column - reference| beyond this is a tracking error candidate, deg at the wheel.
 pub const DEFAULT_TRACKING_DEG: f32 = 20.0;
 /// ... for this long, µs ...
 pub const DEFAULT_TRACKING_PERSIST_US: u32 = 200_000;
 /// ... while the column closes the gap slower than this, deg/s.
 pub const DEFAULT_TRACKING_PROGRESS_DPS: f32 = 30.0;
+/// Runaway: the current toward the reference at least this (90 % of the 20 A loop limit: the
+/// loop is saturated, pushing with all it has) ...
+pub const RUNAWAY_CURRENT: Amps = Amps(18.0);
+/// ... for this long, µs (issue 12: within 50 ms) ...
+pub const RUNAWAY_PERSIST_US: u32 = 50_000;
+/// ... while the column still moves away from the reference at least this fast, deg/s, over
+/// the last [`RUNAWAY_SPEED_WINDOW_US`]. A column that only coasts on (the motor decelerating
+/// after a reversal of the reference: at most about 44 ms from full speed at 20 A) is moving
+/// toward the reference again after 50 ms; 20 deg/s is 2.3 encoder counts per 10 ms, above
+/// the quantisation.
+pub const RUNAWAY_AWAY_DPS: f32 = 20.0;
+/// The speed of [`RUNAWAY_AWAY_DPS`] is measured over at least this, µs (5 encoder samples).
+pub const RUNAWAY_SPEED_WINDOW_US: u32 = 10_000;
 
 /// What the drive must do from this call on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -195,6 +215,10 @@ pub enum EcuState {
     Emergency = 4,
     /// A fault is latched. Disabled.
     Faulted = 5,
+    /// EPOS4 mode: the machine demands power (it would read Tracking or Holding) but the
+    /// drive is not in Operation enabled yet (the link is still bringing it up or walking
+    /// CiA 402); the wheels are not steered. Set by [`crate::ecu::Ecu`], which knows the link.
+    Arming = 6,
 }
 
 impl EcuState {
@@ -212,6 +236,7 @@ impl EcuState {
             3 => Some(EcuState::Holding),
             4 => Some(EcuState::Emergency),
             5 => Some(EcuState::Faulted),
+            6 => Some(EcuState::Arming),
             _ => None,
         }
     }
@@ -262,6 +287,7 @@ pub struct Config {
     tracking_persist_us: u32,
     tracking_progress_dps: f32,
     gearing: Gearing,
+    actuation: Actuation,
 }
 
 impl Default for Config {
@@ -294,6 +320,7 @@ impl Config {
         tracking_persist_us: DEFAULT_TRACKING_PERSIST_US,
         tracking_progress_dps: DEFAULT_TRACKING_PROGRESS_DPS,
         gearing: Gearing::PAPER,
+        actuation: Actuation::ReadyOrDriving,
     };
 
     /// Reference timeout, µs (at least 1).
@@ -374,6 +401,16 @@ impl Config {
         Ok(self)
     }
 
+    /// Which AS states may power the drive ([`Actuation`]; default FS: Ready or Driving).
+    pub fn with_actuation(mut self, actuation: Actuation) -> Self {
+        self.actuation = actuation;
+        self
+    }
+
+    pub fn actuation(&self) -> Actuation {
+        self.actuation
+    }
+
     /// The gear chain for the disagreement check (already validated by [`Gearing::new`]).
     pub fn with_gearing(mut self, gearing: Gearing) -> Self {
         self.gearing = gearing;
@@ -440,7 +477,14 @@ pub struct SteeringStateMachine {
     disagreement_since_us: Option<u64>,
     /// Start of the current tracking-error interval: (time, column deg).
     tracking_since: Option<(u64, f32)>,
+    /// Since when the current has pushed toward the reference at [`RUNAWAY_CURRENT`].
+    runaway_since: Option<u64>,
+    /// A column sample for the speed away: (time, deg), and the last speed away, deg/s.
+    runaway_probe: Option<(u64, f32)>,
+    away_dps: f32,
     overcurrent_count: u16,
+    /// When the current over-current run began.
+    overcurrent_since_us: Option<u64>,
     latched: FaultSet,
     /// Faults whose cause is present now (latched or not yet).
     active: FaultSet,
@@ -479,7 +523,11 @@ impl SteeringStateMachine {
             previous_column: None,
             disagreement_since_us: None,
             tracking_since: None,
+            runaway_since: None,
+            runaway_probe: None,
+            away_dps: 0.0,
             overcurrent_count: 0,
+            overcurrent_since_us: None,
             latched: FaultSet::EMPTY,
             active: FaultSet::EMPTY,
             log: FaultLog::new(),
@@ -544,18 +592,36 @@ impl SteeringStateMachine {
         self.output()
     }
 
-    /// The protocol layer saw `count` invalid reference frames in a row, above its limit.
+    /// The protocol layer's invalid-frame score reached its limit (`count`, see
+    /// [`crate::protocol::e2e`]).
     pub fn on_invalid_frames_fault(&mut self, now_us: u64, count: u16) -> Output {
         let now = self.advance(now_us);
         self.raise(now, Fault::InvalidFrames, i32::from(count));
         self.output()
     }
 
-    /// A column-encoder sample with the motor angle taken at the same time. `motor` is in the
-    /// cascade's frame (Hall count 0 = column 0, as [`crate::paper_mode::Cascade`] assumes).
-    /// Call only with readings the sensor vouches for; report its errors with
-    /// [`SteeringStateMachine::on_encoder_fault`].
+    /// A column-encoder sample with the motor angle taken at the same time. `motor` is aligned
+    /// to the column (0 = column 0 through the gearing; the ECU takes the origin from the
+    /// column encoder, [`crate::ecu::Ecu::motor_angle`]). Call only with readings the sensor
+    /// vouches for; report its errors with [`SteeringStateMachine::on_encoder_fault`].
     pub fn on_encoder(&mut self, now_us: u64, column: SteeringDeg, motor: MotorRad) -> Output {
+        self.encoder_sample(now_us, column, Some(motor))
+    }
+
+    /// A column-encoder sample while the motor angle is not known (no motor origin yet: the
+    /// EPOS4 has not reported its position). Every check of [`SteeringStateMachine::on_encoder`]
+    /// but the disagreement, which has nothing to compare; a disagreement in progress is
+    /// forgotten (its cause is not shown any more).
+    pub fn on_column(&mut self, now_us: u64, column: SteeringDeg) -> Output {
+        self.encoder_sample(now_us, column, None)
+    }
+
+    fn encoder_sample(
+        &mut self,
+        now_us: u64,
+        column: SteeringDeg,
+        motor: Option<MotorRad>,
+    ) -> Output {
         let now = self.advance(now_us);
         if !column.is_finite() {
             self.previous_column = None;
@@ -566,7 +632,7 @@ impl SteeringStateMachine {
             );
             return self.output();
         }
-        if !motor.is_finite() {
+        if motor.is_some_and(|m| !m.is_finite()) {
             self.raise(
                 now,
                 Fault::Encoder,
@@ -577,8 +643,17 @@ impl SteeringStateMachine {
         self.active.remove(Fault::Encoder);
         self.last_encoder_us = Some(now);
         self.check_jump(now, column.0);
-        let motor_as_column = SteeringDeg::from(self.config.gearing.steering_from_motor(motor));
-        self.check_disagreement(now, column.0 - motor_as_column.0);
+        match motor {
+            Some(motor) => {
+                let motor_as_column =
+                    SteeringDeg::from(self.config.gearing.steering_from_motor(motor));
+                self.check_disagreement(now, column.0 - motor_as_column.0);
+            }
+            None => {
+                self.disagreement_since_us = None;
+                self.active.remove(Fault::EncoderMotorDisagreement);
+            }
+        }
         self.output()
     }
 
@@ -615,6 +690,49 @@ impl SteeringStateMachine {
         self.output()
     }
 
+    /// The runaway check (call with each column sample while the drive is on): `current` is
+    /// what pushes the motor (direct: the position loop's set-point; EPOS4: the drive's
+    /// measured current), positive toward positive angles. When it pushes toward the reference
+    /// at [`RUNAWAY_CURRENT`] or more for [`RUNAWAY_PERSIST_US`] and the column still moves away
+    /// at [`RUNAWAY_AWAY_DPS`] or more, the drive has lost control of the current's direction
+    /// (a sign-flipped current sense, an offset the loop regulates against, swapped motor
+    /// phases): `TrackingError` latches, the detail the error in centi-degrees. Non-finite
+    /// values push nothing and move nothing: the check rests (the encoder and over-current
+    /// checks own them).
+    pub fn on_drive_effort(
+        &mut self,
+        now_us: u64,
+        reference: SteeringDeg,
+        column: SteeringDeg,
+        current: Amps,
+    ) -> Output {
+        let now = self.advance(now_us);
+        let error = reference.0 - column.0;
+        match self.runaway_probe {
+            Some((t, c)) if now.saturating_sub(t) >= u64::from(RUNAWAY_SPEED_WINDOW_US) => {
+                let dt_s = now.saturating_sub(t) as f32 * 1e-6;
+                // Away = moving against the sign of the error.
+                self.away_dps = -(column.0 - c) * error.signum() / dt_s;
+                self.runaway_probe = Some((now, column.0));
+            }
+            Some(_) => {}
+            None => self.runaway_probe = Some((now, column.0)),
+        }
+        // NaN compares false: no push anyone can vouch for.
+        let pushing = current.0 * error.signum() >= RUNAWAY_CURRENT.0;
+        if !pushing {
+            self.runaway_since = None;
+            return self.output();
+        }
+        let since = *self.runaway_since.get_or_insert(now);
+        if now.saturating_sub(since) >= u64::from(RUNAWAY_PERSIST_US)
+            && self.away_dps >= RUNAWAY_AWAY_DPS
+        {
+            self.raise(now, Fault::TrackingError, centideg_detail(error));
+        }
+        self.output()
+    }
+
     /// An over-current run is open: the last current sample was beyond the threshold (or not
     /// a number), so the next sample must go through [`SteeringStateMachine::on_current`]
     /// even if it is within.
@@ -626,6 +744,9 @@ impl SteeringStateMachine {
     pub fn on_not_tracking(&mut self, now_us: u64) -> Output {
         self.advance(now_us);
         self.tracking_since = None;
+        self.runaway_since = None;
+        self.runaway_probe = None;
+        self.away_dps = 0.0;
         self.active.remove(Fault::TrackingError);
         self.output()
     }
@@ -645,11 +766,15 @@ impl SteeringStateMachine {
         let within = measured.0.abs() <= self.config.overcurrent.0;
         if within {
             self.overcurrent_count = 0;
+            self.overcurrent_since_us = None;
             self.active.remove(Fault::OverCurrent);
         } else {
             self.overcurrent_count = self.overcurrent_count.saturating_add(1);
+            let since = *self.overcurrent_since_us.get_or_insert(now);
             self.active.insert(Fault::OverCurrent);
-            if self.overcurrent_count >= self.config.overcurrent_samples {
+            let lasted =
+                self.overcurrent_count >= 2 && now.saturating_sub(since) >= OVERCURRENT_PERSIST_US;
+            if self.overcurrent_count >= self.config.overcurrent_samples || lasted {
                 let detail = if measured.0.is_nan() {
                     i32::MIN
                 } else {
@@ -705,7 +830,8 @@ impl SteeringStateMachine {
 
     /// Clears every latched fault, if the AS state is Off (from a frame within the reference
     /// timeout) and the cause of each is gone; otherwise nothing changes. The fault log is
-    /// kept. The next call's [`Output`] shows the result.
+    /// kept, and no detector's timer or count is reset. The next call's [`Output`] shows the
+    /// result. The ECU calls it on the rising edge of the frame's clear bit only.
     pub fn request_clear_faults(&mut self, now_us: u64) -> Result<(), ClearRefused> {
         let now = self.advance(now_us);
         let stale = self
@@ -721,10 +847,10 @@ impl SteeringStateMachine {
         if !still.is_empty() {
             return Err(ClearRefused::CauseActive { faults: still });
         }
+        // Only the latch goes: the detectors' timers and counts are left alone. A cause that
+        // is gone has already reset them; one that is building up (not latched yet) must keep
+        // building, or a vehicle asking to clear every period would mask it for ever.
         self.latched = FaultSet::EMPTY;
-        self.overcurrent_count = 0;
-        self.disagreement_since_us = None;
-        self.tracking_since = None;
         Ok(())
     }
 
@@ -752,7 +878,7 @@ impl SteeringStateMachine {
     }
 
     fn set_as_state(&mut self, now: u64, as_state: AsState) {
-        if as_state.actuator_may_be_powered() {
+        if self.config.actuation.allows(as_state) {
             if self.powered_since_us.is_none() {
                 self.powered_since_us = Some(now);
             }
@@ -824,7 +950,8 @@ impl SteeringStateMachine {
             encoder_age.is_some_and(|a| a <= u64::from(self.config.encoder_timeout_us));
         let within_hold =
             reference_age.is_some_and(|a| a <= timeout + u64::from(self.config.hold_us));
-        let may_power = self.as_state.is_some_and(AsState::actuator_may_be_powered);
+        let actuation = self.config.actuation;
+        let may_power = self.as_state.is_some_and(|s| actuation.allows(s));
         let engaged = self.last_demand != DriveDemand::Disabled;
 
         let demand = if !may_power || !self.latched.is_empty() {
@@ -1273,6 +1400,105 @@ mod tests {
     }
 
     #[test]
+    fn a_clear_request_never_resets_a_detector() {
+        // AS Off, the vehicle asks to clear every 10 ms (the reference period) while the column
+        // and the motor disagree by 20 deg and the current reads 30 A: both must latch.
+        let mut sm = SteeringStateMachine::default();
+        let mut t = 0;
+        for _ in 0..400 {
+            let _ = sm.on_reference(t, AsState::Off);
+            for j in 0..5 {
+                let _ = sm.on_encoder(t + j * 2 * MS, SteeringDeg(20.0), motor_at(0.0));
+            }
+            let _ = sm.on_current(t, Amps(30.0));
+            let _ = sm.request_clear_faults(t);
+            t += 10 * MS;
+        }
+        let faults = sm.faults();
+        assert!(
+            faults.contains(Fault::EncoderMotorDisagreement),
+            "{faults:?}"
+        );
+        assert!(faults.contains(Fault::OverCurrent), "{faults:?}");
+    }
+
+    #[test]
+    fn a_runaway_under_a_saturated_push_latches_in_50_ms_and_a_coast_does_not() {
+        // Runaway: 20 A toward +10 deg while the column runs away at 100 deg/s.
+        let (mut sm, t0) = tracking();
+        let mut latched_at = None;
+        let mut t = t0;
+        while t < t0 + 200 * MS && latched_at.is_none() {
+            t += 2 * MS;
+            let column = -100.0 * (t - t0) as f32 * 1e-6;
+            if (t - t0).is_multiple_of(10 * MS) {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            let _ = sm.on_encoder(t, SteeringDeg(column), motor_at(column));
+            let out = sm.on_drive_effort(t, SteeringDeg(10.0), SteeringDeg(column), Amps(20.0));
+            if out.faults.contains(Fault::TrackingError) {
+                latched_at = Some(t - t0);
+            }
+        }
+        let at = latched_at.expect("the runaway latched");
+        assert!((50 * MS..=52 * MS).contains(&at), "at {at} us");
+
+        // A coast: the reference reversed, the column keeps going away for 40 ms while the
+        // loop brakes at 20 A, then comes back.
+        let (mut sm, t0) = tracking();
+        let mut t = t0;
+        while t < t0 + 200 * MS {
+            t += 2 * MS;
+            let s = (t - t0) as f32 * 1e-6;
+            // 300 deg/s decelerating to 0 at 40 ms, then back at the same rate.
+            let column = 300.0 * s - 3750.0 * s * s;
+            if (t - t0).is_multiple_of(10 * MS) {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            let _ = sm.on_encoder(t, SteeringDeg(column), motor_at(column));
+            let out = sm.on_drive_effort(t, SteeringDeg(-5.0), SteeringDeg(column), Amps(-20.0));
+            assert!(out.faults.is_empty(), "at {} ms", (t - t0) / MS);
+        }
+    }
+
+    #[test]
+    fn the_driving_only_rule_keeps_the_drive_off_in_as_ready() {
+        let config = Config::DEFAULT.with_actuation(Actuation::DrivingOnly);
+        let mut sm = SteeringStateMachine::new(config);
+        let _ = sm.on_encoder(0, SteeringDeg(0.0), motor_at(0.0));
+        let out = sm.on_reference(MS, AsState::Ready);
+        assert_eq!(out.demand, DriveDemand::Disabled);
+        assert_eq!(out.state, EcuState::Idle);
+        // No reference timeout counts in AS Ready either: nothing is powered.
+        let out = run_encoder(&mut sm, MS, 500 * MS);
+        assert!(out.faults.is_empty(), "{:?}", out.faults);
+        let _ = sm.on_encoder(500 * MS, SteeringDeg(0.0), motor_at(0.0));
+        let out = sm.on_reference(500 * MS, AsState::Driving);
+        assert_eq!(out.demand, DriveDemand::Track);
+        // The FS default powers the drive in AS Ready.
+        assert_eq!(Config::DEFAULT.actuation(), Actuation::ReadyOrDriving);
+    }
+
+    #[test]
+    fn an_over_current_sampled_every_10_ms_latches_within_20_ms() {
+        // EPOS4 mode: the drive's current comes with each SYNC (TPDO2, every 10 ms).
+        let (mut sm, t0) = tracking();
+        let mut latched_at = None;
+        for k in 1..=30u64 {
+            let t = t0 + k * 10 * MS;
+            let _ = sm.on_reference(t, AsState::Driving);
+            let _ = sm.on_encoder(t, SteeringDeg(0.0), motor_at(0.0));
+            let out = sm.on_current(t, Amps(30.0));
+            if latched_at.is_none() && out.faults.contains(Fault::OverCurrent) {
+                latched_at = Some(k * 10 * MS);
+            }
+        }
+        let at = latched_at.expect("latched");
+        // The first sample above is at 10 ms: latched by the third at the latest.
+        assert!(at <= 30 * MS, "latched {at} us after the first sample");
+    }
+
+    #[test]
     fn heartbeat_loss_latches() {
         let (mut sm, t) = tracking();
         let out = sm.on_heartbeat_lost(t + 1);
@@ -1387,7 +1613,7 @@ mod tests {
         for code in 0..=255u8 {
             match EcuState::from_code(code) {
                 Some(s) => assert_eq!(s.code(), code),
-                None => assert!(code > 5),
+                None => assert!(code > 6),
             }
         }
     }

@@ -111,14 +111,25 @@ pub struct Epos4Sim {
     /// Consumer heartbeat (0x1016 sub 1): when the watched node's heartbeat last came; the
     /// watch starts with the first one (CiA 301).
     consumer_last_us: Option<u64>,
+    /// The plant's motor angle at power-up, rad: position 0 inc of the drive.
+    origin_rad: f64,
 }
 
 impl Epos4Sim {
     /// A drive at node `node`, powered up at t = 0 with the paper's plant at rest at 0 deg;
     /// it sends its boot-up message on the first `advance`.
     pub fn new(node: NodeId, scale: PositionScale) -> Result<Self, PlantError> {
+        Self::new_at(node, scale, 0.0)
+    }
+
+    /// [`Epos4Sim::new`] with the actuator at rest at `column_rad` at power-up. The drive's
+    /// position (0x6064, 0x607A) counts from where the motor stood at power-up, as the real
+    /// drive's Hall/incremental position does: 0 inc is not column 0 unless the car was
+    /// powered up straight.
+    pub fn new_at(node: NodeId, scale: PositionScale, column_rad: f64) -> Result<Self, PlantError> {
         let mut plant = LinearPlant::new(PlantParams::PAPER, 1.0 / CURRENT_LOOP_HZ as f64)?;
-        plant.set_at_rest(0.0);
+        plant.set_at_rest(column_rad);
+        let origin_rad = plant.motor_rad();
         let mut sim = Epos4Sim {
             node,
             od: BTreeMap::new(),
@@ -141,6 +152,7 @@ impl Epos4Sim {
             current_avg_ma: 0.0,
             out: Vec::new(),
             consumer_last_us: None,
+            origin_rad,
         };
         sim.load_defaults();
         Ok(sim)
@@ -219,6 +231,12 @@ impl Epos4Sim {
         e(0x603F, 0, U16, Ro, 0);
         e(0x6040, 0, U16, Rw, 0);
         e(0x6041, 0, U16, Ro, 0);
+        // Limits the ECU writes at bring-up (values here are the simulation's power-up ones,
+        // chosen unlike the ECU's so a missing write shows; not the EDS defaults).
+        e(0x3001, 0, U8, Ro, 5);
+        e(0x3001, 2, U32, Rw, 5_000);
+        e(0x6065, 0, U32, Rw, 2_000);
+        e(0x607F, 0, U32, Rw, 25_000);
         e(0x6060, 0, U8, Rw, 1);
         e(0x6061, 0, U8, Ro, 1);
         e(0x6064, 0, U32, Ro, 0);
@@ -629,7 +647,7 @@ impl Epos4Sim {
         self.set_raw(0x6061, 0, mode);
         let inc = self
             .scale
-            .inc_from_motor(MotorRad(self.plant.motor_rad() as f32))
+            .inc_from_motor(MotorRad((self.plant.motor_rad() - self.origin_rad) as f32))
             .unwrap_or(0);
         self.set_raw(0x6064, 0, inc as u32);
         self.set_raw(0x30D1, 1, (self.current_avg_ma.round() as i32) as u32);
@@ -645,7 +663,9 @@ impl Epos4Sim {
     }
 
     fn push_target(&mut self, inc: i32) {
-        let motor = self.scale.motor_from_inc(inc);
+        // The cascade runs on the plant's true angle: the drive's increments count from the
+        // power-up position.
+        let motor = MotorRad(self.scale.motor_from_inc(inc).0 + self.origin_rad as f32);
         let wheel = SteeringDeg::from(self.cascade.gearing().steering_from_motor(motor));
         if self.cascade.push_reference(wheel).is_err() {
             self.rejected_targets += 1;

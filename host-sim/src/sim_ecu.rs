@@ -141,12 +141,24 @@ pub fn direct_drive_period(
     now_us: u64,
     current_offset_a: f64,
 ) {
+    direct_drive_period_sensed(plant, fast, ecu, now_us, |i| i + current_offset_a);
+}
+
+/// [`direct_drive_period`] with any current-sense error: `sense` maps the winding's true
+/// current to what the phase-current ADC reads (an offset, a flipped sign, a wrong gain).
+pub fn direct_drive_period_sensed(
+    plant: &mut LinearPlant,
+    fast: &mut FastLoop,
+    ecu: &SharedEcu,
+    now_us: u64,
+    sense: impl Fn(f64) -> f64,
+) {
     let sector = hall_from_motor(plant.motor_rad()).rem_euclid(6) as u8;
     let mut truth = HallDecoder::new(0);
     let _ = truth.update(code_of(sector));
     let mut phases = [Amps::ZERO; 3];
     if let Some((high, low)) = truth.driven_legs() {
-        let measured = (plant.current_a() + current_offset_a) as f32;
+        let measured = sense(plant.current_a()) as f32;
         phases[high] = Amps(measured);
         phases[low] = Amps(-measured);
     }
@@ -203,6 +215,19 @@ impl SimEcu {
     /// The paper's ECU and actuator at rest at 0 deg, the EPOS4 at node 1 (booting), t = 0.
     /// Waits while another `SimEcu` of this process is alive.
     pub fn paper() -> SimEcu {
+        Self::paper_at(0.0)
+    }
+
+    /// [`SimEcu::paper`] with the car powered up at `column_deg` at the wheel (the actuator
+    /// and the EPOS4's plant at rest there). The Hall count and the EPOS4's position start at
+    /// 0 wherever the motor stands, so this rehearses the ECU's motor-origin alignment.
+    /// A non-finite angle is taken as 0.
+    pub fn paper_at(column_deg: f64) -> SimEcu {
+        let column_rad = if column_deg.is_finite() {
+            column_deg.to_radians()
+        } else {
+            0.0
+        };
         let guard = ONE_AT_A_TIME
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
@@ -214,7 +239,7 @@ impl SimEcu {
         let reference_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
         let tx_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
         let encoder = Rc::new(EncoderState {
-            column_rad: Cell::new(0.0),
+            column_rad: Cell::new(column_rad),
             broken: Cell::new(false),
         });
         let port: &'static mut SimEncoder = Box::leak(Box::new(SimEncoder(encoder.clone())));
@@ -236,9 +261,10 @@ impl SimEcu {
         let node = NodeId::new(EPOS_NODE).expect("node 1 is valid");
         let config = Epos4Config::paper(node);
         let scale = PositionScale::new(config.counts_per_rev).expect("84 inc/rev");
-        let epos = Epos4Sim::new(node, scale).expect("the paper plant discretises");
-        let plant = LinearPlant::new(PlantParams::PAPER, STEP_US as f64 * 1e-6)
+        let epos = Epos4Sim::new_at(node, scale, column_rad).expect("the paper plant discretises");
+        let mut plant = LinearPlant::new(PlantParams::PAPER, STEP_US as f64 * 1e-6)
             .expect("the paper plant discretises");
+        plant.set_at_rest(column_rad);
         SimEcu {
             ecu,
             reference_frames,

@@ -13,11 +13,12 @@ use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
-use steering_ecu::canopen::NodeId;
 use steering_ecu::canopen::cia402::State;
-use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale};
+use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale, od};
+use steering_ecu::canopen::{NodeId, ObjectAddress};
 use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
+use steering_ecu::gearing::Gearing;
 use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
 use steering_ecu::sensors::ColumnEncoder;
@@ -35,7 +36,7 @@ static SERIAL: StdMutex<()> = StdMutex::new(());
 
 const STEP_US: u64 = 50;
 /// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
-const RUNS: usize = 8;
+const RUNS: usize = 24;
 const PERIOD_STEPS: u64 = 10_000 / STEP_US;
 
 fn node() -> NodeId {
@@ -112,16 +113,27 @@ struct Sample {
     current_a: f64,
     /// The last status frame's current, A (what the vehicle computer sees).
     status_current_a: f32,
+    /// The drive's target position (0x607A), deg at the wheel from the drive's power-up
+    /// position.
+    target_deg: f64,
 }
 
 struct Run {
     samples: Vec<Sample>,
+    /// The simulated drive's (0x3001 sub 2, 0x6065, 0x607F) after the run.
+    limits: [Option<u32>; 3],
     refusals: usize,
     dropped: u64,
     corrupted: u64,
 }
 
 fn run(script: &[Event], faults: RandomFaults, seed: u64) -> Run {
+    run_from(0.0, script, faults, seed)
+}
+
+/// [`run`] with the actuator at rest at `column_deg` when the drive powers up (its position
+/// counts from there, as the real drive's does).
+fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) -> Run {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     MockDriver::get().reset();
     while REFERENCE_FRAMES.try_receive().is_ok() {}
@@ -139,8 +151,15 @@ fn run(script: &[Event], faults: RandomFaults, seed: u64) -> Run {
     let ecu_port = bus.attach();
     let drive_port = bus.attach();
     bus.set_random_faults(faults);
-    let mut sim =
-        Epos4Sim::new(node(), PositionScale::new(config.counts_per_rev).unwrap()).unwrap();
+    let mut sim = Epos4Sim::new_at(
+        node(),
+        PositionScale::new(config.counts_per_rev).unwrap(),
+        column_deg.to_radians(),
+    )
+    .unwrap();
+    if let Ok(mut c) = COLUMN_RAD.lock() {
+        *c = sim.column_rad();
+    }
     // The drive boots before the ECU's link starts: its boot-up message is on the bus first.
     for f in sim.advance(0) {
         bus.send(drive_port, f, 0);
@@ -172,6 +191,13 @@ fn run(script: &[Event], faults: RandomFaults, seed: u64) -> Run {
                     column_deg: sim.column_rad().to_degrees(),
                     current_a: sim.current_a(),
                     status_current_a: status_current,
+                    target_deg: {
+                        let inc = sim.object(od::TARGET_POSITION).unwrap_or(0) as i32;
+                        let motor = PositionScale::new(config.counts_per_rev)
+                            .unwrap()
+                            .motor_from_inc(inc);
+                        f64::from(SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0)
+                    },
                 });
                 let (as_state, deg, clear) = match script.get(period) {
                     Some(Event::Ref(a, d)) => (*a, *d, false),
@@ -230,8 +256,15 @@ fn run(script: &[Event], faults: RandomFaults, seed: u64) -> Run {
         },
     );
     let stats = bus.stats();
+    let limits = [
+        ObjectAddress::new(0x3001, 2),
+        ObjectAddress::new(0x6065, 0),
+        ObjectAddress::new(0x607F, 0),
+    ]
+    .map(|o| sim.object(o));
     Run {
         samples,
+        limits,
         refusals: sim.refusals().len(),
         dropped: stats.dropped,
         corrupted: stats.corrupted,
@@ -397,4 +430,83 @@ fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault() {
     }
     eprintln!("{tracked} of 4 lossy runs tracked");
     assert!(tracked >= 2, "only {tracked} of 4 lossy runs tracked");
+}
+
+/// Issue 12 defect 1, EPOS4 mode: the drive's position counts from where the motor stood at
+/// power-up; the CSP target must be the drive's position plus the column-derived offset.
+#[test]
+fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up() {
+    use AsState::*;
+    let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
+    script.extend(repeat(Event::Ref(Driving, 0.0), 101)); // 60-160: 1 s at 0 deg
+    for column_deg in [-30.0, -12.0, 5.0, 15.0, 30.0] {
+        let r = run_from(column_deg, &script, RandomFaults::default(), 5);
+        let s = &r.samples;
+        assert!(
+            s.iter().all(|x| x.faults == 0),
+            "{column_deg}: a fault latched: {:?}",
+            s.iter().find(|x| x.faults != 0)
+        );
+        assert_eq!(s[160].drive, State::OperationEnabled, "{column_deg}");
+        assert!(
+            s[160].column_deg.abs() < 1.0,
+            "power-up at {column_deg} deg: column at {:.2} deg 1 s after AS Driving at 0 deg",
+            s[160].column_deg
+        );
+        assert_eq!(r.refusals, 0);
+    }
+}
+
+/// Issue 12 defect 3, EPOS4 mode: the first cyclic target is the drive's own position, and the
+/// target then ramps to a far reference at the documented rate instead of stepping to it.
+#[test]
+fn an_epos4_enable_ramps_the_target_from_the_measured_position() {
+    use AsState::*;
+    // The vehicle asks for 60 deg all along (the protocol's rate rule judges the frames, not
+    // the AS state); the column stands at 0 until AS Driving.
+    let mut script = repeat(Event::Ref(Off, 60.0), 60); // 0-59: bring-up, power off
+    script.extend(repeat(Event::Ref(Driving, 60.0), 100)); // 60-159
+    let r = run(&script, RandomFaults::default(), 6);
+    let s = &r.samples;
+    let per_period = f64::from(steering_ecu::ecu::ENABLE_RAMP_DPS) * 0.010;
+    for p in 60..s.len() {
+        let step = s[p].target_deg - s[p - 1].target_deg;
+        assert!(
+            step.abs() <= per_period + 0.2,
+            "period {p}: the target moved {step:.2} deg in 10 ms ({:?} -> {:?})",
+            s[p - 1].drive,
+            s[p].drive
+        );
+    }
+    assert!(
+        (s[159].column_deg - 60.0).abs() < 1.0,
+        "column at {:.2} deg",
+        s[159].column_deg
+    );
+    assert!(s.iter().all(|x| x.faults == 0));
+}
+
+/// Issue 12 defect 11: the bring-up writes the drive's own limits (current, following error,
+/// speed) and reads them back; the drive holds them.
+#[test]
+fn the_bring_up_writes_the_drive_limits() {
+    let script = repeat(Event::Ref(AsState::Off, 0.0), 60);
+    let r = run(&script, RandomFaults::default(), 7);
+    assert_eq!(r.samples[59].faults, 0);
+    let [current_ma, following_inc, velocity_rpm] = r.limits;
+    assert_eq!(
+        current_ma,
+        Some(20_000),
+        "output current limit: the 20 A loop limit"
+    );
+    // 25 deg at the wheel in the drive's increments, 84 per motor turn.
+    let expected_following = {
+        let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(25.0).into());
+        PositionScale::new(84)
+            .unwrap()
+            .inc_from_motor(motor)
+            .map(|i| i as u32)
+    };
+    assert_eq!(following_inc, expected_following, "following error window");
+    assert_eq!(velocity_rpm, Some(5_400), "max profile velocity");
 }

@@ -7,7 +7,7 @@
 use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
 use host_sim::plant::{Actuator, LinearPlant, PlantParams};
-use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period};
+use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period_sensed};
 use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
@@ -31,7 +31,7 @@ static INJECT: StdMutex<Inject> = StdMutex::new(Inject::None);
 /// One scenario at a time: the mock clock and the queues are shared by the whole binary.
 static SERIAL: StdMutex<()> = StdMutex::new(());
 /// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
-const RUNS: usize = 6;
+const RUNS: usize = 16;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Inject {
@@ -43,6 +43,9 @@ enum Inject {
     /// The current sense reads this much more than the winding carries, A (an amplifier
     /// offset).
     CurrentBiasA(f32),
+    /// The current sense reads the winding's current with the wrong sign (swapped shunt
+    /// wires).
+    CurrentSignFlipped,
 }
 
 fn inject() -> Inject {
@@ -109,6 +112,16 @@ struct Sample {
 /// Runs the tasks for `script.len()` periods of 10 ms; `at_period` may act on the ECU (the
 /// clear request, which has no frame yet).
 fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample> {
+    run_from(0.0, script, at_period)
+}
+
+/// [`run`] with the actuator at rest at `column_deg` at power-up (the Hall count starts at 0
+/// wherever the motor stands, as the real decoder's does).
+fn run_from(
+    column_deg: f64,
+    script: &[Send],
+    at_period: impl Fn(usize, &mut Ecu, u64),
+) -> Vec<Sample> {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     MockDriver::get().reset();
     while REFERENCE_FRAMES.try_receive().is_ok() {}
@@ -122,6 +135,10 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
     let mut plant = LinearPlant::new(PlantParams::PAPER, 50e-6).unwrap();
+    plant.set_at_rest(column_deg.to_radians());
+    if let Ok(mut c) = COLUMN_RAD.lock() {
+        *c = plant.column_rad();
+    }
     let mut counter = AliveCounter::wrapping(0);
     let mut samples = Vec::new();
     let mut fast = FastLoop::new(0, Volts(SUPPLY_V as f32));
@@ -180,11 +197,12 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
                 while TX_FRAMES.try_receive().is_ok() {}
             }
             // The fast loop, as the firmware's ADC interrupt runs it.
-            let bias = match inject() {
-                Inject::CurrentBiasA(a) => f64::from(a),
-                _ => 0.0,
-            };
-            direct_drive_period(&mut plant, &mut fast, ecu, now_us, bias);
+            let injected = inject();
+            direct_drive_period_sensed(&mut plant, &mut fast, ecu, now_us, |i| match injected {
+                Inject::CurrentBiasA(a) => i + f64::from(a),
+                Inject::CurrentSignFlipped => -i,
+                _ => i,
+            });
             if let Ok(mut c) = COLUMN_RAD.lock() {
                 *c = plant.column_rad();
             }
@@ -327,6 +345,80 @@ fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
         assert_eq!(s[at].demand, DriveDemand::Disabled, "{name}");
         assert_eq!(s[99].state, EcuState::Faulted, "{name}: stays latched");
         assert!(s[99].current_a.abs() < 0.5, "{name}: current taken to zero");
+    }
+}
+
+/// Issue 12 defect 9: a drive that runs away from the reference while the loop pushes toward
+/// it with all it has is a fault within 50 ms of the push, not after the tracking check's
+/// 20 deg for 200 ms.
+#[test]
+fn a_runaway_latches_within_50_ms_of_the_saturated_push() {
+    // 0-9 AS Off, 10-69 AS Driving 5 deg; the current sense breaks at period 30.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 5.0); 60]);
+    for (name, injection) in [
+        ("sense reads 30 A high", Inject::CurrentBiasA(30.0)),
+        ("sense sign flipped", Inject::CurrentSignFlipped),
+    ] {
+        let s = run(&script, |period, _, _| {
+            if period >= 30
+                && let Ok(mut i) = INJECT.lock()
+            {
+                *i = injection;
+            }
+        });
+        assert_eq!(s[29].faults, 0, "{name}");
+        let at = (30..s.len())
+            .find(|&p| s[p].faults != 0)
+            .unwrap_or_else(|| panic!("{name}: nothing latched"));
+        let latched_ms = (at - 30) * 10;
+        eprintln!(
+            "{name}: latched {latched_ms} ms after the injection (column {:.1} deg, faults {:#x})",
+            s[at].column_deg, s[at].faults
+        );
+        // The offset is the runaway check's; the flipped sign makes the current loop a
+        // positive feedback, which the over-current check sees first.
+        let expected = (1 << Fault::TrackingError.bit()) | (1 << Fault::OverCurrent.bit());
+        assert!(s[at].faults & expected != 0, "{name}: {:#x}", s[at].faults);
+        assert!(
+            latched_ms <= 100,
+            "{name}: latched {latched_ms} ms after the injection"
+        );
+        assert!(
+            (s[at].column_deg - 5.0).abs() < 20.0,
+            "{name}: the column ran {:.1} deg away",
+            s[at].column_deg - 5.0
+        );
+        assert_eq!(s[at].demand, DriveDemand::Disabled, "{name}");
+    }
+}
+
+/// Issue 12 defect 1: the Hall count starts at 0 wherever the motor stands at power-up, so the
+/// motor's origin must be taken from the column encoder, or the ECU steers to the wrong angle
+/// (or latches the disagreement for good).
+#[test]
+fn the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up() {
+    // 0-9 AS Off, then 1 s of AS Driving at 0 deg.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 101]);
+    for column_deg in [-30.0, -12.0, 5.0, 15.0, 30.0] {
+        let s = run_from(column_deg, &script, |_, _, _| {});
+        assert!(
+            (s[5].column_deg - column_deg).abs() < 0.1,
+            "{column_deg}: the car stands where it was powered up"
+        );
+        assert!(
+            s.iter().all(|x| x.faults == 0),
+            "{column_deg}: a fault latched: {:?}",
+            s.iter().find(|x| x.faults != 0)
+        );
+        let end = s[110];
+        assert_eq!(end.state, EcuState::Tracking, "{column_deg}");
+        assert!(
+            end.column_deg.abs() < 1.0,
+            "power-up at {column_deg} deg: column at {:.2} deg 1 s after AS Driving at 0 deg",
+            end.column_deg
+        );
     }
 }
 

@@ -322,3 +322,38 @@ fn track_campaign_from_csv_runs_the_profile_it_was_given() {
     );
     assert_eq!(sim.output().demand, DriveDemand::Disabled);
 }
+
+/// `--sim-column-deg`: the simulated car powered up off centre steers to the reference (issue
+/// 12 defect 1, the motor origin taken from the column encoder).
+#[test]
+fn a_simulated_car_powered_up_off_centre_steers_to_the_reference() {
+    use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
+    use steering_ecu::units::SteeringDeg;
+    let mut sim = SimEcu::paper_at(25.0);
+    assert!((sim.column_deg() - 25.0).abs() < 0.1);
+    let protocol = ProtocolConfig::default();
+    let mut counter = AliveCounter::wrapping(0);
+    for period in 0..150u64 {
+        let as_state = if period < 20 {
+            AsState::Off
+        } else {
+            AsState::Driving
+        };
+        counter = counter.next();
+        let frame = protocol.encode_reference(&Reference {
+            angle: SteeringDeg(0.0),
+            as_state,
+            counter,
+            clear_faults: false,
+        });
+        sim.send(&frame).unwrap();
+        sim.run_until((period + 1) * 10_000);
+        assert!(sim.output().faults.is_empty(), "{:?}", sim.output());
+    }
+    assert_eq!(sim.output().state, EcuState::Tracking);
+    assert!(
+        sim.column_deg().abs() < 1.0,
+        "column at {:.2} deg",
+        sim.column_deg()
+    );
+}

@@ -107,6 +107,15 @@ pub mod od {
     /// [60C2sub2] Interpolation time index, INTEGER8, rww (10^index s; default -3).
     pub const INTERPOLATION_INDEX: ObjectAddress = ObjectAddress::new(0x60C2, 2);
 
+    /// Motor data: output current limit, UNSIGNED32, mA (EPOS4 firmware specification; not
+    /// checked against the EDS in this repository).
+    pub const OUTPUT_CURRENT_LIMIT: ObjectAddress = ObjectAddress::new(0x3001, 2);
+    /// [6065] Following error window, UNSIGNED32, inc (CiA 402).
+    pub const FOLLOWING_ERROR_WINDOW: ObjectAddress = ObjectAddress::new(0x6065, 0);
+    /// [607F] Max profile velocity, UNSIGNED32, rpm (CiA 402; the EPOS4's default velocity
+    /// unit).
+    pub const MAX_PROFILE_VELOCITY: ObjectAddress = ObjectAddress::new(0x607F, 0);
+
     /// 0x6060 value of cyclic synchronous position mode (CiA 402).
     pub const MODE_CSP: i8 = 8;
     /// [60C2sub1] HighLimit.
@@ -234,6 +243,47 @@ pub struct Epos4Config {
     /// The ECU's own heartbeat, which the drive is told to watch (0x1016): if the ECU dies
     /// (a hang, a reset, a cut wire), the drive faults and switches its power stage off.
     pub ecu_heartbeat: Option<EcuHeartbeat>,
+    /// The drive's own limits, written and read back at bring-up.
+    pub limits: DriveLimits,
+}
+
+/// Limits the drive enforces by itself, so a wrong target or a confused ECU cannot ask for more.
+/// Software position limits (0x607D) are not written: the drive counts from its power-up
+/// position, so they would have to follow the ECU's column-derived origin (issue 12, open).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DriveLimits {
+    /// Output current limit, mA (0x3001 sub 2).
+    pub current_ma: u32,
+    /// Following error window, inc (0x6065): beyond it the drive faults.
+    pub following_error_inc: u32,
+    /// Max profile velocity, rpm (0x607F).
+    pub max_velocity_rpm: u32,
+}
+
+/// Following error window at the wheel, deg: above the 20 deg the ECU's tracking check allows
+/// (a 400 deg/s reference slew against the motor's 306 deg/s lags up to about 21 deg over the
+/// full range), so the drive's own fault only fires where the ECU's would.
+pub const FOLLOWING_ERROR_DEG: f32 = 25.0;
+/// Max profile velocity, rpm: the motor's no-load speed on a full 29.4 V pack (29.4 V / ke
+/// 52.5 mV s/rad = 560 rad/s = 5350 rpm), rounded up: a faster command is not the motor's own.
+pub const MAX_VELOCITY_RPM: u32 = 5_400;
+
+impl DriveLimits {
+    /// The paper's car: the 20 A loop limit (section 3.3), [`FOLLOWING_ERROR_DEG`] through the
+    /// paper's gears at `counts_per_rev`, [`MAX_VELOCITY_RPM`].
+    pub fn paper(counts_per_rev: u32) -> Self {
+        let motor = crate::gearing::Gearing::PAPER
+            .motor_from_steering(crate::units::SteeringDeg(FOLLOWING_ERROR_DEG).into());
+        let following_error_inc = PositionScale::new(counts_per_rev)
+            .and_then(|s| s.inc_from_motor(motor))
+            .map_or(0, |i| i.unsigned_abs());
+        DriveLimits {
+            current_ma: (crate::paper_mode::CURRENT_LIMIT.0 * 1000.0) as u32,
+            following_error_inc,
+            max_velocity_rpm: MAX_VELOCITY_RPM,
+        }
+    }
 }
 
 /// The heartbeat the link produces for the ECU and the time the drive allows between two.
@@ -275,6 +325,7 @@ impl Epos4Config {
             max_missed_tpdos: 5,
             current_object: od::CURRENT_ACTUAL,
             ecu_heartbeat: Some(EcuHeartbeat::DEFAULT),
+            limits: DriveLimits::paper(crate::sensors::HALL_COUNTS_PER_REV),
         }
     }
 }
@@ -419,7 +470,8 @@ const MAX_START_ATTEMPTS: u8 = 3;
 /// Theory of operation:
 ///
 /// ```text
-///  Configuring (SDO script: gains -> read back -> 0x6060 = 8 -> 0x60C2 -> 0x1017 -> PDOs)
+///  Configuring (SDO script: gains -> read back -> limits -> read back -> 0x6060 = 8 ->
+///      |        0x60C2 -> 0x1017 -> PDOs)
 ///      |  every write confirmed, every read-back equal
 ///      v
 ///  Starting (NMT start; heartbeat must report Operational)
@@ -476,6 +528,8 @@ pub struct Epos4Link {
     /// The one best-effort "disable voltage" after a failure was sent.
     failsafe_sent: bool,
     next_ecu_heartbeat_us: u64,
+    /// See [`Epos4Link::position_known`].
+    position_known: bool,
 }
 
 impl Epos4Link {
@@ -537,6 +591,7 @@ impl Epos4Link {
             power: false,
             failsafe_sent: false,
             next_ecu_heartbeat_us: now_us,
+            position_known: false,
         })
     }
 
@@ -557,6 +612,24 @@ impl Epos4Link {
             }))?;
         }
         for (object, expected) in gains {
+            push(ScriptStep::Verify { object, expected })?;
+        }
+        let limits = [
+            (od::OUTPUT_CURRENT_LIMIT, config.limits.current_ma),
+            (
+                od::FOLLOWING_ERROR_WINDOW,
+                config.limits.following_error_inc,
+            ),
+            (od::MAX_PROFILE_VELOCITY, config.limits.max_velocity_rpm),
+        ];
+        for (object, value) in limits {
+            push(ScriptStep::Write(SdoWrite {
+                object,
+                value,
+                width: Width::U32,
+            }))?;
+        }
+        for (object, expected) in limits {
             push(ScriptStep::Verify { object, expected })?;
         }
         let small = |object, value: u32, width| {
@@ -655,6 +728,14 @@ impl Epos4Link {
 
     pub fn scale(&self) -> PositionScale {
         self.scale
+    }
+
+    /// The drive has reported its position (TPDO1 or the enable walk's read of 0x6064) since
+    /// the link last (re)configured it; until then [`Epos4Link::motor_position`] is a default
+    /// 0, not a measurement. A drive that rebooted counts from a new origin, so a restart of
+    /// the bring-up forgets the position.
+    pub fn position_known(&self) -> bool {
+        self.position_known
     }
 
     /// The motor angle the drive last reported.
@@ -758,6 +839,7 @@ impl Epos4Link {
             _ => {
                 self.step = 0;
                 self.started = false;
+                self.position_known = false;
                 self.phase = Phase::Configuring { step: 0, total: 0 };
                 self.run_script(now_us, &mut out);
             }
@@ -996,6 +1078,7 @@ impl Epos4Link {
         self.feedback.statusword = statusword;
         self.feedback.position_inc = position;
         self.feedback.updated_us = now_us;
+        self.position_known = true;
         self.missed_tpdos = 0;
         match self.phase {
             Phase::Cyclic | Phase::Disabling | Phase::Standby
@@ -1107,6 +1190,7 @@ impl Epos4Link {
             }
             (EnableStep::ReadPosition, SdoOutcome::Read { value, .. }) => {
                 self.feedback.position_inc = value as i32;
+                self.position_known = true;
                 self.target_inc = value as i32;
                 self.enable_issue(EnableStep::WriteTarget, now_us, out);
             }
@@ -1181,9 +1265,9 @@ mod tests {
     #[test]
     fn pdo_layouts_are_valid() {
         let link = Epos4Link::new(Epos4Config::paper(node()), 0).unwrap();
-        // 7 writes + 7 read-backs + 4 mode/period/heartbeat + 1 consumer heartbeat + 6 + 7 + 6
-        // PDO writes.
-        assert_eq!(link.script.len(), 38);
+        // 7 gain writes + 7 read-backs + 3 limit writes + 3 read-backs + 4 mode/period/
+        // heartbeat + 1 consumer heartbeat + 6 + 7 + 6 PDO writes.
+        assert_eq!(link.script.len(), 44);
     }
 
     #[test]
@@ -1288,6 +1372,7 @@ mod tests {
             frames in proptest::collection::vec(prop_oneof![any_frame(), near_frame()], 1..12),
             phase in 0u8..6,
             dts in proptest::collection::vec(0u64..30_000, 12),
+            powers in proptest::collection::vec(any::<bool>(), 12),
         ) {
             let n = node();
             for f in &frames {
@@ -1316,15 +1401,41 @@ mod tests {
             };
             let mut link = link_in(phase);
             let mut t = 0u64;
-            for (f, dt) in frames.iter().zip(dts) {
+            // "Enable operation" (CiA 402 controlword 0x000F) in any frame the link sends.
+            let enables = |out: &Outbox| {
+                out.iter().any(|f| {
+                    matches!(
+                        super::super::sdo::parse_request(f, n),
+                        Some(super::super::sdo::ServerRequest::Download { object, value, .. })
+                            if object == od::CONTROLWORD
+                                && value as u16 == Command::EnableOperation.controlword()
+                    )
+                })
+            };
+            for ((f, dt), power) in frames.iter().zip(dts).zip(powers) {
                 t += dt;
+                // What the ECU demands for this step.
+                let off = link.set_power(power, t);
+                prop_assert!(!enables(&off));
                 let out = link.on_frame(f, t);
                 prop_assert!(out.len() <= 4);
-                let _ = link.poll(t);
+                let polled = link.poll(t);
+                if !power {
+                    // No power is ever asked of the drive against the ECU's demand.
+                    prop_assert!(!enables(&out) && !enables(&polled), "enable while off");
+                }
                 if link.error().is_some() {
-                    let _ = link.set_power(false, t);
+                    // After a failure, the first "off" sends a disable at once.
+                    let off = link.set_power(false, t);
+                    if power {
+                        let disable = disable_voltage_frame(n);
+                        prop_assert!(
+                            off.iter().any(|f| Some(*f) == disable),
+                            "no disable within one call after a failure"
+                        );
+                    }
+                    prop_assert!(!enables(&off));
                     let _ = link.request_fault_reset(t);
-                    let _ = link.set_power(true, t);
                 }
             }
         }

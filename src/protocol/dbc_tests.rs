@@ -62,7 +62,10 @@ fn ids_lengths_and_signal_sets_agree() {
     let motor = message(&dbc, "EcuMotor");
     assert_eq!(motor.id, MessageId::Standard(MOTOR_ID.raw()));
     assert_eq!(motor.size, u64::from(FRAME_LEN));
-    assert_eq!(dbc.messages.len(), 3);
+    let diagnostics = message(&dbc, "EcuDiagnostics");
+    assert_eq!(diagnostics.size, u64::from(FRAME_LEN));
+    // The diagnostic frame's multiplexed signals overlap by design: its own test checks them.
+    assert_eq!(dbc.messages.len(), 4);
 
     for m in [reference, status, motor] {
         // Signals inside the frame and not overlapping.
@@ -193,6 +196,47 @@ fn fault_table_names_each_fault_bit() {
         .map(|e| (u64::try_from(e.id).unwrap(), e.description.clone()))
         .collect();
     assert_eq!(found, expected);
+}
+
+#[test]
+fn diagnostic_pages_decode_as_the_dbc_says() {
+    use can_dbc::MultiplexIndicator;
+    let dbc = dbc();
+    let m = message(&dbc, "EcuDiagnostics");
+    assert_eq!(m.id, MessageId::Standard(DIAGNOSTIC_ID.raw()));
+    let cfg = ProtocolConfig::DEFAULT;
+    for page in 0..DIAGNOSTIC_PAGES {
+        let words = if page >= FIRST_RECORD_PAGE {
+            Diagnostic::record_words(Some((page, -123_456 * i32::from(page))))
+        } else {
+            [1000 + u16::from(page), 2000 + u16::from(page), 65535]
+        };
+        let d = Diagnostic {
+            counter: AliveCounter::wrapping(page),
+            page,
+            words,
+        };
+        let frame = cfg.encode_diagnostic(&d);
+        assert_eq!(cfg.decode_diagnostic(&frame), Ok(d));
+        let data = frame.data();
+        assert_eq!(raw(signal(m, "DIA_Page"), data), i64::from(page));
+        let on_page: Vec<&Signal> = m
+            .signals
+            .iter()
+            .filter(|s| {
+                s.multiplexer_indicator == MultiplexIndicator::MultiplexedSignal(u64::from(page))
+            })
+            .collect();
+        assert_eq!(on_page.len(), if page >= FIRST_RECORD_PAGE { 2 } else { 3 });
+        if let Some((fault, detail)) = d.record() {
+            assert_eq!(raw(on_page[0], data), i64::from(fault));
+            assert_eq!(raw(on_page[1], data), i64::from(detail));
+        } else {
+            for (s, w) in on_page.iter().zip(words) {
+                assert_eq!(raw(s, data), i64::from(w), "{}", s.name);
+            }
+        }
+    }
 }
 
 proptest! {

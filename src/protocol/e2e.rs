@@ -14,10 +14,10 @@
 //!       |  no: Stale / Counter -> invalid
 //!  AS code? |angle| <= max? step <= budget? --no--> invalid
 //!       |
-//!  Valid(Reference): last accepted := (angle, now_us), invalid run := 0
+//!  Valid(Reference): last accepted := (angle, now_us), invalid score -= 1 (not below 0)
 //!
-//!  invalid: counted per reason (saturating u16), invalid run += 1 (saturating u8);
-//!           run >= max_invalid_in_row -> Fault, else Dropped.
+//!  invalid: counted per reason (saturating u16), invalid score += 1 (at most the limit);
+//!           score >= max_invalid_in_row -> Fault, else Dropped.
 //! ```
 //!
 //! The first frame after [`E2eChecker::new`] or [`E2eChecker::reset`] may carry any counter,
@@ -27,7 +27,20 @@
 //! reference is plausible again, and a burst of late frames still gets one period each.
 //! A receive time earlier than the last accepted one counts as one period.
 //!
-//! The checker does not latch the fault: a valid frame ends the invalid run. Latching, and
+//! The step rule alone gives every frame a period's budget, so a sender running faster than
+//! the period could move the angle faster than the rate. The real-time window (panda's
+//! `rt_rate_limit`) closes that: measured from an anchor (an accepted value, restarted every
+//! [`RT_WINDOW_US`]), the angle may move at most `max_rate * (time since the anchor + one
+//! period)`, however many frames come. Frames that come less than half a period after the
+//! previous authentic one are counted ([`E2eChecker::early_frames`]).
+//!
+//! A frame that fails only the angle rules (range, rate) still carries an AS state the sender
+//! did send: [`E2eChecker::authentic_as_state`] gives it, so AS Emergency in such a frame still
+//! disables the drive at once.
+//!
+//! The checker does not latch the fault: a valid frame lowers the invalid score (as panda's
+//! wrong-counter count: a good frame decrements, it does not zero, so 4 bad frames in every
+//! 5 still reach the limit). Latching, and
 //! what the drive does meanwhile, is the state machine's decision.
 
 use super::{
@@ -120,7 +133,20 @@ pub struct E2eChecker {
     last_accepted: Option<Accepted>,
     invalid_in_row: u8,
     drops: DropCounters,
+    /// See [`E2eChecker::authentic_as_state`].
+    authentic_as_state: Option<AsState>,
+    /// The real-time window's anchor: an accepted value, at most [`RT_WINDOW_US`] old when
+    /// the window was (re)started.
+    window: Option<Accepted>,
+    /// Receive time of the last frame that passed ID, length and CRC.
+    last_authentic_us: Option<u64>,
+    early_frames: u16,
 }
+
+/// Length of the real-time rate window, us (panda's `rt_rate_limit` uses the same 250 ms):
+/// 25 reference periods, long enough that a burst of early frames cannot add a period's step
+/// each, short enough that the anchor stays a recent accepted value.
+pub const RT_WINDOW_US: u64 = 250_000;
 
 impl E2eChecker {
     /// A checker for `config`, or why the configuration is refused.
@@ -138,6 +164,10 @@ impl E2eChecker {
             last_accepted: None,
             invalid_in_row: 0,
             drops: DropCounters::default(),
+            authentic_as_state: None,
+            window: None,
+            last_authentic_us: None,
+            early_frames: 0,
         })
     }
 
@@ -147,16 +177,25 @@ impl E2eChecker {
 
     /// Checks one received frame, `now_us` its receive time (any monotonic microsecond clock).
     pub fn check(&mut self, frame: &Frame, now_us: u64) -> E2eVerdict {
+        self.authentic_as_state = None;
         match self.rules(frame, now_us) {
             Ok(reference) => {
-                self.invalid_in_row = 0;
+                // A good frame takes one off, it does not wipe the score (panda's wrong-counter
+                // count): a link that loses or repeats most frames reaches the limit even with
+                // good frames in between.
+                self.invalid_in_row = self.invalid_in_row.saturating_sub(1);
                 E2eVerdict::Valid(reference)
             }
             Err(error) => {
                 self.drops.count(&error);
                 if !matches!(error, FrameError::WrongId { .. }) {
-                    // Saturate: the run length only needs to say "at least the limit".
-                    self.invalid_in_row = self.invalid_in_row.saturating_add(1);
+                    // Saturate at the limit: the score only needs to say "at least the limit",
+                    // and one good frame after a long burst then leaves the fault verdict
+                    // (the state machine keeps the latch).
+                    self.invalid_in_row = self
+                        .invalid_in_row
+                        .saturating_add(1)
+                        .min(self.config.max_invalid_in_row);
                 }
                 let invalid_in_row = self.invalid_in_row;
                 if self.in_fault() {
@@ -176,6 +215,11 @@ impl E2eChecker {
 
     fn rules(&mut self, frame: &Frame, now_us: u64) -> Result<Reference, FrameError> {
         let word = checked_word(self.config.reference_id, frame)?;
+        if let Some(last) = self.last_authentic_us.replace(now_us)
+            && now_us.saturating_sub(last) < u64::from(self.config.period_us / 2)
+        {
+            self.early_frames = self.early_frames.saturating_add(1);
+        }
 
         let counter = AliveCounter::wrapping(field(word, 8, 4) as u8);
         // The frame passed the CRC, so the sender did send this counter: the next frame is
@@ -198,6 +242,9 @@ impl E2eChecker {
 
         let code = field(word, 12, 4) as u8;
         let as_state = AsState::from_code(code).ok_or(FrameError::UnknownAsState { code })?;
+        // ID, length, CRC and counter are good: the sender did send this AS state now, even if
+        // the angle fails a rule below.
+        self.authentic_as_state = Some(as_state);
 
         let angle_raw = field(word, 16, 16) as u16 as i16;
         let clear_faults = field(word, 32, 1) == 1;
@@ -217,12 +264,37 @@ impl E2eChecker {
                     allowed: raw_deg(allowed),
                 });
             }
+            // The real-time window: against the anchor, the angle may have moved the rate
+            // times the real time since it, plus one period (the jitter allowance the step
+            // rule gives), however many frames came in between. A window older than
+            // RT_WINDOW_US restarts at the last accepted value.
+            let anchor = match self.window {
+                Some(a) if now_us.saturating_sub(a.at_us) < RT_WINDOW_US => a,
+                _ => prev,
+            };
+            self.window = Some(anchor);
+            let moved = (i32::from(angle_raw) - i32::from(anchor.angle_raw)).unsigned_abs();
+            let elapsed_us = now_us.saturating_sub(anchor.at_us);
+            let allowed = self
+                .max_rate_raw_per_s
+                .saturating_mul(elapsed_us.saturating_add(u64::from(self.config.period_us)))
+                / 1_000_000;
+            if u64::from(moved) > allowed {
+                return Err(FrameError::RateTooHigh {
+                    step: raw_deg(u64::from(moved)),
+                    allowed: raw_deg(allowed),
+                });
+            }
         }
 
-        self.last_accepted = Some(Accepted {
+        let accepted = Accepted {
             angle_raw,
             at_us: now_us,
-        });
+        };
+        self.last_accepted = Some(accepted);
+        if self.window.is_none() {
+            self.window = Some(accepted);
+        }
         Ok(Reference {
             angle: super::angle_from_raw(angle_raw),
             as_state,
@@ -238,12 +310,29 @@ impl E2eChecker {
         self.max_rate_raw_per_s.saturating_mul(dt_us) / 1_000_000
     }
 
+    /// The AS state of the frame just checked, if that frame was authentic and in sequence
+    /// (ID, length, CRC and counter good, known AS code), whether or not its angle passed the
+    /// range and rate rules; `None` otherwise. The angle of such a frame is not used, but its
+    /// AS state is the vehicle's word: AS Emergency in it must disable the drive at once.
+    pub fn authentic_as_state(&self) -> Option<AsState> {
+        self.authentic_as_state
+    }
+
+    /// Authentic frames (ID, length, CRC good) that came less than half a period after the
+    /// previous one (saturating): a sender running faster than the protocol's period. Half a
+    /// period is far beyond the bus and scheduling jitter (a few 100 us), so the count is
+    /// not noise.
+    pub fn early_frames(&self) -> u16 {
+        self.early_frames
+    }
+
     /// Frames dropped so far, per reason.
     pub fn drops(&self) -> &DropCounters {
         &self.drops
     }
 
-    /// Invalid reference frames since the last valid one (saturating at 255).
+    /// The invalid-frame score: +1 per invalid frame, -1 per valid one, between 0 and the
+    /// configured limit (in a clean run of invalid frames, their number).
     pub fn invalid_in_row(&self) -> u8 {
         self.invalid_in_row
     }
@@ -270,6 +359,7 @@ impl E2eChecker {
     pub fn reset(&mut self) {
         self.last_counter = None;
         self.last_accepted = None;
+        self.window = None;
         self.invalid_in_row = 0;
     }
 }

@@ -101,7 +101,8 @@
 //! one lost frame costs the next frame too (it is dropped as a jump, and re-synchronises the
 //! counter), and the one after is accepted again. The rate budget is 400 deg/s times the time
 //! since the last accepted reference, at least one 10 ms period: 4.00 deg per sample.
-//! Five invalid frames in a row (configurable) make [`e2e::E2eVerdict::Fault`].
+//! An invalid-frame score of five (configurable; +1 per invalid frame, -1 per valid one) makes
+//! [`e2e::E2eVerdict::Fault`].
 
 pub mod crc;
 pub mod e2e;
@@ -148,6 +149,55 @@ pub const MOTOR_ID: StandardId = match StandardId::new(0x102) {
     Some(id) => id,
     None => panic!("0x102 is an 11-bit ID"), // evaluated at compile time
 };
+/// Diagnostic-frame ID (issue 12): the fault ring and the counters, one page per frame.
+pub const DIAGNOSTIC_ID: StandardId = match StandardId::new(0x103) {
+    Some(id) => id,
+    None => panic!("0x103 is an 11-bit ID"), // evaluated at compile time
+};
+/// Pages of the diagnostic frame: 0..=3 counters, 4..=7 the newest fault records.
+pub const DIAGNOSTIC_PAGES: u8 = 8;
+/// First fault-record page; page `FIRST_RECORD_PAGE + n` holds the n-th newest record.
+pub const FIRST_RECORD_PAGE: u8 = 4;
+/// Fault code of an empty record page.
+pub const NO_RECORD: u8 = 0xFF;
+
+/// One page of the diagnostic frame (0x103): byte 0 CRC, bits 8..11 counter, 12..15 page.
+/// Pages 0..=3 carry three saturating u16 counters at bits 16, 32 and 48:
+/// 0 = E2E drops for wrong length, CRC, stale counter; 1 = counter jump, unknown AS state,
+/// angle out of range; 2 = rate too high, early frames, bus-off events; 3 = refused clear
+/// requests, hold entries, lost demand-change frames. Pages 4..=7 carry a fault record, the
+/// newest first: the fault's bit at 16..23 ([`NO_RECORD`] = none), its detail (i32) at 24..55.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Diagnostic {
+    pub counter: AliveCounter,
+    pub page: u8,
+    /// Pages 0..=3: the three counters. Pages 4..=7: `[fault, low 16 bits, high 16 bits]`
+    /// of the record (use [`Diagnostic::record`]).
+    pub words: [u16; 3],
+}
+
+impl Diagnostic {
+    /// A record page's (fault bit, detail); `None` on a counter page or an empty record.
+    pub fn record(&self) -> Option<(u8, i32)> {
+        if self.page < FIRST_RECORD_PAGE || self.words[0] as u8 == NO_RECORD {
+            return None;
+        }
+        let detail = u32::from(self.words[1]) | u32::from(self.words[2]) << 16;
+        Some((self.words[0] as u8, detail as i32))
+    }
+
+    /// A record page's words for `(fault bit, detail)`.
+    pub fn record_words(record: Option<(u8, i32)>) -> [u16; 3] {
+        match record {
+            Some((fault, detail)) => {
+                let d = detail as u32;
+                [u16::from(fault), d as u16, (d >> 16) as u16]
+            }
+            None => [u16::from(NO_RECORD), 0, 0],
+        }
+    }
+}
+
 /// Motor-angle scale of the motor frame, rad per bit.
 pub const MOTOR_RAD_PER_BIT: f64 = 1e-4;
 /// Mean-current scale of the motor frame, A per bit.
@@ -291,7 +341,7 @@ pub struct ProtocolConfig {
     pub max_rate_deg_per_s: f32,
     /// Nominal reference period, us; the smallest time the rate budget is computed for.
     pub period_us: u32,
-    /// This many invalid reference frames in a row are a fault.
+    /// An invalid-frame score this high is a fault (+1 per invalid frame, -1 per valid one).
     pub max_invalid_in_row: u8,
     /// No accepted reference for longer than this, us, is a timeout ([`E2eChecker::timed_out`]).
     pub timeout_us: u32,
@@ -412,6 +462,47 @@ impl ProtocolConfig {
                 Amps(f32::from(current_raw) / MOTOR_CURRENT_BITS_PER_A)
             },
             counter: AliveCounter::wrapping(field(word, 8, 4) as u8),
+        })
+    }
+}
+
+impl ProtocolConfig {
+    /// The diagnostic frame (ID [`DIAGNOSTIC_ID`]). The page is taken modulo 16 (4 bits); a
+    /// record page's first word keeps its low 8 bits (the fault bit) and packs the detail's
+    /// 32 bits after it.
+    pub fn encode_diagnostic(&self, d: &Diagnostic) -> Frame {
+        let payload = if d.page >= FIRST_RECORD_PAGE {
+            u64::from(d.words[0] & 0xFF) << 16
+                | u64::from(d.words[1]) << 24
+                | u64::from(d.words[2]) << 40
+        } else {
+            u64::from(d.words[0]) << 16 | u64::from(d.words[1]) << 32 | u64::from(d.words[2]) << 48
+        };
+        let word = u64::from(d.counter.raw()) << 8 | u64::from(d.page & 0x0F) << 12 | payload;
+        frame_with_crc(DIAGNOSTIC_ID, word)
+    }
+
+    /// Decodes a diagnostic frame: ID, length, CRC.
+    pub fn decode_diagnostic(&self, frame: &Frame) -> Result<Diagnostic, FrameError> {
+        let word = checked_word(DIAGNOSTIC_ID, frame)?;
+        let page = field(word, 12, 4) as u8;
+        let words = if page >= FIRST_RECORD_PAGE {
+            [
+                field(word, 16, 8) as u16,
+                field(word, 24, 16) as u16,
+                field(word, 40, 16) as u16,
+            ]
+        } else {
+            [
+                field(word, 16, 16) as u16,
+                field(word, 32, 16) as u16,
+                field(word, 48, 16) as u16,
+            ]
+        };
+        Ok(Diagnostic {
+            counter: AliveCounter::wrapping(field(word, 8, 4) as u8),
+            page,
+            words,
         })
     }
 }

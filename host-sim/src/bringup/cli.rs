@@ -43,6 +43,16 @@ pub struct Cli {
     /// With `--iface sim`: inject a fault at a time, KIND@SECONDS (encoder, overcurrent, epos).
     #[arg(long, global = true, hide = true, value_name = "KIND@S")]
     pub sim_inject: Option<String>,
+    /// With `--iface sim`: the steering angle the simulated car is powered up at, deg at the
+    /// wheel (the motor's position counts from there, as on the car).
+    #[arg(
+        long,
+        global = true,
+        default_value_t = 0.0,
+        value_name = "DEG",
+        allow_negative_numbers = true
+    )]
+    pub sim_column_deg: f64,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -229,7 +239,7 @@ pub fn main() -> ExitCode {
 
 fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     if cli.iface == "sim" {
-        let mut sim = SimEcu::paper();
+        let mut sim = SimEcu::paper_at(cli.sim_column_deg);
         if let Some(spec) = &cli.sim_inject {
             let bad = || BringupError::Profile {
                 reason: format!(

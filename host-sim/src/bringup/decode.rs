@@ -205,6 +205,7 @@ pub fn ecu_state_words(code: u8) -> String {
         Some(EcuState::Holding) => "holding".into(),
         Some(EcuState::Emergency) => "emergency".into(),
         Some(EcuState::Faulted) => "faulted".into(),
+        Some(EcuState::Arming) => "arming (drive being enabled)".into(),
         None => format!("unknown state {code}"),
     }
 }

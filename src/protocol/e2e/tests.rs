@@ -121,14 +121,31 @@ fn five_invalid_in_a_row_is_a_fault() {
     assert!(matches!(
         c.check(&frame(0, 9, 0), 6 * T),
         E2eVerdict::Fault {
-            invalid_in_row: 6,
+            invalid_in_row: 5,
             ..
         }
     ));
-    // Not latched here: a valid frame ends the run (the state machine latches).
+    // Not latched here: a valid frame takes the score below the limit (the state machine
+    // latches).
     assert!(is_valid(c.check(&frame(1, DRIVING, 0), 7 * T)));
-    assert_eq!(c.invalid_in_row(), 0);
+    assert_eq!(c.invalid_in_row(), 4);
     assert!(!c.in_fault());
+}
+
+#[test]
+fn a_counter_repeated_in_four_of_five_frames_is_a_fault() {
+    // Issue 12 defect 7: one good frame in five must not wipe the four bad ones.
+    let mut c = checker();
+    let mut counter = 0u8;
+    let mut faulted = false;
+    for n in 0..50u64 {
+        if n % 5 == 0 {
+            counter = (counter + 1) % 16;
+        }
+        let v = c.check(&frame(counter, DRIVING, 0), n * T);
+        faulted |= matches!(v, E2eVerdict::Fault { .. });
+    }
+    assert!(faulted, "score {}", c.invalid_in_row());
 }
 
 #[test]
@@ -139,7 +156,7 @@ fn wrong_counters_saturate() {
         c.check(&stale, n * T);
     }
     assert_eq!(c.drops().stale, u16::MAX);
-    assert_eq!(c.invalid_in_row(), u8::MAX);
+    assert_eq!(c.invalid_in_row(), 5, "the score saturates at the limit");
     assert!(c.in_fault());
 }
 
@@ -238,8 +255,32 @@ fn early_frames_get_one_period_of_budget() {
     let mut c = checker();
     assert!(is_valid(c.check(&frame(0, DRIVING, 0), 0)));
     assert!(is_valid(c.check(&frame(1, DRIVING, 400), 2_000)));
-    // A clock that steps back counts as one period too.
-    assert!(is_valid(c.check(&frame(2, DRIVING, 800), 1_000)));
+    // ... but one period of budget in all, not one per early frame: a second full step that
+    // early (here with a clock that steps back) is dropped.
+    assert!(matches!(
+        error(c.check(&frame(2, DRIVING, 800), 1_000)),
+        Some(FrameError::RateTooHigh { .. })
+    ));
+}
+
+#[test]
+fn frames_sent_faster_than_the_period_cannot_beat_the_rate_limit() {
+    // Issue 12 defect 6: 20 frames 1 ms apart, +4 deg each (a period's full step each).
+    let mut c = checker();
+    let mut accepted = 0i16;
+    for n in 0..20u8 {
+        let angle = i16::from(n) * 400;
+        if is_valid(c.check(&frame(n, DRIVING, angle), u64::from(n) * 1_000)) {
+            accepted = angle;
+        }
+    }
+    // 400 deg/s over the 19 ms, plus one period's 4 deg: 11.6 deg at most.
+    assert!(
+        accepted <= 1160,
+        "moved {} deg in 19 ms",
+        f32::from(accepted) / 100.0
+    );
+    assert_eq!(c.early_frames(), 19, "every frame but the first came early");
 }
 
 #[test]
@@ -399,11 +440,11 @@ proptest! {
                     }
                     last_accepted = Some((raw, now));
                     seen_raw = raw;
-                    run = 0;
+                    run = run.saturating_sub(1);
                 }
                 E2eVerdict::Dropped { error, invalid_in_row } | E2eVerdict::Fault { error, invalid_in_row } => {
                     if !matches!(error, FrameError::WrongId { .. }) {
-                        run = run.saturating_add(1);
+                        run = run.saturating_add(1).min(5);
                     }
                     prop_assert_eq!(invalid_in_row, run);
                     prop_assert_eq!(matches!(verdict, E2eVerdict::Fault { .. }), run >= 5);
