@@ -43,6 +43,9 @@
 use crate::as_state::AsState;
 use crate::can::Frame;
 use crate::canopen::epos4::{Epos4Link, LinkError, Outbox, Phase};
+use crate::controller::SteeringController;
+use crate::ecu_mode::{ColumnCascade, ColumnShaper, EcuTuning};
+use crate::gains::EposGains;
 use crate::gearing::Gearing;
 use crate::paper_mode::Cascade;
 use crate::protocol::{AliveCounter, E2eChecker, E2eVerdict, MotorStatus, ProtocolConfig, Status};
@@ -55,8 +58,8 @@ use crate::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts};
 // One per ECU, made once: the size difference does not matter.
 #[allow(clippy::large_enum_variant)]
 pub enum Drive {
-    /// The ECU runs the cascade on its own bridge.
-    Direct(Cascade),
+    /// The ECU runs the cascade on its own bridge: paper mode or ECU mode.
+    Direct(SteeringController),
     /// An EPOS4 in cyclic synchronous position mode runs the loops.
     Epos4(Epos4Link),
 }
@@ -146,12 +149,19 @@ pub struct Ecu {
     /// Measured current summed since the last motor frame, A, and the number of samples.
     current_sum: f32,
     current_samples: u32,
+    /// ECU mode over an EPOS4: the column side of the controller, which makes the CSP target.
+    /// `None` in paper mode and in direct drive (where the controller holds its own).
+    shaper: Option<ColumnShaper>,
 }
 
 impl Ecu {
     /// A direct-drive ECU with these settings; `None` if the protocol configuration is refused.
-    pub fn new(protocol: ProtocolConfig, config: Config, cascade: Cascade) -> Option<Self> {
-        Self::with_drive(protocol, config, Drive::Direct(cascade))
+    pub fn new(
+        protocol: ProtocolConfig,
+        config: Config,
+        cascade: impl Into<SteeringController>,
+    ) -> Option<Self> {
+        Self::with_drive(protocol, config, Drive::Direct(cascade.into()))
     }
 
     /// An ECU driving the motor as `drive` says; `None` if the protocol configuration is
@@ -192,12 +202,42 @@ impl Ecu {
             motor_counter: AliveCounter::wrapping(0),
             current_sum: 0.0,
             current_samples: 0,
+            shaper: None,
         })
     }
 
     /// The paper's actuator driven directly, the default protocol and state-machine settings.
     pub fn paper() -> Option<Self> {
         Self::new(ProtocolConfig::default(), Config::DEFAULT, Cascade::paper())
+    }
+
+    /// ECU mode ([`crate::ecu_mode`]) on the paper's actuator, driven directly.
+    pub fn ecu_direct() -> Option<Self> {
+        let gains = EposGains::PAPER.to_si().ok()?;
+        let config = Config::DEFAULT;
+        let cascade = ColumnCascade::new(&gains, config.gearing(), EcuTuning::PAPER);
+        Self::new(ProtocolConfig::default(), config, cascade)
+    }
+
+    /// ECU mode over an EPOS4: the ECU runs the column side ([`ColumnShaper`]: inverse belt
+    /// model and column feedback) once per reference period and sends the result as the CSP
+    /// target; the drive runs its own loops, with the feedforward of
+    /// [`Ecu::ecu_mode_epos4_gains`] written at bring-up.
+    pub fn ecu_epos4(link: Epos4Link) -> Option<Self> {
+        let config = Config::DEFAULT;
+        let mut ecu = Self::with_drive(ProtocolConfig::default(), config, Drive::Epos4(link))?;
+        ecu.shaper = Some(ColumnShaper::new(config.gearing(), EcuTuning::PAPER, 1));
+        Some(ecu)
+    }
+
+    /// The EPOS4's gains in ECU mode: Table 3's PID with the model's feedforward
+    /// ([`EcuTuning::PAPER`], converted to the drive's mA s/rad and mA s^2/rad).
+    pub fn ecu_mode_epos4_gains() -> EposGains {
+        EposGains {
+            ff_velocity_ma_s_per_rad: EcuTuning::PAPER.ff_velocity * 1000.0,
+            ff_acceleration_ma_s2_per_rad: EcuTuning::PAPER.ff_acceleration * 1000.0,
+            ..EposGains::PAPER
+        }
     }
 
     /// The paper's car: an EPOS4 with the link's settings, the default protocol and
@@ -337,6 +377,15 @@ impl Ecu {
             self.ramp = Some((self.column, now_us));
         }
         let aligned = self.aligned_counts();
+        if out.drive_just_enabled
+            && let Some(shaper) = &mut self.shaper
+        {
+            // ECU mode over the EPOS4 starts from rest where the column is.
+            shaper.reset(
+                self.gearing
+                    .motor_from_steering(SteeringRad::from(self.column)),
+            );
+        }
         match &mut self.drive {
             Drive::Direct(cascade) => {
                 if out.drive_just_enabled {
@@ -414,7 +463,14 @@ impl Ecu {
                 let _ = cascade.push_reference(angle);
             }
             Drive::Epos4(link) => {
-                let motor = self.gearing.motor_from_steering(SteeringRad::from(angle));
+                let mut motor = self.gearing.motor_from_steering(SteeringRad::from(angle));
+                if let Some(shaper) = &mut self.shaper {
+                    // ECU mode: the shaped target with the column terms. A refused sample
+                    // keeps the shaper's last target.
+                    let _ = shaper.push_reference(angle);
+                    let column = Some(SteeringRad::from(self.column)).filter(|c| c.is_finite());
+                    motor = shaper.next_target(column);
+                }
                 // The drive counts from where it powered up: its target is the column-derived
                 // angle plus the origin. Not finite, or no origin yet: the target stays (the
                 // link keeps it at the drive's actual position until it is enabled).
@@ -563,7 +619,10 @@ impl Ecu {
             // that switched the drive on, so it is known here.
             DriveDemand::Hold | DriveDemand::Track => {
                 let aligned = hall_count.saturating_sub(self.origin_counts.unwrap_or(0));
-                cascade.position_step(aligned).current
+                // ECU mode closes its column terms on the newest encoder sample (the aligned
+                // frame puts column 0 at motor 0); paper mode ignores it.
+                let column = Some(SteeringRad::from(self.column)).filter(|c| c.is_finite());
+                cascade.position_step(aligned, column).current
             }
         }
     }

@@ -54,6 +54,10 @@ use crate::sensors::{COLUMN_ENCODER_COUNTS, HALL_COUNTS_PER_REV, motor_from_hall
 use crate::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts, saturate};
 use core::f32::consts::TAU;
 
+/// Below this reference speed at the column (1 deg/s) the reference counts as resting and the
+/// column integral runs, rad/s.
+const RESTING_RAD_PER_S: f32 = 0.017_453;
+
 /// One count of the 12-bit column encoder, rad.
 const COLUMN_COUNT_RAD: f32 = TAU / COLUMN_ENCODER_COUNTS as f32;
 
@@ -221,8 +225,25 @@ impl ColumnShaper {
 
     /// The motor target for this tick, given the column angle when a fresh sample exists.
     pub fn next(&mut self, column: Option<SteeringRad>) -> Setpoint {
-        let plain = self.plain.next_setpoint();
         let mut setpoint = self.target.next_setpoint();
+        let correction = self.column_terms(column);
+        setpoint.position = MotorRad(setpoint.position.0 + correction);
+        setpoint
+    }
+
+    /// EPOS4 mode, once per SYNC: the newest shaped sample plus the column terms, as the CSP
+    /// target. The drive interpolates from its last target to this one over the next period,
+    /// which is the one sample of lag direct drive's interpolator has too.
+    pub fn next_target(&mut self, column: Option<SteeringRad>) -> MotorRad {
+        let _ = self.target.next_setpoint();
+        let correction = self.column_terms(column);
+        MotorRad(self.target.segment_end().0 + correction)
+    }
+
+    /// Advance the plain reference one tick, take the column sample into the column terms and
+    /// return their correction of the motor target, rad at the motor.
+    fn column_terms(&mut self, column: Option<SteeringRad>) -> f32 {
+        let plain = self.plain.next_setpoint();
         if let Some(column) = column.filter(|c| c.is_finite()) {
             let column_motor = self.gearing.motor_from_steering(column).0;
             let error = plain.position.0 - column_motor;
@@ -230,7 +251,12 @@ impl ColumnShaper {
             let authority = self.gearing.ratio() * self.tuning.column_authority_rad;
             let next =
                 self.column_correction + error * self.dt_s / self.tuning.column_time_constant_s;
-            if next.is_finite() {
+            // The integral is for static offsets (backlash, friction, gearing): while the
+            // reference moves, the column's lag is the feedforward's business, and integrating
+            // it would wind up and overshoot when the reference stops (0.7 deg after a 10 deg
+            // ramp at 100 deg/s, seen through the firmware's tasks).
+            let resting = plain.velocity.abs() <= self.gearing.ratio() * RESTING_RAD_PER_S;
+            if resting && next.is_finite() {
                 self.column_correction = saturate(next, authority).0;
             }
         }
@@ -239,9 +265,7 @@ impl ColumnShaper {
         // acts only on the error beyond one count (the integral still sees all of it).
         let dead_band = self.gearing.ratio() * COLUMN_COUNT_RAD;
         let beyond = self.column_error - saturate(self.column_error, dead_band).0;
-        let proportional = self.tuning.column_gain * beyond;
-        setpoint.position = MotorRad(setpoint.position.0 + self.column_correction + proportional);
-        setpoint
+        self.column_correction + self.tuning.column_gain * beyond
     }
 
     /// Start again from rest at the motor angle `here`: histories and column terms cleared.

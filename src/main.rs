@@ -48,6 +48,7 @@ mod firmware {
     use steering_ecu::can::{Frame, StandardId};
     #[cfg(feature = "drive-epos4")]
     use steering_ecu::canopen::epos4::Epos4Link;
+    use steering_ecu::controller::ControllerKind;
     use steering_ecu::ecu::Ecu;
     use steering_ecu::ports::{BusError, CanRx, CanTx, ColumnEncoderPort, EncoderError};
     use steering_ecu::sensors::ColumnEncoder;
@@ -59,6 +60,10 @@ mod firmware {
 
     /// The ECU's shared state, made once at start-up.
     static ECU: StaticCell<SharedEcu> = StaticCell::new();
+    /// The steering controller: `Paper` (the paper's EPOS4 cascade, Table 3) or `Ecu` (the
+    /// ECU's own, `steering_ecu::ecu_mode`: about twice the bandwidth on the paper's plant; see
+    /// the README's "ECU mode"). In EPOS4 mode `Ecu` also writes the model feedforward.
+    const CONTROLLER: ControllerKind = ControllerKind::Paper;
     /// Raw column-encoder word at straight ahead; set at bring-up (see the README checklist).
     const COLUMN_ZERO_RAW: u16 = 0;
     /// AMT20 SPI clock: the datasheet allows up to 1 MHz; 500 kHz leaves margin for the cable
@@ -266,18 +271,36 @@ mod firmware {
         // Start-up only: the defaults are valid by construction (tested on the host).
         #[cfg(feature = "drive-epos4")]
         let ecu: &'static SharedEcu = {
-            let config = safety::epos4_config();
+            let mut config = safety::epos4_config();
+            if CONTROLLER == ControllerKind::Ecu {
+                config.gains = Ecu::ecu_mode_epos4_gains();
+            }
             let now = embassy_time::Instant::now().as_micros();
             let link = defmt::unwrap!(Epos4Link::new(config, now).ok());
-            defmt::info!("drive: EPOS4 node {=u8}, CSP", config.node.raw());
+            defmt::info!(
+                "drive: EPOS4 node {=u8}, CSP, controller {}",
+                config.node.raw(),
+                CONTROLLER
+            );
             ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(
-                Ecu::paper_epos4(link)
+                match CONTROLLER {
+                    ControllerKind::Paper => Ecu::paper_epos4(link),
+                    ControllerKind::Ecu => Ecu::ecu_epos4(link),
+                }
             ))))
         };
         #[cfg(feature = "drive-direct")]
         let ecu: &'static SharedEcu = {
-            defmt::info!("drive: direct, three-phase bridge on TIM1");
-            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(Ecu::paper()))))
+            defmt::info!(
+                "drive: direct, three-phase bridge on TIM1, controller {}",
+                CONTROLLER
+            );
+            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(
+                match CONTROLLER {
+                    ControllerKind::Paper => Ecu::paper(),
+                    ControllerKind::Ecu => Ecu::ecu_direct(),
+                }
+            ))))
         };
         spawner.spawn(defmt::unwrap!(reference_task(ecu)));
         spawner.spawn(defmt::unwrap!(status_task(ecu)));

@@ -157,6 +157,11 @@ impl Interpolator {
         }
     }
 
+    /// Where the current segment ends: the newest sample (motor side).
+    pub fn segment_end(&self) -> MotorRad {
+        MotorRad(self.end)
+    }
+
     /// The set-point `tick` ticks into the current segment.
     fn position_at(&self, tick: u16) -> f32 {
         let frac = tick as f32 / self.ticks_per_period as f32;

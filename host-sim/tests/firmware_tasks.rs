@@ -12,6 +12,7 @@ use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
+use steering_ecu::controller::ControllerKind;
 use steering_ecu::direct::FastLoop;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
@@ -28,10 +29,21 @@ static TX_FRAMES: FrameQueue = FrameQueue::new();
 static COLUMN_RAD: StdMutex<f64> = StdMutex::new(0.0);
 /// A sensor fault the scenario injects (set from `at_period`).
 static INJECT: StdMutex<Inject> = StdMutex::new(Inject::None);
+/// Tests that switch the controller hold this for their whole run, so no other test's
+/// scenario starts with their choice (tests that do not take it run paper mode).
+static SCENARIOS: StdMutex<()> = StdMutex::new(());
 /// One scenario at a time: the mock clock and the queues are shared by the whole binary.
 static SERIAL: StdMutex<()> = StdMutex::new(());
 /// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
-const RUNS: usize = 16;
+const RUNS: usize = 40;
+/// The controller the next scenario's ECU runs (both drive the same tests).
+static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Paper);
+
+fn set_controller(kind: ControllerKind) {
+    if let Ok(mut c) = CONTROLLER.lock() {
+        *c = kind;
+    }
+}
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Inject {
@@ -129,9 +141,14 @@ fn run_from(
     if let Ok(mut i) = INJECT.lock() {
         *i = Inject::None;
     }
-    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(
-        Ecu::paper().unwrap(),
-    ))));
+    let kind = CONTROLLER
+        .lock()
+        .map(|c| *c)
+        .unwrap_or(ControllerKind::Paper);
+    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(match kind {
+        ControllerKind::Paper => Ecu::paper().unwrap(),
+        ControllerKind::Ecu => Ecu::ecu_direct().unwrap(),
+    }))));
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
     let mut plant = LinearPlant::new(PlantParams::PAPER, 50e-6).unwrap();
@@ -216,6 +233,15 @@ fn run_from(
 
 #[test]
 fn steering_rules_end_to_end_on_the_firmware_tasks() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        set_controller(kind);
+        steering_rules_end_to_end(kind);
+    }
+}
+
+fn steering_rules_end_to_end(kind: ControllerKind) {
+    eprintln!("steering rules, {kind:?} mode");
     // Timeline, 10 ms per entry:
     //   0-9    AS Off, 0 deg          -> drive disabled
     //   10-59  AS Ready/Driving 10 deg -> tracking, the column reaches 10 deg
@@ -291,6 +317,14 @@ fn steering_rules_end_to_end_on_the_firmware_tasks() {
 
 #[test]
 fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        set_controller(kind);
+        sensor_faults_latch(kind);
+    }
+}
+
+fn sensor_faults_latch(kind: ControllerKind) {
     // 0-9 AS Off, 10-99 AS Driving 5 deg; the fault is injected from period 30 on.
     let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
     script.extend(vec![Send::Ref(AsState::Driving, 5.0); 90]);
@@ -338,7 +372,7 @@ fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
             s[at].faults
         );
         eprintln!(
-            "{name}: {fault:?} latched {} ms after the injection, column at {:.1} deg",
+            "{kind:?} mode, {name}: {fault:?} latched {} ms after the injection, column at {:.1} deg",
             (at - 30) * 10,
             s[at].column_deg
         );
@@ -353,6 +387,15 @@ fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
 /// 20 deg for 200 ms.
 #[test]
 fn a_runaway_latches_within_50_ms_of_the_saturated_push() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        a_runaway_latches_within_50_ms_of_the_saturated_push_in();
+    }
+}
+
+fn a_runaway_latches_within_50_ms_of_the_saturated_push_in() {
     // 0-9 AS Off, 10-69 AS Driving 5 deg; the current sense breaks at period 30.
     let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
     script.extend(vec![Send::Ref(AsState::Driving, 5.0); 60]);
@@ -398,6 +441,15 @@ fn a_runaway_latches_within_50_ms_of_the_saturated_push() {
 /// (or latches the disagreement for good).
 #[test]
 fn the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up_in();
+    }
+}
+
+fn the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up_in() {
     // 0-9 AS Off, then 1 s of AS Driving at 0 deg.
     let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
     script.extend(vec![Send::Ref(AsState::Driving, 0.0); 101]);
@@ -425,6 +477,15 @@ fn the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up() {
 /// The receive side of the bus: bus-off ends routing and latches the fault.
 #[test]
 fn bus_off_ends_reception_and_latches_the_fault() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        bus_off_ends_reception_and_latches_the_fault_in();
+    }
+}
+
+fn bus_off_ends_reception_and_latches_the_fault_in() {
     use steering_ecu::can::StandardId;
     use steering_ecu::ports::{BusError, CanRx};
     use steering_ecu::tasks::{Route, RouterCounters};
