@@ -46,6 +46,15 @@ impl SteeringController {
         }
     }
 
+    /// A sample the ECU made itself (the enable ramp): ECU mode takes it without its inverse
+    /// belt model ([`crate::ecu_mode::ColumnShaper::push_unshaped`]); paper mode as any sample.
+    pub fn push_unshaped(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
+        match self {
+            SteeringController::Paper(c) => c.push_reference(angle),
+            SteeringController::Ecu(c) => c.push_unshaped(angle),
+        }
+    }
+
     /// One position tick. Paper mode ignores the column (its loop sees only the motor).
     pub fn position_step(
         &mut self,

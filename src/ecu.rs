@@ -454,20 +454,31 @@ impl Ecu {
     }
 
     fn push_reference(&mut self, now_us: u64, target: SteeringDeg) {
+        // The enable ramp is the ECU's own motion, its last step included: ECU mode does not
+        // shape it.
+        let ramping = self.ramp.is_some();
         let angle = self.ramped(now_us, target);
         self.reference = Some(angle);
         match &mut self.drive {
             // The E2E check already bounds the angle to the cascade's range; a refusal here
             // keeps the ramp in progress, which is the documented outcome.
             Drive::Direct(cascade) => {
-                let _ = cascade.push_reference(angle);
+                let _ = if ramping {
+                    cascade.push_unshaped(angle)
+                } else {
+                    cascade.push_reference(angle)
+                };
             }
             Drive::Epos4(link) => {
                 let mut motor = self.gearing.motor_from_steering(SteeringRad::from(angle));
                 if let Some(shaper) = &mut self.shaper {
                     // ECU mode: the shaped target with the column terms. A refused sample
                     // keeps the shaper's last target.
-                    let _ = shaper.push_reference(angle);
+                    let _ = if ramping {
+                        shaper.push_unshaped(angle)
+                    } else {
+                        shaper.push_reference(angle)
+                    };
                     let column = Some(SteeringRad::from(self.column)).filter(|c| c.is_finite());
                     motor = shaper.next_target(column);
                 }

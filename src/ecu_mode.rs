@@ -58,6 +58,15 @@ use core::f32::consts::TAU;
 /// column integral runs, rad/s.
 const RESTING_RAD_PER_S: f32 = 0.017_453;
 
+/// The column integral acts only within this error at the column (1 deg, rad): it is for
+/// static offsets (backlash of 1.5 deg leaves at most 0.75 deg), not for the catch-up after a
+/// step.
+const INTEGRAL_ZONE_RAD: f32 = 0.017_453;
+
+/// Fastest change of the proportional column term, rad/s at the column (100 deg/s, as the
+/// enable ramp `ecu::ENABLE_RAMP_DPS`).
+const COLUMN_SLEW_RAD_PER_S: f32 = 1.745_33;
+
 /// One count of the 12-bit column encoder, rad.
 const COLUMN_COUNT_RAD: f32 = TAU / COLUMN_ENCODER_COUNTS as f32;
 
@@ -173,6 +182,10 @@ pub struct ColumnShaper {
     column_correction: f32,
     /// The last column error, rad at the motor (0 without a column sample).
     column_error: f32,
+    /// The newest sample was shaped (a vehicle reference), not the enable ramp's.
+    shaping: bool,
+    /// The proportional column term as applied (slew-limited), rad at the motor.
+    proportional: f32,
 }
 
 impl ColumnShaper {
@@ -196,6 +209,8 @@ impl ColumnShaper {
             history: [None; 2],
             column_correction: 0.0,
             column_error: 0.0,
+            shaping: true,
+            proportional: 0.0,
         }
     }
 
@@ -220,7 +235,26 @@ impl ColumnShaper {
         let target = r + self.tuning.lag1_s * slope + self.tuning.lag2_s2 * curvature;
         self.history = [Some(r), Some(r1)];
         self.plain.push(MotorRad(r))?;
+        self.shaping = true;
         self.target.push(MotorRad(target))
+    }
+
+    /// A sample taken as it is, without the inverse belt model, and with the derivative history
+    /// restarted there: the ECU's enable ramp (a velocity step it makes itself) would otherwise
+    /// become a position step of `lag1_s` times the ramp rate (4.9 deg at 100 deg/s) at the
+    /// start of every enable, and again at its end.
+    pub fn push_unshaped(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
+        if !angle.is_finite() {
+            return Err(ReferenceError::NotFinite);
+        }
+        if angle.0.abs() > STEERING_RANGE_DEG {
+            return Err(ReferenceError::OutOfRange);
+        }
+        let r = self.gearing.motor_from_steering(SteeringRad::from(angle)).0;
+        self.history = [Some(r), Some(r)];
+        self.plain.push(MotorRad(r))?;
+        self.shaping = false;
+        self.target.push(MotorRad(r))
     }
 
     /// The motor target for this tick, given the column angle when a fresh sample exists.
@@ -255,7 +289,10 @@ impl ColumnShaper {
             // reference moves, the column's lag is the feedforward's business, and integrating
             // it would wind up and overshoot when the reference stops (0.7 deg after a 10 deg
             // ramp at 100 deg/s, seen through the firmware's tasks).
-            let resting = plain.velocity.abs() <= self.gearing.ratio() * RESTING_RAD_PER_S;
+            // And only near the reference: a large error is the proportional term's, and
+            // integrating the catch-up after a step would overshoot by as much again.
+            let resting = plain.velocity.abs() <= self.gearing.ratio() * RESTING_RAD_PER_S
+                && error.abs() <= self.gearing.ratio() * INTEGRAL_ZONE_RAD;
             if resting && next.is_finite() {
                 self.column_correction = saturate(next, authority).0;
             }
@@ -265,13 +302,29 @@ impl ColumnShaper {
         // acts only on the error beyond one count (the integral still sees all of it).
         let dead_band = self.gearing.ratio() * COLUMN_COUNT_RAD;
         let beyond = self.column_error - saturate(self.column_error, dead_band).0;
-        self.column_correction + self.tuning.column_gain * beyond
+        // Not during the enable ramp: the column lags the ECU's own ramp, and pushing on that
+        // lag would make the ramp faster than its documented rate.
+        let gain = if self.shaping {
+            self.tuning.column_gain
+        } else {
+            0.0
+        };
+        // The proportional term moves the target no faster than the enable ramp's 100 deg/s
+        // at the column: when a ramp hands over, or an encoder sample jumps, the drive sees a
+        // ramp, not a step.
+        let slew = self.gearing.ratio() * COLUMN_SLEW_RAD_PER_S * self.dt_s;
+        let wanted = gain * beyond;
+        if wanted.is_finite() {
+            self.proportional += saturate(wanted - self.proportional, slew).0;
+        }
+        self.column_correction + self.proportional
     }
 
     /// Start again from rest at the motor angle `here`: histories and column terms cleared.
     pub fn reset(&mut self, here: MotorRad) {
         self.column_correction = 0.0;
         self.column_error = 0.0;
+        self.proportional = 0.0;
         self.history = [None; 2];
         self.target.reset_to(here);
         self.plain.reset_to(here);
@@ -353,6 +406,11 @@ impl ColumnCascade {
     /// A new reference sample at the wheel; refused as paper mode refuses it.
     pub fn push_reference(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
         self.shaper.push_reference(angle)
+    }
+
+    /// [`ColumnShaper::push_unshaped`]: the ECU's own enable ramp.
+    pub fn push_unshaped(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
+        self.shaper.push_unshaped(angle)
     }
 
     /// One position-loop tick (2 kHz): the Hall count and, when a fresh sample exists, the

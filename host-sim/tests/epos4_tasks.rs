@@ -16,6 +16,7 @@ use steering_ecu::can::Frame;
 use steering_ecu::canopen::cia402::State;
 use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale, od};
 use steering_ecu::canopen::{NodeId, ObjectAddress};
+use steering_ecu::controller::ControllerKind;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
 use steering_ecu::gearing::Gearing;
@@ -36,7 +37,17 @@ static SERIAL: StdMutex<()> = StdMutex::new(());
 
 const STEP_US: u64 = 50;
 /// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
-const RUNS: usize = 24;
+const RUNS: usize = 48;
+/// The controller the next scenario's ECU runs (both drive the same tests).
+static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Paper);
+/// Held by each test for its whole run, so no scenario starts with another test's choice.
+static SCENARIOS: StdMutex<()> = StdMutex::new(());
+
+fn set_controller(kind: ControllerKind) {
+    if let Ok(mut c) = CONTROLLER.lock() {
+        *c = kind;
+    }
+}
 const PERIOD_STEPS: u64 = 10_000 / STEP_US;
 
 fn node() -> NodeId {
@@ -139,11 +150,19 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
     while REFERENCE_FRAMES.try_receive().is_ok() {}
     while DRIVE_FRAMES.try_receive().is_ok() {}
     while TX_FRAMES.try_receive().is_ok() {}
-    let config = Epos4Config::paper(node());
+    let kind = CONTROLLER
+        .lock()
+        .map(|c| *c)
+        .unwrap_or(ControllerKind::Paper);
+    let mut config = Epos4Config::paper(node());
+    if kind == ControllerKind::Ecu {
+        config.gains = Ecu::ecu_mode_epos4_gains();
+    }
     let link = Epos4Link::new(config, 0).unwrap();
-    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(
-        Ecu::paper_epos4(link).unwrap(),
-    ))));
+    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(match kind {
+        ControllerKind::Paper => Ecu::paper_epos4(link).unwrap(),
+        ControllerKind::Ecu => Ecu::ecu_epos4(link).unwrap(),
+    }))));
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
     let mut bus = CanBus::new(seed, 130);
@@ -281,6 +300,15 @@ fn repeat(event: Event, n: usize) -> Vec<Event> {
 
 #[test]
 fn the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference_in();
+    }
+}
+
+fn the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference_in() {
     use AsState::*;
     // 10 ms per entry.
     let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
@@ -327,6 +355,15 @@ fn the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference()
 
 #[test]
 fn a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered_in();
+    }
+}
+
+fn a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered_in() {
     use AsState::*;
     let mut script = repeat(Event::Ref(Off, 0.0), 60);
     script.extend(repeat(Event::Ref(Driving, 5.0), 50)); // 60-109
@@ -369,6 +406,15 @@ fn a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered() {
 
 #[test]
 fn a_silent_drive_latches_heartbeat_lost() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        a_silent_drive_latches_heartbeat_lost_in();
+    }
+}
+
+fn a_silent_drive_latches_heartbeat_lost_in() {
     use AsState::*;
     let mut script = repeat(Event::Ref(Off, 0.0), 60);
     script.extend(repeat(Event::Ref(Driving, 5.0), 40)); // 60-99
@@ -392,6 +438,15 @@ fn a_silent_drive_latches_heartbeat_lost() {
 
 #[test]
 fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault_in();
+    }
+}
+
+fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault_in() {
     use AsState::*;
     let mut script = repeat(Event::Ref(Off, 0.0), 100);
     script.extend(repeat(Event::Ref(Driving, 8.0), 100));
@@ -436,6 +491,15 @@ fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault() {
 /// power-up; the CSP target must be the drive's position plus the column-derived offset.
 #[test]
 fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up_in();
+    }
+}
+
+fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up_in() {
     use AsState::*;
     let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
     script.extend(repeat(Event::Ref(Driving, 0.0), 101)); // 60-160: 1 s at 0 deg
@@ -461,6 +525,15 @@ fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up() {
 /// target then ramps to a far reference at the documented rate instead of stepping to it.
 #[test]
 fn an_epos4_enable_ramps_the_target_from_the_measured_position() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        an_epos4_enable_ramps_the_target_from_the_measured_position_in();
+    }
+}
+
+fn an_epos4_enable_ramps_the_target_from_the_measured_position_in() {
     use AsState::*;
     // The vehicle asks for 60 deg all along (the protocol's rate rule judges the frames, not
     // the AS state); the column stands at 0 until AS Driving.
@@ -490,6 +563,15 @@ fn an_epos4_enable_ramps_the_target_from_the_measured_position() {
 /// speed) and reads them back; the drive holds them.
 #[test]
 fn the_bring_up_writes_the_drive_limits() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        set_controller(kind);
+        the_bring_up_writes_the_drive_limits_in();
+    }
+}
+
+fn the_bring_up_writes_the_drive_limits_in() {
     let script = repeat(Event::Ref(AsState::Off, 0.0), 60);
     let r = run(&script, RandomFaults::default(), 7);
     assert_eq!(r.samples[59].faults, 0);
