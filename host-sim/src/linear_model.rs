@@ -87,6 +87,7 @@
 use crate::plant::{PlantParams, state};
 use nalgebra::{Complex, DMatrix, DVector, RowDVector, SMatrix, SVector};
 use std::f64::consts::TAU;
+use steering_ecu::ecu_mode::EcuTuning;
 use steering_ecu::gains::{EposGains, GainError};
 use steering_ecu::paper_mode::{
     CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, POSITION_LOOP_HZ,
@@ -577,6 +578,54 @@ impl LinearModel {
         self.closed_loop_poles().iter().all(|p| p.z_magnitude < 1.0)
     }
 
+    /// ECU mode's loop transfer (`steering_ecu::ecu_mode`), broken at the current set-point:
+    /// the same PID and plant, with the proportional and integral column terms feeding the
+    /// pinion angle back into the set-point (`sp += G (Kc + (Tp/tau)/(1 - 1/z)) (r - delta_P)`),
+    /// and the D term on the motor speed alone (Hall edge timing, linearised as the exact
+    /// speed's backward difference):
+    ///
+    /// ```text
+    ///   L = (Kp + Ki Tp/(1 - 1/z)) (P_m + G (Kc + (Tp/tau)/(1 - 1/z)) P_c) + Kd (1 - 1/z)/Tp P_m
+    /// ```
+    ///
+    /// `P_m = theta_rot / i*`, `P_c = delta_P / i*`. Linearised: the column encoder's dead band
+    /// and 500 Hz sampling are left out (the column term acts every tick), and the inverse belt
+    /// model and the model feedforward are outside the loop.
+    pub fn ecu_loop_transfer(&self, f_hz: f64, tuning: &EcuTuning) -> Complex<f64> {
+        let z = Complex::from_polar(1.0, TAU * f_hz * self.tp);
+        let (p_m, p_c) = self.plant_per_current(z);
+        let zi = z.inv();
+        let one = Complex::new(1.0, 0.0);
+        let pi = self.gains.position_kp + (one - zi).inv() * (self.gains.position_ki * self.tp);
+        let column = tuning.column_gain as f64
+            + (one - zi).inv() * (self.tp / tuning.column_time_constant_s as f64);
+        pi * (p_m + column * self.ratio * p_c)
+            + (one - zi) * (self.gains.position_kd / self.tp) * p_m
+    }
+
+    /// `(theta_rot, delta_P)` per unit current set-point held over position ticks, at `z`.
+    fn plant_per_current(&self, z: Complex<f64>) -> (Complex<f64>, Complex<f64>) {
+        let n = self.a_inner.nrows();
+        let mut m =
+            DMatrix::<Complex<f64>>::from_fn(n, n, |i, j| Complex::new(-self.a_inner[(i, j)], 0.0));
+        for i in 0..n {
+            m[(i, i)] += z;
+        }
+        let rhs = DVector::<Complex<f64>>::from_fn(n, |i, _| Complex::new(self.b_inner[i], 0.0));
+        let nan = Complex::new(f64::NAN, f64::NAN);
+        m.lu().solve(&rhs).map_or((nan, nan), |x| {
+            (
+                x[state::THETA_ROT],
+                x[state::THETA_BS] * self.params.screw_to_pinion(),
+            )
+        })
+    }
+
+    /// [`LinearModel::margins`] of ECU mode's loop ([`LinearModel::ecu_loop_transfer`]).
+    pub fn ecu_margins(&self, tuning: &EcuTuning) -> Margins {
+        self.margins_of(|f| self.ecu_loop_transfer(f, tuning))
+    }
+
     /// The loop transfer `L(e^{j w Tp}) = C P` with the loop broken at the current set-point.
     pub fn loop_transfer(&self, f_hz: f64) -> Complex<f64> {
         let z = Complex::from_polar(1.0, TAU * f_hz * self.tp);
@@ -602,12 +651,17 @@ impl LinearModel {
     /// Gain and phase margins of the position loop (broken at `i*`), from 0.01 Hz to the
     /// 1 kHz Nyquist limit of the position loop.
     pub fn margins(&self) -> Margins {
+        self.margins_of(|f| self.loop_transfer(f))
+    }
+
+    /// Margins of any loop transfer over the same grid.
+    fn margins_of(&self, loop_transfer: impl Fn(f64) -> Complex<f64>) -> Margins {
         let nyquist = POSITION_LOOP_HZ as f64 / 2.0;
         let n = 4000;
         let grid: Vec<f64> = (0..=n)
             .map(|k| 0.01 * (nyquist * 0.999 / 0.01).powf(k as f64 / n as f64))
             .collect();
-        let l: Vec<Complex<f64>> = grid.iter().map(|&f| self.loop_transfer(f)).collect();
+        let l: Vec<Complex<f64>> = grid.iter().map(|&f| loop_transfer(f)).collect();
         // Unwrapped phase, starting on the branch (-270, 90] (an integrator and the free
         // rigid body put it near -180 at low frequency).
         let mut phase = Vec::with_capacity(l.len());
@@ -625,7 +679,7 @@ impl LinearModel {
         }
         let mag_db: Vec<f64> = l.iter().map(|h| 20.0 * h.norm().log10()).collect();
         let unwrapped_phase = |f: f64, near: f64| {
-            let p = self.loop_transfer(f).arg().to_degrees();
+            let p = loop_transfer(f).arg().to_degrees();
             p + 360.0 * ((near - p) / 360.0).round()
         };
         let mut out = Margins {
@@ -640,7 +694,7 @@ impl LinearModel {
             let (f0, f1) = (grid[k - 1], grid[k]);
             // |L| = 1
             if (mag_db[k - 1] > 0.0) != (mag_db[k] > 0.0) {
-                let f = bisect(f0, f1, |f| 20.0 * self.loop_transfer(f).norm().log10());
+                let f = bisect(f0, f1, |f| 20.0 * loop_transfer(f).norm().log10());
                 let p = unwrapped_phase(f, phase[k]);
                 let pm = wrap_deg(180.0 + p);
                 out.gain_crossovers.push(PhaseCrossing {
@@ -656,7 +710,7 @@ impl LinearModel {
                     let f = bisect(f0, f1, |f| unwrapped_phase(f, near) - lv);
                     out.phase_crossovers.push(GainCrossing {
                         f_hz: f,
-                        margin_db: -20.0 * self.loop_transfer(f).norm().log10(),
+                        margin_db: -20.0 * loop_transfer(f).norm().log10(),
                     });
                 }
             }

@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 use steering_ecu::control::AntiWindup;
+use steering_ecu::ecu_mode::EcuTuning;
 use steering_ecu::gains::EposGains;
 
 #[derive(Parser, Debug)]
@@ -396,6 +397,19 @@ fn poles(json: Option<&Path>) -> Result<()> {
         (Some(pm), Some(f)) => say!("  phase margin  {pm:6.1} deg at {f:7.2} Hz (|L| = 1)"),
         _ => say!("  phase margin  none: |L| never crosses 1"),
     }
+    let ecu_margins = model.ecu_margins(&EcuTuning::PAPER);
+    say!(
+        "ECU mode's loop (the same PID with the column fed back, D on the motor speed; \
+         `--controller ecu`):"
+    );
+    match (ecu_margins.gain_margin_db, ecu_margins.phase_crossover_hz) {
+        (Some(gm), Some(f)) => say!("  gain margin   {gm:6.1} dB  at {f:7.2} Hz (phase -180 deg)"),
+        _ => say!("  gain margin   none: the phase never crosses -180 deg with |L| < 1"),
+    }
+    match (ecu_margins.phase_margin_deg, ecu_margins.gain_crossover_hz) {
+        (Some(pm), Some(f)) => say!("  phase margin  {pm:6.1} deg at {f:7.2} Hz (|L| = 1)"),
+        _ => say!("  phase margin  none: |L| never crosses 1"),
+    }
     let log_rate = RunConfig::default().log_rate_hz;
     let bandwidth = model.bandwidth_hz(0.05, 50.0, log_rate);
     match bandwidth {
@@ -423,6 +437,7 @@ fn poles(json: Option<&Path>) -> Result<()> {
                 "closed_loop_poles": closed,
                 "closed_loop_stable": model.is_stable(),
                 "margins": margins,
+                "ecu_mode_margins": ecu_margins,
                 "small_signal_bandwidth_hz": bandwidth,
             }),
         )?;

@@ -3,11 +3,13 @@
 //! measured beside it on the same plant. The targets are issue 14's.
 #![allow(clippy::unwrap_used)] // test helpers: a failed unwrap is a failed test
 
-use host_sim::linear_model::PhysicalLimit;
+use host_sim::linear_model::{LinearModel, PhysicalLimit};
 use host_sim::plant::PlantParams;
 use host_sim::report;
 use host_sim::scenario::{self, Sweep};
 use host_sim::sim::{Controller, RunConfig};
+use steering_ecu::ecu_mode::EcuTuning;
+use steering_ecu::gains::EposGains;
 
 fn with(controller: Controller) -> RunConfig {
     RunConfig {
@@ -147,5 +149,40 @@ fn ecu_mode_is_robust_to_the_plant_it_was_not_tuned_for() {
         let last = &sp[sp.len() / 2..];
         let rms = (last.iter().map(|i| i * i).sum::<f64>() / last.len() as f64).sqrt();
         assert!(rms <= 1.0, "{name}: {rms} A RMS holding still");
+    }
+}
+
+/// ECU mode's loop, from the linear model (`LinearModel::ecu_loop_transfer`): the margins
+/// issue 14 asks for on the paper plant and on the robustness set; and the model reduces to
+/// paper mode's loop when the column terms are taken out (the D term on the motor speed is the
+/// same feedback path as on the error), which checks the added terms against the tested ones.
+#[test]
+fn ecu_mode_margins_from_the_linear_model() {
+    let model = LinearModel::new(PlantParams::PAPER, &EposGains::PAPER).unwrap();
+    let no_column = EcuTuning {
+        column_gain: 0.0,
+        column_time_constant_s: 1e30,
+        ..EcuTuning::PAPER
+    };
+    for f in [0.1, 1.0, 5.0, 17.0, 100.0, 400.0] {
+        let (a, b) = (
+            model.ecu_loop_transfer(f, &no_column),
+            model.loop_transfer(f),
+        );
+        assert!((a - b).norm() <= 1e-9 * b.norm(), "{f} Hz: {a} vs {b}");
+    }
+    let mut plants = vec![("paper", PlantParams::PAPER)];
+    for (name, k) in [("k_B x0.5", 0.5), ("k_B x3", 3.0)] {
+        let mut p = PlantParams::PAPER;
+        p.k_b *= k;
+        plants.push((name, p));
+    }
+    for (name, plant) in plants {
+        let m = LinearModel::new(plant, &EposGains::PAPER)
+            .unwrap()
+            .ecu_margins(&EcuTuning::PAPER);
+        let (gm, pm) = (m.gain_margin_db.unwrap(), m.phase_margin_deg.unwrap());
+        println!("{name}: gain margin {gm:.1} dB, phase margin {pm:.1} deg");
+        assert!(gm >= 6.0 && pm >= 40.0, "{name}: {m:?}");
     }
 }
