@@ -102,10 +102,23 @@ impl PositionLoop {
     }
 
     pub fn step(&mut self, setpoint: Setpoint, measured: MotorRad) -> PositionOutput {
+        self.step_with(setpoint, measured, Amps::ZERO)
+    }
+
+    /// [`PositionLoop::step`] with `extra` added to the output before the limit (ECU mode's
+    /// D term on the measured speed), so that the limit and the anti-windup see the whole
+    /// demand. A non-finite `extra` is an input like the others: 0 A, state untouched.
+    pub fn step_with(
+        &mut self,
+        setpoint: Setpoint,
+        measured: MotorRad,
+        extra: Amps,
+    ) -> PositionOutput {
         let inputs_finite = setpoint.position.is_finite()
             && setpoint.velocity.is_finite()
             && setpoint.acceleration.is_finite()
-            && measured.is_finite();
+            && measured.is_finite()
+            && extra.is_finite();
         if !inputs_finite {
             return PositionOutput {
                 current: Amps::ZERO,
@@ -124,7 +137,8 @@ impl PositionLoop {
             + candidate_integral
             + self.kd * derivative
             + self.kv * setpoint.velocity
-            + self.ka * setpoint.acceleration;
+            + self.ka * setpoint.acceleration
+            + extra.0;
         let (current, saturated) = saturate(unsaturated, self.limit_a);
         let integrate = match self.anti_windup {
             AntiWindup::ConditionalIntegration => !saturated,
