@@ -73,7 +73,10 @@ pub fn identify(
             }
         })
         .collect();
-    let scorer = Scorer::new(rig, rec);
+    // The likelihood of the diagnosis: each signal weighed by its noise, estimated from the
+    // residual of Table 4 itself, so the column angle (where the belt and the column show)
+    // is not drowned by the current's chatter.
+    let scorer = Scorer::new(rig, rec).with_noise(rec, &simulate(rig, rec, &Effects::nominal()));
     let with = |p: &[f64]| -> Rig {
         let mut r = rig.clone();
         if let RigModel::Paper(m) = &mut r.model {

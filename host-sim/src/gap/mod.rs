@@ -220,6 +220,30 @@ impl EffectKind {
         }
     }
 
+    /// The smallest size worth naming, on the effect's first parameter, in the rig's units:
+    /// below it the effect is within the sensors' resolution or the grid's, and a fit that
+    /// lands there is fitting the noise or another effect's shadow.
+    pub fn min_size(self, rig: &Rig) -> f64 {
+        match (self, &rig.model) {
+            // The 12-bit column encoder reads 0.088 deg a count: play under about three counts
+            // is within its quantisation.
+            (EffectKind::Backlash, RigModel::Paper(_)) => 0.3,
+            // 0.03 Nm is 0.57 A through kt = 52.5 mNm/A (Table 1), a tenth of the current's
+            // chatter inside a reference period.
+            (EffectKind::CoulombFriction, RigModel::Paper(_)) => 0.03,
+            // A fifth of a 10 ms reference period.
+            (EffectKind::Delay, RigModel::Paper(_)) => 2.0,
+            // 150 N at the rack is 0.024 Nm at the motor through tau_bs and the belt (Table
+            // 2): the friction minimum's size.
+            (EffectKind::TireGround, RigModel::Paper(_)) => 150.0,
+            (EffectKind::SupplySag, _) => 0.0,
+            (EffectKind::Backlash, RigModel::Emps(_)) => 2e-5,
+            (EffectKind::CoulombFriction, RigModel::Emps(_)) => 2.0,
+            (EffectKind::Delay, RigModel::Emps(m)) => 0.2e3 * m.ts_s,
+            (EffectKind::TireGround, RigModel::Emps(_)) => 2.0,
+        }
+    }
+
     /// Write fitted parameters into an effect set.
     pub fn apply(self, p: &[f64], fx: &mut Effects) {
         let get = |i: usize| p.get(i).copied().unwrap_or(0.0);
@@ -261,12 +285,24 @@ pub struct Fit {
     pub effort_rel_error_pct: f64,
 }
 
-/// The normalised, stacked residual that every fit minimises.
+/// The residual every fit minimises: each signal's error divided by that signal's own noise
+/// (a Gaussian likelihood), so a signal is weighed by how much of it a model can predict, not
+/// by its size. Before the noise is known (`identify`, a scorer without `with_noise`), each
+/// signal is divided by its demeaned norm instead (eq. 11's denominator).
 #[derive(Debug, Clone)]
 pub struct Scorer {
     skip: usize,
     den_output: f64,
     den_effort: f64,
+    noise: Option<Noise>,
+}
+
+/// The white measurement noise of each signal, in the signal's unit, estimated from the
+/// nominal model's residual.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Noise {
+    pub output: f64,
+    pub effort: f64,
 }
 
 fn demeaned_norm(y: &[f64]) -> f64 {
@@ -279,6 +315,22 @@ fn demeaned_norm(y: &[f64]) -> f64 {
         .max(1e-12)
 }
 
+/// The standard deviation of the white part of `r`: the median absolute third difference
+/// (white noise of variance s^2 gives third differences of variance 20 s^2). A model error is
+/// smooth on the grid, so its third difference is small; the median keeps the few samples
+/// where it is not (a reversal, a step in the reference) from counting as noise.
+fn white_sigma(r: &[f64]) -> f64 {
+    if r.len() < 8 {
+        return 0.0;
+    }
+    let mut a: Vec<f64> = r
+        .windows(4)
+        .map(|w| (w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0]).abs())
+        .collect();
+    a.sort_by(|x, y| x.total_cmp(y));
+    a[a.len() / 2] / 0.6745 / 20f64.sqrt()
+}
+
 impl Scorer {
     pub fn new(rig: &Rig, rec: &Record) -> Scorer {
         let skip = ((rig.skip_s / rec.dt).round() as usize).min(rec.len().saturating_sub(2));
@@ -286,11 +338,49 @@ impl Scorer {
             skip,
             den_output: demeaned_norm(&rec.output[skip..]),
             den_effort: demeaned_norm(&rec.effort[skip..]),
+            noise: None,
         }
+    }
+
+    /// The likelihood scorer: each signal's noise estimated from the nominal model's residual
+    /// `sim0 - rec` (not from the raw signal, whose own curvature, a chirp's, is no noise).
+    /// A floor of a thousandth of the signal's RMS per sample keeps a noiseless log finite.
+    pub fn with_noise(mut self, rec: &Record, sim0: &SimOut) -> Scorer {
+        let n = rec.len().min(sim0.output.len()).min(sim0.effort.len());
+        let s = self.skip.min(n);
+        let res = |a: &[f64], b: &[f64]| -> Vec<f64> {
+            a[s..n].iter().zip(&b[s..n]).map(|(x, y)| x - y).collect()
+        };
+        let per_sample = ((n - s).max(1) as f64).sqrt();
+        let sig = |r: Vec<f64>, den: f64| white_sigma(&r).max(1e-3 * den / per_sample);
+        self.noise = Some(Noise {
+            output: sig(res(&sim0.output, &rec.output), self.den_output),
+            effort: sig(res(&sim0.effort, &rec.effort), self.den_effort),
+        });
+        self
+    }
+
+    /// The same noise on another record of the same log (a window of it).
+    pub fn on(&self, rig: &Rig, rec: &Record) -> Scorer {
+        Scorer {
+            noise: self.noise,
+            ..Scorer::new(rig, rec)
+        }
+    }
+
+    pub fn noise(&self) -> Option<Noise> {
+        self.noise
     }
 
     pub fn skip(&self) -> usize {
         self.skip
+    }
+
+    fn scales(&self) -> (f64, f64) {
+        match self.noise {
+            Some(n) => (n.output, n.effort),
+            None => (self.den_output, self.den_effort),
+        }
     }
 
     pub fn residual(&self, rec: &Record, sim: &SimOut) -> Vec<f64> {
@@ -298,12 +388,13 @@ impl Scorer {
         if n <= self.skip {
             return vec![1e3; 2];
         }
+        let (so, se) = self.scales();
         let mut r = Vec::with_capacity(2 * (n - self.skip));
         for k in self.skip..n {
-            r.push((sim.output[k] - rec.output[k]) / self.den_output);
+            r.push((sim.output[k] - rec.output[k]) / so);
         }
         for k in self.skip..n {
-            r.push((sim.effort[k] - rec.effort[k]) / self.den_effort);
+            r.push((sim.effort[k] - rec.effort[k]) / se);
         }
         r
     }
@@ -339,24 +430,17 @@ impl Scorer {
         }
     }
 
-    /// The cost floor the measurement noise alone would leave: the white part of each signal,
-    /// estimated from its third differences (a smooth signal has none; white noise of
-    /// variance s^2 gives 20 s^2).
+    /// The cost the measurement noise alone would leave. With the likelihood scorer every
+    /// residual sample is in units of its own noise, so the floor is the number of samples;
+    /// without it, the white part of each raw signal, normalised like the residual.
     pub fn noise_floor_cost(&self, rec: &Record) -> f64 {
+        let m = rec.len().saturating_sub(self.skip) as f64;
+        if self.noise.is_some() {
+            return 2.0 * m;
+        }
         let floor = |y: &[f64], den: f64| -> f64 {
-            let y = &y[self.skip..];
-            if y.len() < 8 {
-                return 0.0;
-            }
-            let d3: Vec<f64> = y
-                .windows(4)
-                .map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0])
-                .collect();
-            // Median absolute value, robust against the jumps of a track run.
-            let mut a: Vec<f64> = d3.iter().map(|v| v.abs()).collect();
-            a.sort_by(|x, y| x.total_cmp(y));
-            let sigma = a[a.len() / 2] / 0.6745 / 20f64.sqrt();
-            sigma * sigma * y.len() as f64 / (den * den)
+            let sigma = white_sigma(&y[self.skip..]);
+            sigma * sigma * m / (den * den)
         };
         floor(&rec.output, self.den_output) + floor(&rec.effort, self.den_effort)
     }
@@ -383,6 +467,8 @@ pub struct Candidate {
     pub improvement: f64,
     /// Every parameter at least two standard errors from zero.
     pub significant: bool,
+    /// Every effect at least its minimum physical size ([`EffectKind::min_size`]).
+    pub large_enough: bool,
     pub simulations: usize,
     #[serde(skip)]
     pub kinds: Vec<EffectKind>,
@@ -392,9 +478,23 @@ pub struct Candidate {
     pub cost: f64,
 }
 
+/// What kind of answer the diagnosis gives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VerdictKind {
+    /// The nominal model leaves no more than the noise.
+    None,
+    /// One or two named effects, each above its minimum size, remove the gap.
+    Effects,
+    /// Far above the noise, and no candidate removes enough of it.
+    Unexplained,
+}
+
 /// The verdict: the effects named, and the GoF with them.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Verdict {
+    pub kind: VerdictKind,
+    /// The named effects; `["unexplained"]` for that kind, empty for none.
     pub effects: Vec<String>,
     pub gof_after: f64,
     pub gof_validation: Option<f64>,
@@ -415,6 +515,9 @@ pub struct Diagnosis {
     /// Normalised cost of the nominal model, and the floor the noise alone leaves.
     pub baseline_cost: f64,
     pub noise_floor_cost: f64,
+    /// Each signal's noise (its unit), estimated from the nominal residual; the likelihood
+    /// divides each residual by it.
+    pub noise: Option<Noise>,
     pub verdict: Verdict,
     pub ranking: Vec<Candidate>,
     #[serde(rename = "where")]
@@ -436,8 +539,14 @@ pub struct Options {
     pub min_share_of_reducible: f64,
     /// ...and at least this share of the whole nominal cost.
     pub min_improvement: f64,
-    /// A second effect is added when the pair removes this share of what the first left.
+    /// A second effect is added when the pair removes this share of what the first left...
     pub min_pair_improvement: f64,
+    /// ...and this share of the noise floor.
+    pub min_pair_share_of_floor: f64,
+    /// With nothing named, a nominal cost above this many times the noise floor is
+    /// `unexplained` rather than `none`: a residual RMS over twice the noise's. Below it a
+    /// model a few per cent off Table 4 (no car matches the table) is no finding.
+    pub unexplained_ratio: f64,
     pub threads: usize,
     pub progress: bool,
     /// Logs longer than this are fitted on their worst window of this length, s (0 = all).
@@ -452,6 +561,8 @@ impl Default for Options {
             min_share_of_reducible: 0.3,
             min_improvement: 0.15,
             min_pair_improvement: 0.2,
+            min_pair_share_of_floor: 0.1,
+            unexplained_ratio: 5.0,
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             progress: false,
             max_fit_s: 30.0,
@@ -543,16 +654,16 @@ fn cost(r: &[f64]) -> f64 {
 /// Diagnose `rec` on `rig`; `validation` is checked with the parameters fitted on `rec`.
 pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Options) -> Diagnosis {
     let started = std::time::Instant::now();
-    let scorer = Scorer::new(rig, rec);
-    let vscorer = validation.map(|v| (v, Scorer::new(rig, v)));
     let nominal = Effects::nominal();
     let sim0 = simulate(rig, rec, &nominal);
+    let scorer = Scorer::new(rig, rec).with_noise(rec, &sim0);
+    let vscorer = validation.map(|v| (v, Scorer::new(rig, v)));
     let fit0 = scorer.fit(rec, &sim0);
     // A long log is fitted on the window where the nominal residual is largest (the figures
     // are still given on the whole log): the fits then cost the same for any log length.
     let frec_owned = fit_window(rig, rec, &scorer, &sim0, opts.max_fit_s);
     let frec = frec_owned.as_ref().unwrap_or(rec);
-    let fscorer_owned = frec_owned.as_ref().map(|w| Scorer::new(rig, w));
+    let fscorer_owned = frec_owned.as_ref().map(|w| scorer.on(rig, w));
     let fscorer = fscorer_owned.as_ref().unwrap_or(&scorer);
     let cost0 = match &frec_owned {
         Some(w) => cost(&fscorer.residual(w, &simulate(rig, w, &nominal))),
@@ -626,21 +737,24 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // The verdict.
     let reducible = (cost0 - floor).max(0.0);
     // Nothing above the noise floor: nothing to explain (an effect that still lowers the cost
-    // is fitting the noise).
+    // is fitting the noise). A candidate below its minimum size is never named, however much
+    // it lowers the cost: it is then standing in for something else.
     let named = |c: &Candidate, reference_cost: f64, share: f64| -> bool {
         let gain = reference_cost - c.cost;
         reducible > 0.0
+            && c.large_enough
             && gain > opts.min_share_of_reducible * reducible
             && gain > share * reference_cost
     };
     let mut verdict_candidate: Option<Candidate> = None;
     let mut reason;
     if let Some(best) = ranking
-        .first()
+        .iter()
+        .find(|c| c.large_enough)
         .filter(|c| named(c, cost0, opts.min_improvement))
     {
         reason = format!(
-            "{} removes {:.0} % of the nominal cost ({:.3} of {:.3}; noise floor {:.3})",
+            "{} removes {:.0} % of the nominal cost ({:.0} of {:.0}; noise floor {:.0})",
             best.effect,
             100.0 * best.improvement,
             cost0 - best.cost,
@@ -650,7 +764,11 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         let mut chosen = best.clone();
         // A second effect: every other candidate fitted on top of the best one, jointly
         // (the new effect first, so the scan runs over its leading parameter).
-        let others: Vec<Candidate> = ranking.iter().skip(1).cloned().collect();
+        let others: Vec<Candidate> = ranking
+            .iter()
+            .filter(|c| c.kinds != best.kinds)
+            .cloned()
+            .collect();
         let pair_fits: Vec<Candidate> = std::thread::scope(|s| {
             let handles: Vec<_> = others
                 .iter()
@@ -659,14 +777,12 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                         (&best, &scorer, &progress, &fit_on_validation);
                     s.spawn(move || {
                         let kinds = [other.kinds[0], best.kinds[0]];
-                        let n_other = other.kinds[0].specs(rig).len();
                         let start: Vec<f64> = other.kinds[0]
                             .specs(rig)
                             .iter()
                             .map(|sp| sp.start)
                             .chain(best.values.iter().copied())
                             .collect();
-                        let _ = n_other;
                         let (values, errs, c, evals) = fit_effects(
                             rig,
                             frec,
@@ -684,7 +800,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             handles.into_iter().filter_map(|h| h.join().ok()).collect()
         });
         let mut best_pair: Option<Candidate> = None;
-        for cand in pair_fits {
+        for cand in pair_fits.into_iter().filter(|c| c.large_enough) {
             if best_pair.as_ref().is_none_or(|b| cand.cost < b.cost) {
                 best_pair = Some(cand);
             }
@@ -692,12 +808,11 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         if let Some(pair) = best_pair {
             let gain = best.cost - pair.cost;
             // The pair must remove a share of what the best left, a share of what is above
-            // the noise floor, and more than most of the noise floor's own worth: otherwise
-            // the second effect is fitting the noise (or the first fit's own error).
+            // the noise floor, and a share of the noise floor's own worth: otherwise the
+            // second effect is fitting the noise (or the first fit's own error).
             if gain > opts.min_pair_improvement * best.cost
                 && gain > opts.min_share_of_reducible * (best.cost - floor).max(0.0)
-                && gain > 0.7 * floor
-                && (pair.significant || gain > 1.5 * floor)
+                && gain > opts.min_pair_share_of_floor * floor
             {
                 reason.push_str(&format!(
                     "; adding {} removes {:.0} % of what was left",
@@ -707,9 +822,10 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                 chosen = pair.clone();
             } else {
                 reason.push_str(&format!(
-                    "; the best pair {} removes only {:.0} % of what was left",
+                    "; the best pair {} removes only {:.0} % of what was left ({:.0})",
                     pair.effect,
-                    100.0 * gain / best.cost
+                    100.0 * gain / best.cost,
+                    gain
                 ));
             }
             ranking.push(pair);
@@ -717,19 +833,38 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         verdict_candidate = Some(chosen);
     } else {
         reason = format!(
-            "no effect removes enough of the nominal cost {:.3} (noise floor {:.3}; best {})",
+            "the nominal cost is {:.2} times the noise floor ({:.0} of {:.0}); no effect of at \
+             least its minimum size removes enough of it (best: {})",
+            cost0 / floor.max(1e-300),
             cost0,
             floor,
             ranking
                 .first()
-                .map(|c| format!("{} {:.0} %", c.effect, 100.0 * c.improvement))
+                .map(|c| format!(
+                    "{} {:.0} %{}",
+                    c.effect,
+                    100.0 * c.improvement,
+                    if c.large_enough {
+                        ""
+                    } else {
+                        ", below its minimum size"
+                    }
+                ))
                 .unwrap_or_default()
         );
     }
     progress.finish();
     let base_validation = fit_on_validation(&nominal);
+    let unexplained = verdict_candidate.is_none() && cost0 > opts.unexplained_ratio * floor;
+    if unexplained {
+        reason.push_str(
+            "; try `--refit-linear` (Table 4 off), other candidate effects (`--effects`), or \
+             check the log's columns and units",
+        );
+    }
     let verdict = match &verdict_candidate {
         Some(c) => Verdict {
+            kind: VerdictKind::Effects,
             effects: c.kinds.iter().map(|k| k.name().to_string()).collect(),
             gof_after: c.gof,
             gof_validation: c.gof_validation,
@@ -738,7 +873,16 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             reason,
         },
         None => Verdict {
-            effects: vec![],
+            kind: if unexplained {
+                VerdictKind::Unexplained
+            } else {
+                VerdictKind::None
+            },
+            effects: if unexplained {
+                vec!["unexplained".into()]
+            } else {
+                vec![]
+            },
             gof_after: fit0.gof,
             gof_validation: base_validation.map(|f| f.gof),
             fit_after: fit0,
@@ -759,6 +903,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         baseline_validation: base_validation,
         baseline_cost: cost0,
         noise_floor_cost: floor,
+        noise: scorer.noise(),
         verdict,
         ranking,
         where_,
@@ -869,11 +1014,17 @@ fn make_candidate(
         fit_validation: None,
         improvement: 1.0 - c / cost0.max(1e-300),
         significant,
+        large_enough: true,
         simulations: evals,
         kinds: kinds.to_vec(),
         values,
         cost: c,
     };
+    let mut i = 0;
+    for k in kinds {
+        cand.large_enough &= cand.values.get(i).is_some_and(|v| *v >= k.min_size(rig));
+        i += k.specs(rig).len();
+    }
     let fx = cand.effects_on(rig);
     cand.fit = scorer.fit(rec, &simulate(rig, rec, &fx));
     cand.gof = cand.fit.gof;
@@ -935,13 +1086,26 @@ impl Diagnosis {
             );
         }
         let v = &self.verdict;
+        let ratio = self.baseline_cost / self.noise_floor_cost.max(1e-300);
         let _ = writeln!(
             s,
             "\nverdict: {}",
-            if v.effects.is_empty() {
-                "none: the nominal model explains the log down to its noise floor".to_string()
-            } else {
-                v.effects.join(" + ")
+            match v.kind {
+                // Only a residual at the noise (within a fifth) is "explained"; between that
+                // and the unexplained bar the numbers say so.
+                VerdictKind::None if ratio <= 1.2 => format!(
+                    "none: the nominal model explains the log down to its noise floor \
+                     (cost {ratio:.2} x floor)"
+                ),
+                VerdictKind::None => format!(
+                    "none: no candidate effect is clearly present; the nominal residual is \
+                     {ratio:.2} x the noise floor"
+                ),
+                VerdictKind::Unexplained => format!(
+                    "unexplained: the nominal residual is {ratio:.2} x the noise floor and no \
+                     candidate removes enough of it"
+                ),
+                VerdictKind::Effects => v.effects.join(" + "),
             }
         );
         let _ = writeln!(s, "  {}", v.reason);
