@@ -153,3 +153,22 @@ impl Identified {
         s
     }
 }
+
+/// Every refitted parameter within `factor` of the rig's value (either way); a parameter the
+/// table gives as zero (beta_tb) counts as within when it stays below a tenth of its range.
+pub fn within_factor(rig: &Rig, id: &Identified, factor: f64) -> bool {
+    let RigModel::Paper(m) = &rig.model else {
+        return true;
+    };
+    m.plant.identified().iter().all(|(name, table)| {
+        let Some(v) = id.params.get(*name) else {
+            return true;
+        };
+        if *table > 0.0 {
+            let r = v / table;
+            r <= factor && r >= 1.0 / factor
+        } else {
+            *v <= 0.01
+        }
+    })
+}

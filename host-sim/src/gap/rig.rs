@@ -2,7 +2,7 @@
 //! columns hold the reference, the output and the effort. Two ship with host-sim
 //! (`host-sim/rigs/`): the paper's actuator (the default, built in) and EMPS.
 
-use super::Record;
+use super::{CurrentSamples, Record};
 use crate::plant::PlantParams;
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
@@ -260,6 +260,7 @@ impl Rig {
         })?;
         let col = |c: &str| -> Result<Vec<f64>, RigError> {
             table
+                .columns
                 .iter()
                 .find(|(h, _)| h == c)
                 .map(|(_, v)| v.clone())
@@ -287,7 +288,15 @@ impl Rig {
             RigModel::Paper(m) => {
                 let per = m.plant.motor_per_pinion();
                 let motor_deg = motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
-                Record::from_samples_binned(&t, &reference, &output, &effort, motor_deg, 0.01)
+                Record::from_samples(
+                    &t,
+                    &reference,
+                    &output,
+                    &effort,
+                    motor_deg,
+                    0.01,
+                    table.current,
+                )
             }
             RigModel::Emps(_) => Record {
                 dt: self.grid_s(),
@@ -301,13 +310,30 @@ impl Rig {
     }
 }
 
-/// A CSV with one header row; `#` lines and blank lines skipped.
-fn read_csv(r: impl BufRead) -> Result<Vec<(String, Vec<f64>)>, String> {
+/// A log's columns, and what its comment lines said about them.
+struct Table {
+    columns: Vec<(String, Vec<f64>)>,
+    current: CurrentSamples,
+}
+
+/// A CSV with one header row; blank lines skipped, `#` lines skipped but for
+/// `# current: instantaneous`, which says the current column holds instants.
+fn read_csv(r: impl BufRead) -> Result<Table, String> {
     let mut cols: Vec<(String, Vec<f64>)> = Vec::new();
+    let mut current = CurrentSamples::IntervalMean;
     for (n, line) in r.lines().enumerate() {
         let line = line.map_err(|e| e.to_string())?;
         let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
+        if let Some(comment) = line.strip_prefix('#') {
+            if let Some((key, value)) = comment.split_once(':')
+                && key.trim() == "current"
+                && value.trim() == "instantaneous"
+            {
+                current = CurrentSamples::Instantaneous;
+            }
+            continue;
+        }
+        if line.is_empty() {
             continue;
         }
         if cols.is_empty() {
@@ -339,5 +365,8 @@ fn read_csv(r: impl BufRead) -> Result<Vec<(String, Vec<f64>)>, String> {
     if cols.is_empty() {
         return Err("no header".into());
     }
-    Ok(cols)
+    Ok(Table {
+        columns: cols,
+        current,
+    })
 }
