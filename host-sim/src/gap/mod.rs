@@ -968,14 +968,58 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             && *c < opts.parameters_cost_share * effect_cost
     });
     if within_tolerance
-        && let (Some((_, _, c)), Some(v)) = (&parameters, &verdict_candidate)
+        && let (Some((_, refit, c)), Some(v)) = (&parameters, &verdict_candidate)
         && *c <= v.cost
     {
-        reason.push_str(&format!(
-            "; but Table 4 refitted within x{:.1} leaves {:.0}, no more than {} ({:.0}): not named",
-            opts.parameter_tolerance, c, v.effect, v.cost
-        ));
-        verdict_candidate = None;
+        // The effect again, on top of the refitted table: named only if it still removes
+        // what an effect must remove from what the refit leaves.
+        let (values, errs, c_both, evals) = fit_effects(
+            refit,
+            frec,
+            fscorer,
+            &v.kinds,
+            Some(&v.values),
+            &nominal,
+            opts.fit,
+            &progress,
+        );
+        let on_refit = make_candidate(
+            refit,
+            rec,
+            &scorer,
+            &v.kinds,
+            values,
+            errs,
+            c_both,
+            evals,
+            cost0,
+            &fit_on_validation,
+        );
+        let gain = c - c_both;
+        if on_refit.large_enough
+            && gain > opts.min_share_of_reducible * (c - floor).max(0.0)
+            && gain > opts.min_improvement * c
+        {
+            reason.push_str(&format!(
+                "; Table 4 refitted within x{:.1} leaves {:.0}, and {} on top of it removes {:.0} % of that",
+                opts.parameter_tolerance,
+                c,
+                v.effect,
+                100.0 * gain / c.max(1e-300)
+            ));
+        } else {
+            reason.push_str(&format!(
+                "; but Table 4 refitted within x{:.1} leaves {:.0}, no more than {} ({:.0}), \
+                 and {} on top of it removes only {:.0} % of that: not named",
+                opts.parameter_tolerance,
+                c,
+                v.effect,
+                v.cost,
+                v.effect,
+                100.0 * gain / c.max(1e-300)
+            ));
+            verdict_candidate = None;
+        }
     }
     if let Some((_, _, c)) = &parameters {
         reason.push_str(&format!(
@@ -1023,8 +1067,14 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         };
     }
     let base_validation = fit_on_validation(&nominal);
+    // What the best explanation leaves: the nominal model, or the table refitted within its
+    // tolerance (a car a few per cent off the table is no gap).
+    let left = parameters
+        .as_ref()
+        .filter(|_| within_tolerance)
+        .map_or(cost0, |(_, _, c)| c.min(cost0));
     let unexplained = verdict_candidate.is_none()
-        && cost0 > opts.unexplained_ratio * floor
+        && left > opts.unexplained_ratio * floor
         && fit0.gof < opts.unexplained_below_gof;
     if unexplained {
         reason.push_str(
