@@ -42,6 +42,8 @@ pub struct Effects {
     pub tire_stiffness_n_per_mm: f64,
     /// Supply voltage replacing the rig's (paper rig only, V; 0 = nominal).
     pub supply_v: f64,
+    /// Coulomb friction at the rack, N (paper rig only).
+    pub rack_coulomb_n: f64,
 }
 
 impl Effects {
@@ -255,6 +257,7 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
         1.0
     };
     let per_motor = p.motor_per_pinion();
+    let j_screw = p.j_bs_equivalent();
     let n_cur = (POSITION_TICKS_PER_REFERENCE * CURRENT_TICKS_PER_POSITION_TICK) as f64;
     for &sample in &reference {
         let _ = cascade.push_reference(SteeringDeg(sample as f32));
@@ -270,7 +273,15 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
                 let v = cascade.current_step(Amps(i_meas as f32)).voltage.0 as f64;
                 let t_motor = friction(fx.coulomb, fx.stribeck, vs, x[state::W_ROT], p.j_rot, dt);
                 let rack = x[state::THETA_BS] * p.tau_bs;
-                let t_screw = -bristle.force(rack) * p.tau_bs;
+                let t_rack_friction = friction(
+                    fx.rack_coulomb_n * p.tau_bs,
+                    0.0,
+                    1.0,
+                    x[state::W_BS],
+                    j_screw,
+                    dt,
+                );
+                let t_screw = -bristle.force(rack) * p.tau_bs + t_rack_friction;
                 plant.step(v, t_motor, t_screw);
                 i_acc += plant.x()[state::CURRENT];
             }

@@ -76,6 +76,7 @@ fn draw_effect(kind: EffectKind, rng: &mut Rng, fx: &mut Effects) {
             fx.tire_stiffness_n_per_mm = rng.range(200.0, 1000.0);
         }
         EffectKind::SupplySag => fx.supply_v = rng.range(14.0, 20.0),
+        EffectKind::RackFriction => fx.rack_coulomb_n = rng.range(400.0, 1500.0),
     }
 }
 
@@ -271,6 +272,7 @@ pub fn run(
                         let d = diagnose(&rig, &rec, None, &per_case);
                         let mut named = d.verdict.effects.clone();
                         named.sort();
+                        named.dedup();
                         let r = CaseResult {
                             correct: named == case.hidden,
                             named,
@@ -363,10 +365,10 @@ impl SelftestReport {
     }
 }
 
-/// The options the selftest uses by default: the four core effects, cheap fits.
+/// The options the selftest uses by default: the paper rig's candidates, cheap fits.
 pub fn default_options() -> Options {
     Options {
-        effects: EffectKind::CORE.to_vec(),
+        effects: EffectKind::PAPER.to_vec(),
         fit: super::fit::FitOptions {
             scan: 5,
             iterations: 5,
