@@ -576,6 +576,9 @@ pub struct Table {
     pub columns: Vec<Vec<f64>>,
     /// The file's line number of each row, for errors found after reading.
     pub lines: Vec<usize>,
+    /// The comment lines before the header, without their `#` (a log may say
+    /// `# current: instantaneous` there).
+    pub comments: Vec<String>,
 }
 
 impl Table {
@@ -709,6 +712,7 @@ fn read_table(
 ) -> Result<Table, LogError> {
     let mut text = String::new();
     let mut line_no = 0;
+    let mut comments = Vec::new();
 
     let (names, time) = loop {
         text.clear();
@@ -722,7 +726,9 @@ fn read_table(
             &text
         };
         let line = line.trim();
-        if !line.is_empty() && !line.starts_with('#') {
+        if let Some(comment) = line.strip_prefix('#') {
+            comments.push(comment.trim().to_string());
+        } else if !line.is_empty() {
             break header(line)?;
         }
     };
@@ -742,6 +748,7 @@ fn read_table(
         columns: vec![Vec::new(); names.len()],
         names,
         lines: Vec::new(),
+        comments,
     };
     let mut values = vec![0.0; table.names.len()];
     loop {

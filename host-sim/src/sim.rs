@@ -239,6 +239,9 @@ pub fn run_tapped(
     let mut tick: u64 = 0;
     let mut column = None;
     let dt_position = 1.0 / POSITION_LOOP_HZ as f64;
+    // The logged current is the mean over the interval that ends at the row (what the 0x102
+    // frame and the EPOS4's averaged current report), not an instant of the PWM chatter.
+    let (mut current_sum, mut current_n) = (0.0f64, 0u32);
 
     for &sample in reference_deg {
         let pushed = cascade.push_reference(SteeringDeg(sample as f32));
@@ -285,28 +288,35 @@ pub fn run_tapped(
                 voltage = out.voltage.0 as f64;
                 summary.max_voltage_v = summary.max_voltage_v.max(voltage.abs());
                 plant.step(voltage);
+                current_sum += plant.current_a();
+                current_n += 1;
                 if plant.current_a().abs() > summary.max_current_a {
                     summary.max_current_a = plant.current_a().abs();
                     summary.max_current_at_s = tick as f64 * dt_position;
                 }
             }
+            tick += 1;
+            // A row at the end of every log interval: the angles at that instant, the current
+            // averaged over the interval, the reference in force over it.
             if let Some(every) = log_every
                 && tick.is_multiple_of(every as u64)
             {
                 let (sw_rad, motor_rad) = match cfg.logged_angles {
                     LoggedAngles::Sensors => (
                         encoder.angle(encoder.raw_from_angle(plant.column_rad())).0 as f64,
-                        motor_from_hall(hall).0 as f64,
+                        motor_from_hall(hall_from_motor(plant.motor_rad())).0 as f64,
                     ),
                     LoggedAngles::Exact => (plant.column_rad(), plant.motor_rad()),
                 };
+                let current_mean = current_sum / f64::from(current_n.max(1));
+                (current_sum, current_n) = (0.0, 0);
                 log.push(
                     Row {
                         t: tick as f64 * dt_position,
                         ref_sw_deg: sample,
                         sw_deg: sw_rad.to_degrees(),
                         motor_rad,
-                        current_a: plant.current_a(),
+                        current_a: current_mean,
                     },
                     &[
                         cascade.current_setpoint().0 as f64,
@@ -315,7 +325,6 @@ pub fn run_tapped(
                     ],
                 );
             }
-            tick += 1;
         }
     }
     summary.duration_s = tick as f64 * dt_position;

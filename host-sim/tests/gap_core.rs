@@ -40,7 +40,7 @@ fn write_log(dir: &std::path::Path, name: &str, effects: Effects) -> std::path::
         writeln!(
             f,
             "{:.4},{:.4},{:.4},{:.5},{:.4}",
-            k as f64 * 0.01 + 0.005,
+            (k + 1) as f64 * 0.01,
             rec.reference[k],
             rec.output[k],
             motor[k].to_radians() * per,
@@ -111,15 +111,51 @@ fn nominal_log_gets_no_effect_and_coulomb_log_gets_coulomb() {
 
 #[test]
 fn rows_on_the_grid_each_fill_their_own_step() {
-    // 100 Hz rows on the 10 ms grid (what steer-can and most loggers write): every row must
-    // land in its own step. Plain floor((t - t0) / dt) put about one row in ten in the step
-    // before, which halved that step and interpolated the next.
-    let t: Vec<f64> = (0..12_000).map(|k| 0.005 + k as f64 * 0.01).collect();
+    // 100 Hz rows at the ends of the 10 ms periods (what host-sim and steer-can write): each
+    // row is its own step, the angles and the current exactly, whatever the float rounding of
+    // binary fractions of 0.01 s.
+    let t: Vec<f64> = (0..12_000).map(|k| (k + 1) as f64 * 0.01).collect();
     let y: Vec<f64> = (0..12_000).map(|k| k as f64).collect();
-    let rec = host_sim::gap::Record::from_samples_binned(&t, &y, &y, &y, None, 0.01);
-    assert_eq!(rec.len(), 11_999);
-    for (k, v) in rec.output.iter().enumerate() {
-        assert_eq!(*v, k as f64, "step {k}");
+    let rec = host_sim::gap::Record::from_samples(
+        &t,
+        &y,
+        &y,
+        &y,
+        None,
+        0.01,
+        host_sim::gap::CurrentSamples::IntervalMean,
+    );
+    assert_eq!(rec.len(), 12_000);
+    for k in 0..rec.len() {
+        assert_eq!(rec.reference[k], k as f64, "reference, step {k}");
+        assert!((rec.output[k] - k as f64).abs() < 1e-9, "output, step {k}");
+        assert!((rec.effort[k] - k as f64).abs() < 1e-9, "effort, step {k}");
+    }
+}
+
+#[test]
+fn a_1_khz_log_is_read_as_instants_and_interval_means() {
+    // 1 kHz rows: y = t (s) for the angle, the current the mean of t over each 1 ms row
+    // interval. The step ends' angle is the period's end; the current is the period's mean.
+    let t: Vec<f64> = (1..=2_000).map(|k| k as f64 * 1e-3).collect();
+    let mean: Vec<f64> = t.iter().map(|t| t - 0.5e-3).collect();
+    let rec = host_sim::gap::Record::from_samples(
+        &t,
+        &t,
+        &t,
+        &mean,
+        None,
+        0.01,
+        host_sim::gap::CurrentSamples::IntervalMean,
+    );
+    assert_eq!(rec.len(), 200);
+    for k in 0..rec.len() {
+        let end = (k + 1) as f64 * 0.01;
+        assert!((rec.output[k] - end).abs() < 1e-9, "output, step {k}");
+        assert!(
+            (rec.effort[k] - (end - 0.005)).abs() < 1e-9,
+            "effort, step {k}"
+        );
     }
 }
 

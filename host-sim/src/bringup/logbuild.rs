@@ -2,29 +2,26 @@
 //! format: one row per reference period, `t,ref_sw_deg,sw_deg,motor_rad,current_a`, plus
 //! `as_state`, `ecu_state` and `faults` columns.
 //!
-//! Timing, so that a log means what a simulated one means (`host-sim gap` runs the log's
-//! reference through the model and compares each 10 ms period's mean output with the log):
+//! Timing, so that a log means what a simulated one means (README, log format: the angles are
+//! instants at the row's time, the current is the mean over the interval that ends there):
 //!
 //! - The time axis is the reference grid: reference `k` (counted from the first, lost frames
-//!   leave a gap) is the row at `t = k x 10 ms + 5 ms`, the middle of the period it is in
-//!   force, whatever the jitter of the sender (rows after the first 1 µs later, so that the
-//!   diagnosis's binning puts each in its own period).
+//!   leave a gap) is in force over the period that ends at the row `t = (k + 1) x 10 ms`,
+//!   whatever the jitter of the sender.
 //! - The ECU pushes a sample into its interpolator when the frame arrives, one frame time
-//!   after it was sent ([`BUS_LATENCY_US`]), and the model averages over the period after the
-//!   push. Each signal is read from the ECU's frames at the moment the model's average is
-//!   centred on, and each frame's value is dated when the ECU measured it rather than when
-//!   the frame arrived:
+//!   after it was sent ([`BUS_LATENCY_US`]); the period runs from the push. Each signal is read
+//!   from the ECU's frames at the instant the row stands for, each frame's value dated when
+//!   the ECU measured it rather than when the frame arrived:
 //!
 //! ```text
-//! signal      | frame | measured at                          | model's period mean centred
+//! signal      | frame | measured at                          | read at
 //! ------------+-------+--------------------------------------+------------------------------
-//! sw_deg      | 0x101 | the previous 2 ms encoder tick:      | push + 5.25 ms (sampled after
-//!             |       | 2 ms before the frame (the status    | each 0.5 ms position tick)
-//!             |       | task runs first at the shared tick)  |
-//! motor_rad   | 0x102 | the last 0.5 ms position tick:       | push + 4.75 ms (sampled before
-//!             |       | 0.25 ms before on average            | each position tick)
-//! current_a   | 0x102 | mean over the 10 ms status period:   | push + 5 ms
-//!             |       | its middle, 5 ms before              |
+//! sw_deg      | 0x101 | the previous 2 ms encoder tick:      | push + 10 ms (the period's
+//!             |       | 2 ms before the frame                | end, an instant)
+//! motor_rad   | 0x102 | the last 0.5 ms position tick:       | push + 10 ms
+//!             |       | 0.25 ms before on average            |
+//! current_a   | 0x102 | mean over the 10 ms status period:   | push + 5 ms (the middle of
+//!             |       | its middle, 5 ms before              | the period it averages)
 //! ```
 //!
 //! Without motor frames, in EPOS4 mode, the motor angle and current are the drive's TPDO1
@@ -46,11 +43,10 @@ pub const ENCODER_AGE_US: u64 = 2_000;
 pub const MOTOR_AGE_US: u64 = 250;
 /// Age of the mean current in a motor frame, µs (half the 10 ms status period).
 pub const CURRENT_AGE_US: u64 = PERIOD_US as u64 / 2;
-/// Where the model's period means are centred after the push, µs (see the table above).
-const SW_CENTRE_US: f64 = 5_250.0;
-/// Rows after the first are written this long after their grid point (see `build`), µs.
-const GRID_NUDGE_US: f64 = 1.0;
-const MOTOR_CENTRE_US: f64 = 4_750.0;
+/// Where each signal is read after the push, µs (see the table above): the angles at the
+/// period's end, the period's mean current at its middle.
+const SW_AT_US: f64 = 10_000.0;
+const MOTOR_AT_US: f64 = 10_000.0;
 const CURRENT_CENTRE_US: f64 = 5_000.0;
 
 /// Which reference periods become rows.
@@ -202,13 +198,13 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
         let push = t_us as f64 + BUS_LATENCY_US as f64;
         let values = if have_motor {
             (
-                sw.at(push + SW_CENTRE_US),
-                motor.at(push + MOTOR_CENTRE_US),
+                sw.at(push + SW_AT_US),
+                motor.at(push + MOTOR_AT_US),
                 current.at(push + CURRENT_CENTRE_US),
             )
         } else {
             (
-                sw.at(push + SW_CENTRE_US),
+                sw.at(push + SW_AT_US),
                 Some(f64::NAN),
                 status_current.at(push + CURRENT_CENTRE_US),
             )
@@ -220,14 +216,9 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
         last_k = Some(k);
         let k0 = *origin_k.get_or_insert(k);
         let mid = push + CURRENT_CENTRE_US;
-        // `host-sim gap` bins rows by floor((t - t_first) / 10 ms): a row exactly on the grid
-        // sits on a bin edge, where float rounding (0.03 / 0.01 = 2.9999999999999996) would
-        // put one row in ten into the bin before. One µs after the grid point keeps each row in
-        // its own bin and moves the reference the diagnosis reads by 0.01 % of a step.
-        let nudge_us = if k > k0 { GRID_NUDGE_US } else { 0.0 };
         log.push(
             Row {
-                t: ((k - k0) as f64 * period + period / 2.0 + nudge_us) * 1e-6,
+                t: (k - k0 + 1) as f64 * period * 1e-6,
                 ref_sw_deg: angle,
                 sw_deg,
                 motor_rad,

@@ -40,9 +40,13 @@ pub struct GapArgs {
     /// selftest: seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// selftest: seconds per case.
+    /// selftest: seconds per sweep (the independent world's tracks are 120 s).
     #[arg(long, default_value_t = 12.0)]
     pub duration_s: f64,
+    /// selftest: draw the logs from the diagnosis's own model instead of the independent
+    /// world (a check of the search, not of the model).
+    #[arg(long)]
+    pub model_world: bool,
 }
 
 #[derive(Args, Debug)]
@@ -93,7 +97,7 @@ fn options(args: &GapArgs, rig: &Rig) -> Result<Options> {
             .map(|n| {
                 EffectKind::from_name(n.trim()).ok_or_else(|| {
                     format!(
-                        "--effects: unknown effect {n:?} (backlash, coulomb_friction, delay, \
+                        "--effects: unknown effect {n:?} (backlash, coulomb_friction, coulomb_friction_rack, delay, \
                          tire_ground, supply_sag)"
                     )
                 })
@@ -147,7 +151,12 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
         opts.threads = t.max(1);
     }
     let started = Instant::now();
-    let report = selftest::run(args.cases, args.seed, args.duration_s, &opts, &|r| {
+    let world = if args.model_world {
+        selftest::World::Model
+    } else {
+        selftest::World::Independent
+    };
+    let report = selftest::run(world, args.cases, args.seed, args.duration_s, &opts, &|r| {
         eprintln!(
             "case {:3} {:<32} hidden {:<28} named {:<28} {}  GoF {:5.1} -> {:5.1} %",
             r.case.index,

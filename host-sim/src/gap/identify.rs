@@ -73,7 +73,10 @@ pub fn identify(
             }
         })
         .collect();
-    let scorer = Scorer::new(rig, rec);
+    // The likelihood of the diagnosis: each signal weighed by its noise, estimated from the
+    // residual of Table 4 itself, so the column angle (where the belt and the column show)
+    // is not drowned by the current's chatter.
+    let scorer = Scorer::new(rig, rec).with_noise(rec, &simulate(rig, rec, &Effects::nominal()));
     let with = |p: &[f64]| -> Rig {
         let mut r = rig.clone();
         if let RigModel::Paper(m) = &mut r.model {
@@ -149,4 +152,23 @@ impl Identified {
         );
         s
     }
+}
+
+/// Every refitted parameter within `factor` of the rig's value (either way); a parameter the
+/// table gives as zero (beta_tb) counts as within when it stays below a tenth of its range.
+pub fn within_factor(rig: &Rig, id: &Identified, factor: f64) -> bool {
+    let RigModel::Paper(m) = &rig.model else {
+        return true;
+    };
+    m.plant.identified().iter().all(|(name, table)| {
+        let Some(v) = id.params.get(*name) else {
+            return true;
+        };
+        if *table > 0.0 {
+            let r = v / table;
+            r <= factor && r >= 1.0 / factor
+        } else {
+            *v <= 0.01
+        }
+    })
 }

@@ -42,6 +42,8 @@ pub struct Effects {
     pub tire_stiffness_n_per_mm: f64,
     /// Supply voltage replacing the rig's (paper rig only, V; 0 = nominal).
     pub supply_v: f64,
+    /// Coulomb friction at the rack, N (paper rig only).
+    pub rack_coulomb_n: f64,
 }
 
 impl Effects {
@@ -211,7 +213,8 @@ fn friction(fc: f64, fs: f64, vs: f64, w: f64, j: f64, dt: f64) -> f64 {
 }
 
 /// The paper's actuator in paper mode with `effects`, from `rec.reference` (100 Hz, deg).
-/// The record's grid is the 100 Hz reference grid; outputs are averaged over each 10 ms period.
+/// The record's grid is the 100 Hz reference grid; angles are taken at the end of each 10 ms
+/// period, the current is averaged over it (the log's semantics, [`super::Record`]).
 pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
     let p = m.plant;
     let dt = 1.0 / CURRENT_LOOP_HZ as f64;
@@ -254,11 +257,12 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
         1.0
     };
     let per_motor = p.motor_per_pinion();
-    let n_pos = POSITION_TICKS_PER_REFERENCE as f64;
+    let j_screw = p.j_bs_equivalent();
     let n_cur = (POSITION_TICKS_PER_REFERENCE * CURRENT_TICKS_PER_POSITION_TICK) as f64;
     for &sample in &reference {
         let _ = cascade.push_reference(SteeringDeg(sample as f32));
-        let (mut sw_acc, mut i_acc, mut mot_acc) = (0.0, 0.0, 0.0);
+        let mut i_acc = 0.0;
+        let mut col = plant.column_rad();
         for _ in 0..POSITION_TICKS_PER_REFERENCE {
             let x = plant.x();
             let hall = hall_from_motor(x[state::THETA_ROT]);
@@ -269,18 +273,29 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
                 let v = cascade.current_step(Amps(i_meas as f32)).voltage.0 as f64;
                 let t_motor = friction(fx.coulomb, fx.stribeck, vs, x[state::W_ROT], p.j_rot, dt);
                 let rack = x[state::THETA_BS] * p.tau_bs;
-                let t_screw = -bristle.force(rack) * p.tau_bs;
+                let t_rack_friction = friction(
+                    fx.rack_coulomb_n * p.tau_bs,
+                    0.0,
+                    1.0,
+                    x[state::W_BS],
+                    j_screw,
+                    dt,
+                );
+                let t_screw = -bristle.force(rack) * p.tau_bs + t_rack_friction;
                 plant.step(v, t_motor, t_screw);
                 i_acc += plant.x()[state::CURRENT];
             }
-            let col = play.step(plant.column_rad());
-            let sw = encoder.angle(encoder.raw_from_angle(col));
-            sw_acc += (sw.0 as f64).to_degrees();
-            mot_acc += (motor_from_hall(hall).0 as f64 / per_motor).to_degrees();
+            // The play follows the column at the position rate, as the encoder would see it.
+            col = play.step(plant.column_rad());
         }
-        out.output.push(sw_acc / n_pos);
+        // The log's semantics: angles at the instant the period ends, the current's mean
+        // over the period.
+        let sw = encoder.angle(encoder.raw_from_angle(col));
+        let hall_end = hall_from_motor(plant.x()[state::THETA_ROT]);
+        out.output.push((sw.0 as f64).to_degrees());
         out.effort.push(i_acc / n_cur);
-        out.motor.push(mot_acc / n_pos);
+        out.motor
+            .push((motor_from_hall(hall_end).0 as f64 / per_motor).to_degrees());
     }
     out
 }
@@ -290,7 +305,7 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
 /// plant's rotor through a stiff virtual servo (300 Hz, critically damped, on the rotor
 /// inertia; the winding's back-EMF is cancelled so it carries no current), and the chain
 /// downstream responds with its own dynamics and the effects of `fx` (backlash, tyre). The
-/// result is the column encoder's reading, on the record's grid; `None` without a motor
+/// result is the column encoder's reading at the end of each step; `None` without a motor
 /// signal. Against the measured output it tells how much of the gap lies after the motor.
 pub fn replay_downstream(m: &PaperModel, rec: &Record, fx: &Effects) -> Option<Vec<f64>> {
     let motor = rec.motor.as_ref()?;
@@ -309,24 +324,23 @@ pub fn replay_downstream(m: &PaperModel, rec: &Record, fx: &Effects) -> Option<V
     let substeps = ((rec.dt / dt).round() as usize).max(1);
     let mut out = Vec::with_capacity(motor.len());
     for k in 0..motor.len() {
-        // The record holds step averages: a line through the neighbours' mid-points.
-        let here = rad(motor[k]);
-        let next = rad(*motor.get(k + 1).unwrap_or(&motor[k]));
+        // The record holds the angle at the end of each step: a line from the last one.
+        let here = rad(motor[k.saturating_sub(1)]);
+        let next = rad(motor[k]);
         let w_ref = (next - here) / rec.dt;
-        let mut acc = 0.0;
+        let mut col = plant.column_rad();
         for j in 0..substeps {
             let x = *plant.x();
-            let theta_ref = here + w_ref * (j as f64 * dt - 0.5 * rec.dt);
+            let theta_ref = here + w_ref * ((j + 1) as f64 * dt);
             let torque = p.j_rot
                 * (wn * wn * (theta_ref - x[state::THETA_ROT])
                     + 2.0 * wn * (w_ref - x[state::W_ROT]));
             let rack = x[state::THETA_BS] * p.tau_bs;
             let t_screw = -bristle.force(rack) * p.tau_bs;
             plant.step(p.ke * x[state::W_ROT], torque, t_screw);
-            let col = play.step(plant.column_rad());
-            acc += (encoder.angle(encoder.raw_from_angle(col)).0 as f64).to_degrees();
+            col = play.step(plant.column_rad());
         }
-        out.push(acc / substeps as f64);
+        out.push((encoder.angle(encoder.raw_from_angle(col)).0 as f64).to_degrees());
     }
     Some(out)
 }

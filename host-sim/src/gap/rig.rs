@@ -2,7 +2,7 @@
 //! columns hold the reference, the output and the effort. Two ship with host-sim
 //! (`host-sim/rigs/`): the paper's actuator (the default, built in) and EMPS.
 
-use super::Record;
+use super::{CurrentSamples, Record};
 use crate::logfmt::{LogError, Table, fill_missing};
 use crate::plant::PlantParams;
 use std::path::Path;
@@ -300,6 +300,16 @@ impl Rig {
         let reference = col(&self.columns.reference, true)?.unwrap_or_default();
         let output = col(&self.columns.output, true)?.unwrap_or_default();
         let effort = col(&self.columns.effort, true)?.unwrap_or_default();
+        // `# current: instantaneous` before the header: the current column holds instants,
+        // not the interval means the project's logs carry.
+        let current = if table.comments.iter().any(|c| {
+            c.split_once(':')
+                .is_some_and(|(k, v)| k.trim() == "current" && v.trim() == "instantaneous")
+        }) {
+            CurrentSamples::Instantaneous
+        } else {
+            CurrentSamples::IntervalMean
+        };
         let motor = match &self.columns.motor {
             Some(c) => col(c, false)?,
             None => None,
@@ -315,7 +325,15 @@ impl Rig {
             RigModel::Paper(m) => {
                 let per = m.plant.motor_per_pinion();
                 let motor_deg = motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
-                Record::from_samples_binned(&t, &reference, &output, &effort, motor_deg, 0.01)
+                Record::from_samples(
+                    &t,
+                    &reference,
+                    &output,
+                    &effort,
+                    motor_deg,
+                    0.01,
+                    current,
+                )
             }
             RigModel::Emps(_) => Record {
                 dt: self.grid_s(),

@@ -1,0 +1,411 @@
+//! The selftest's own world, independent of the diagnosis's model: the paper's actuator as a
+//! nonlinear ODE integrated by RK4 at the current-loop step, under the firmware's own
+//! [`Cascade`] at the firmware's rates, with effects in forms and places that differ from the
+//! candidates the diagnosis fits, and logs written as a logger on the car writes them.
+//!
+//! | hidden label       | here                                       | the diagnosis's candidate |
+//! |--------------------|--------------------------------------------|---------------------------|
+//! | `coulomb_friction` | smooth (tanh) friction at the rack          | saturated-linear, motor   |
+//! | `backlash`         | dead band in the belt (a spring with play)  | play at the column        |
+//! | `tire_ground`      | Dahl tyre force at the rack                 | elasto-plastic bristle    |
+//! | `delay`            | the reference pushed late (0.5 ms steps)    | interpolated reference    |
+//! | `parameters`       | one or two Table 4 parameters x2-3 or /2-3  | `identify`'s refit        |
+//!
+//! Every case has all nine Table 4 parameters off by up to 10 % (no car matches the table).
+//! Logs are written at 100, 200 or 1000 Hz: the column and motor angles as instants, the
+//! current as the mean over the row's interval plus sensor noise; the rows' stamps are late
+//! by 0-3 ms against the instants the samples were taken (a logger stamps on receipt).
+
+use super::selftest::Rng;
+use super::{CurrentSamples, Record};
+use crate::plant::PlantParams;
+use crate::scenario::Sweep;
+use steering_ecu::gains::EposGains;
+use steering_ecu::gearing::Gearing;
+use steering_ecu::paper_mode::{
+    CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, Cascade, POSITION_TICKS_PER_REFERENCE,
+};
+use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
+use steering_ecu::units::{Amps, SteeringDeg, Volts};
+
+/// What the world hides, in its own forms and units.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Truth {
+    /// The car's plant: Table 4 off by up to 10 % (more in the `parameters` class).
+    #[serde(skip)]
+    pub plant: PlantParams,
+    /// Smooth Coulomb friction at the rack, N (0 = none).
+    pub rack_friction_n: f64,
+    /// Play in the belt, full width, expressed at the steering column, deg (0 = none).
+    pub belt_play_deg: f64,
+    /// Dahl tyre: largest force at the rack, N (0 = none), and its rest stiffness, N/mm.
+    pub dahl_force_n: f64,
+    pub dahl_stiffness_n_per_mm: f64,
+    /// The reference reaches the ECU this late, s.
+    pub reference_delay_s: f64,
+}
+
+/// One generated case: what it hides and how its log is written.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct GenCase {
+    pub index: usize,
+    pub scenario: String,
+    /// Hidden labels, sorted (`parameters` for that class); empty for none.
+    pub hidden: Vec<String>,
+    pub truth: Truth,
+    pub log_rate_hz: u32,
+    /// How late the rows are stamped, s.
+    pub skew_s: f64,
+    #[serde(skip)]
+    pub reference: Vec<f64>,
+}
+
+/// Rack speed of the friction's tanh, m/s: sharp against the rack's 10-100 mm/s in a sweep,
+/// smooth enough for RK4 at 50 us.
+const FRICTION_SPEED_M_S: f64 = 1e-3;
+/// Sensor noise on the interval-mean current, A (the EPOS4's averaged current).
+const CURRENT_NOISE_A: f64 = 0.1;
+/// Noise on the column angle before the 12-bit encoder's quantisation, deg.
+const ANGLE_NOISE_DEG: f64 = 0.01;
+
+/// Draw case `index` of a run seeded with `seed`. `sweep_s` is the length of a sweep; tracks
+/// are 120 s.
+pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
+    let mut rng = Rng::new(seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ index as u64);
+    let mut plant = PlantParams::PAPER;
+    // Every case: all nine Table 4 parameters off by up to 10 %.
+    let scale = |p: &mut PlantParams, name: &str, f: f64| match name {
+        "j_bs" => p.j_bs *= f,
+        "j_sw" => p.j_sw *= f,
+        "j_w" => p.j_w *= f,
+        "k_b" => p.k_b *= f,
+        "beta_b" => p.beta_b *= f,
+        "beta_bs" => p.beta_bs *= f,
+        "k_tb" => p.k_tb *= f,
+        "beta_tb" => p.beta_tb *= f,
+        _ => p.beta_sw *= f,
+    };
+    let names: Vec<&'static str> = PlantParams::PAPER
+        .identified()
+        .iter()
+        .map(|(n, _)| *n)
+        .collect();
+    for n in &names {
+        let f = rng.range(0.9, 1.1);
+        scale(&mut plant, n, f);
+    }
+    let mut truth = Truth {
+        plant,
+        rack_friction_n: 0.0,
+        belt_play_deg: 0.0,
+        dahl_force_n: 0.0,
+        dahl_stiffness_n_per_mm: 0.0,
+        reference_delay_s: 0.0,
+    };
+    let effects = ["backlash", "coulomb_friction", "delay", "tire_ground"];
+    let roll = rng.uniform();
+    let mut hidden: Vec<String> = Vec::new();
+    if roll < 0.2 {
+        // none
+    } else if roll < 0.35 {
+        // parameters: one or two of the physically prominent ones far off.
+        hidden.push("parameters".into());
+        let prominent = ["k_b", "beta_bs", "j_w", "k_tb", "beta_sw"];
+        let count = 1 + (rng.next_u64() % 2) as usize;
+        let first = (rng.next_u64() % 5) as usize;
+        for i in 0..count {
+            let name = prominent[(first + 2 * i) % 5];
+            let f = rng.range(2.0, 3.0);
+            let f = if rng.uniform() < 0.5 { f } else { 1.0 / f };
+            scale(&mut truth.plant, name, f);
+        }
+    } else if roll < 0.8 {
+        hidden.push(effects[(rng.next_u64() % 4) as usize].into());
+    } else {
+        let a = (rng.next_u64() % 4) as usize;
+        let b = (a + 1 + (rng.next_u64() % 3) as usize) % 4;
+        hidden.push(effects[a].into());
+        hidden.push(effects[b].into());
+    }
+    for h in &hidden {
+        match h.as_str() {
+            // Sizes like the candidates' ranges, in this world's own forms: 300-1200 N at the
+            // rack is 0.05-0.19 Nm at the motor through tau_bs and the belt (Table 2).
+            "coulomb_friction" => truth.rack_friction_n = rng.range(300.0, 1200.0),
+            "backlash" => truth.belt_play_deg = rng.range(0.6, 2.5),
+            "tire_ground" => {
+                truth.dahl_force_n = rng.range(300.0, 1500.0);
+                truth.dahl_stiffness_n_per_mm = rng.range(200.0, 1000.0);
+            }
+            "delay" => truth.reference_delay_s = rng.range(0.015, 0.06),
+            _ => {}
+        }
+    }
+    hidden.sort();
+    let log_rate_hz = [100, 200, 1000][(rng.next_u64() % 3) as usize];
+    // Whole 50 us ticks, 0-3 ms.
+    let skew_s = (rng.range(0.0, 3.0e-3) * CURRENT_LOOP_HZ as f64).round() / CURRENT_LOOP_HZ as f64;
+    let (scenario, reference) = if rng.uniform() < 0.7 {
+        let amp = if rng.uniform() < 0.5 { 5.0 } else { 10.0 };
+        let f1 = rng.range(3.0, 6.0);
+        (
+            format!("sweep {amp:.0} deg 0.2-{f1:.1} Hz"),
+            Sweep {
+                amplitude_deg: amp,
+                f_start_hz: 0.2,
+                f_end_hz: f1,
+                duration_s: sweep_s,
+            }
+            .samples(),
+        )
+    } else {
+        ("track 120 s".to_string(), crate::scenario::builtin_track())
+    };
+    GenCase {
+        index,
+        scenario: format!("{scenario}, {log_rate_hz} Hz, skew {:.2} ms", skew_s * 1e3),
+        hidden,
+        truth,
+        log_rate_hz,
+        skew_s,
+        reference,
+    }
+}
+
+/// State: winding current, motor angle and speed, nut angle and speed, column angle and
+/// speed, Dahl force at the rack.
+type State = [f64; 8];
+
+/// The ODE of the paper's plant (eqs. 1-8 with the printing errors corrected, see
+/// `plant-and-control.md`), written out term by term with the effects in place.
+struct Ode {
+    p: PlantParams,
+    j_bs: f64,
+    g: f64,
+    belt_half_play_rad: f64,
+    truth: Truth,
+}
+
+impl Ode {
+    fn new(truth: Truth) -> Ode {
+        let p = truth.plant;
+        let g = p.screw_to_pinion();
+        Ode {
+            p,
+            j_bs: p.j_bs_equivalent(),
+            g,
+            // Column degrees to nut radians: the nut turns 1/g times the pinion.
+            belt_half_play_rad: 0.5 * truth.belt_play_deg.to_radians() / g,
+            truth,
+        }
+    }
+
+    fn deriv(&self, x: &State, v: f64) -> State {
+        let p = &self.p;
+        let [i, _th_rot, w_rot, th_bs, w_bs, d_sw, w_sw, f_dahl] = *x;
+        let tb = 1.0 / p.belt_reduction;
+        // Belt: a spring with play; its damper acts only while the belt is taut.
+        let stretch = x[1] * tb - th_bs;
+        let h = self.belt_half_play_rad;
+        let (spring, taut) = if stretch > h {
+            (stretch - h, 1.0)
+        } else if stretch < -h {
+            (stretch + h, 1.0)
+        } else {
+            (0.0, 0.0)
+        };
+        let t_belt = p.k_b * spring + taut * p.beta_b * (w_rot * tb - w_bs);
+        // Torsion bar between the pinion and the column.
+        let t_tb = p.k_tb * (self.g * th_bs - d_sw) + p.beta_tb * (self.g * w_bs - w_sw);
+        // Rack friction (smooth) and the Dahl tyre, both at the rack, to the nut by tau_bs.
+        let v_rack = w_bs * p.tau_bs;
+        let f_fric = self.truth.rack_friction_n * (v_rack / FRICTION_SPEED_M_S).tanh();
+        let t_rack = (f_fric + f_dahl) * p.tau_bs;
+        let di = (v - p.ra * i - p.ke * w_rot) / p.la;
+        let dw_rot = (p.kt * i - p.r * w_rot - tb * t_belt) / p.j_rot;
+        let dw_bs = (t_belt - p.beta_bs * w_bs - self.g * t_tb - t_rack) / self.j_bs;
+        let dw_sw = (t_tb - p.beta_sw * w_sw) / p.j_sw;
+        // Dahl: dF/dt = sigma v (1 - F/Fmax sgn v).
+        let df = if self.truth.dahl_force_n > 0.0 {
+            let sigma = self.truth.dahl_stiffness_n_per_mm * 1e3;
+            sigma * v_rack * (1.0 - f_dahl / self.truth.dahl_force_n * v_rack.signum())
+        } else {
+            0.0
+        };
+        [di, w_rot, dw_rot, w_bs, dw_bs, w_sw, dw_sw, df]
+    }
+
+    fn rk4(&self, x: &mut State, v: f64, h: f64) {
+        let add = |a: &State, b: &State, s: f64| -> State {
+            let mut o = *a;
+            for (o, b) in o.iter_mut().zip(b) {
+                *o += s * b;
+            }
+            o
+        };
+        let k1 = self.deriv(x, v);
+        let k2 = self.deriv(&add(x, &k1, 0.5 * h), v);
+        let k3 = self.deriv(&add(x, &k2, 0.5 * h), v);
+        let k4 = self.deriv(&add(x, &k3, h), v);
+        for j in 0..8 {
+            x[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+        }
+        if self.truth.dahl_force_n > 0.0 {
+            x[7] = x[7].clamp(-self.truth.dahl_force_n, self.truth.dahl_force_n);
+        }
+    }
+}
+
+/// A log as rows: `t` (the logger's stamps, s), the reference in force over each row's
+/// interval, the column angle (deg), the motor angle (rad), the interval-mean current (A).
+#[derive(Debug, Clone, Default)]
+pub struct Rows {
+    pub t: Vec<f64>,
+    pub reference: Vec<f64>,
+    pub sw_deg: Vec<f64>,
+    pub motor_rad: Vec<f64>,
+    pub current_a: Vec<f64>,
+}
+
+/// Run the case's world and write its log.
+pub fn rows_of(case: &GenCase, seed: u64) -> Rows {
+    let truth = case.truth;
+    let ode = Ode::new(truth);
+    let nominal = PlantParams::PAPER;
+    let mut rows = Rows::default();
+    let Some(&first) = case.reference.first() else {
+        return rows;
+    };
+    // The ECU is set up from the table, not from the car.
+    let Ok(gains) = EposGains::PAPER.to_si() else {
+        return rows;
+    };
+    let Some(gearing) = Gearing::new(
+        nominal.belt_reduction as f32,
+        nominal.tau_bs as f32,
+        nominal.tau_p as f32,
+    ) else {
+        return rows;
+    };
+    let mut cascade = Cascade::new(&gains, gearing);
+    cascade.set_winding(nominal.ra as f32, nominal.la as f32);
+    cascade.set_voltage_limit(Volts(24.0));
+    let p = truth.plant;
+    let col0 = first.to_radians();
+    let th_bs0 = col0 / p.screw_to_pinion();
+    let mut x: State = [
+        0.0,
+        th_bs0 * p.belt_reduction,
+        0.0,
+        th_bs0,
+        0.0,
+        col0,
+        0.0,
+        0.0,
+    ];
+    cascade.reset(hall_from_motor(x[1]));
+    let mut rng = Rng::new(seed ^ (case.index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+    let encoder = ColumnEncoder { zero_raw: 0 };
+    let h = 1.0 / CURRENT_LOOP_HZ as f64;
+    let ticks_per_row = CURRENT_LOOP_HZ as u64 / case.log_rate_hz as u64;
+    let skew_ticks = (case.skew_s * CURRENT_LOOP_HZ as f64).round() as u64;
+    // The reference's late arrival, in position ticks (0.5 ms).
+    let delay_pos = (truth.reference_delay_s * (CURRENT_LOOP_HZ as f64)
+        / CURRENT_TICKS_PER_POSITION_TICK as f64)
+        .round() as i64;
+    let n_pos = case.reference.len() as i64 * POSITION_TICKS_PER_REFERENCE as i64;
+    let period_pos = POSITION_TICKS_PER_REFERENCE as i64;
+    let mut current_integral = 0.0;
+    let mut integral_at_last_row = 0.0;
+    let mut tick: u64 = 0;
+    let mut tick_at_last_row: u64 = 0;
+    for n in 0..n_pos {
+        // The ECU receives sample m at position tick m * 20 + delay: before the first one,
+        // it holds the rest angle (the first sample).
+        if n == 0 || (n - delay_pos) % period_pos == 0 {
+            let m =
+                ((n - delay_pos).div_euclid(period_pos)).clamp(0, case.reference.len() as i64 - 1);
+            let _ = cascade.push_reference(SteeringDeg(case.reference[m as usize] as f32));
+        }
+        let hall = hall_from_motor(x[1]);
+        cascade.position_step(hall);
+        for _ in 0..CURRENT_TICKS_PER_POSITION_TICK {
+            let v = cascade.current_step(Amps(x[0] as f32)).voltage.0 as f64;
+            // The current over the step, by the trapezoid of its ends.
+            let i0 = x[0];
+            ode.rk4(&mut x, v, h);
+            current_integral += 0.5 * (i0 + x[0]) * h;
+            tick += 1;
+            // A row: the logger's clock ticks every row interval from the first push, but
+            // what it stamps `t` was sampled `skew` earlier (it stamps on receipt).
+            let stamp = tick + skew_ticks;
+            if stamp.is_multiple_of(ticks_per_row) {
+                let row_s = ticks_per_row as f64 * h;
+                let t = stamp as f64 * h;
+                // The reference the logger sent, in force over the row's stamped interval.
+                let k = (((t - 0.5 * row_s) * 100.0).floor().max(0.0) as usize)
+                    .min(case.reference.len() - 1);
+                // The column encoder sits at the pinion end of the torsion bar (delta_P of
+                // section 3.2), not at the steering wheel.
+                let col =
+                    x[3] * p.screw_to_pinion() + (ANGLE_NOISE_DEG * rng.normal()).to_radians();
+                let sw = encoder.angle(encoder.raw_from_angle(col));
+                let span = (tick - tick_at_last_row).max(1) as f64 * h;
+                let mean_current = (current_integral - integral_at_last_row) / span;
+                integral_at_last_row = current_integral;
+                tick_at_last_row = tick;
+                rows.t.push(t);
+                rows.reference.push(case.reference[k]);
+                rows.sw_deg.push((sw.0 as f64).to_degrees());
+                rows.motor_rad
+                    .push(motor_from_hall(hall_from_motor(x[1])).0 as f64);
+                rows.current_a
+                    .push(mean_current + CURRENT_NOISE_A * rng.normal());
+            }
+        }
+    }
+    rows
+}
+
+/// The case's log read as the diagnosis reads a file (the paper rig's columns and grid).
+pub fn record_of(case: &GenCase, seed: u64) -> Record {
+    let rows = rows_of(case, seed);
+    let per = PlantParams::PAPER.motor_per_pinion();
+    let motor_deg = rows
+        .motor_rad
+        .iter()
+        .map(|v| (v / per).to_degrees())
+        .collect();
+    Record::from_samples(
+        &rows.t,
+        &rows.reference,
+        &rows.sw_deg,
+        &rows.current_a,
+        Some(motor_deg),
+        0.01,
+        CurrentSamples::IntervalMean,
+    )
+}
+
+impl GenCase {
+    /// A case with the table's plant and no effect, logged at `log_rate_hz` without skew: the
+    /// world the diagnosis's nominal model should reproduce.
+    pub fn nominal(reference: Vec<f64>, log_rate_hz: u32) -> GenCase {
+        GenCase {
+            index: 0,
+            scenario: "nominal".into(),
+            hidden: vec![],
+            truth: Truth {
+                plant: PlantParams::PAPER,
+                rack_friction_n: 0.0,
+                belt_play_deg: 0.0,
+                dahl_force_n: 0.0,
+                dahl_stiffness_n_per_mm: 0.0,
+                reference_delay_s: 0.0,
+            },
+            log_rate_hz,
+            skew_s: 0.0,
+            reference,
+        }
+    }
+}
