@@ -48,9 +48,9 @@
 //!
 //! A periodic system answers a sinusoid with the sinusoid plus images at `f +- k 100 Hz`, so
 //! "the" response must say where the output is looked at. [`LinearModel::response`] gives what
-//! host-sim's log and the H1 estimator of `analysis.rs` see: a row every `2000 / log_rate`
-//! position ticks, stamped `t = tick Tp`, holding the reference sample of its period (the
-//! 100 Hz staircase) and the angle after that tick's current ticks. For `r[n] = e^{j w n T}`
+//! host-sim's log and the H1 estimator of `analysis.rs` see: a row at the end of every
+//! `2000 / log_rate` position ticks, stamped at that instant, holding the reference sample of
+//! its period (the 100 Hz staircase) and the angle after the interval's last current tick. For `r[n] = e^{j w n T}`
 //! the rows are `x_j = e^{j w n T}` and `y_j = g_m e^{j w n T}`, so the ratio of their DTFTs at
 //! `w` (which is what `Sxy / Sxx` converges to; the images lie at 90 Hz and above, outside the
 //! 0-10 Hz band) is
@@ -487,13 +487,14 @@ impl LinearModel {
         let every = (POSITION_LOOP_HZ / log_rate_hz) as usize;
         let n_p = POSITION_TICKS_PER_REFERENCE as usize;
         let g = self.per_tick_response(f_hz, output);
-        // Rows at ticks j = 0, every, 2 every, ... over lcm(20, every) ticks; row j sits at
-        // m = j mod 20 of its period.
+        // A row at the end of every log interval (`sim.rs`): after ticks j = every - 1,
+        // 2 every - 1, ... over lcm(20, every) ticks, with the angles after tick j's current
+        // ticks and the reference of its period; row j sits at m = j mod 20 of its period.
         let span = lcm(n_p, every);
         let w = TAU * f_hz;
         let mut num = Complex::new(0.0, 0.0);
         let mut den = Complex::new(0.0, 0.0);
-        for j in (0..span).step_by(every) {
+        for j in ((every - 1)..span).step_by(every) {
             let m = j % n_p;
             let e = Complex::from_polar(1.0, -w * m as f64 * self.tp);
             num += g[m] * e;

@@ -99,7 +99,15 @@ fn gap_fills_nan_cells_says_so_and_prints_finite_figures() {
     // does not have too (a regime with no time in it has no GoF either way), and a noise floor
     // of the clean log's order, not the 8.5e23 of a NaN that got through.
     let clean_log = dir.path().join("step.csv");
-    let clean = host_sim(&["gap", s(&clean_log), "--threads", "2"]);
+    let clean_json = dir.path().join("clean.json");
+    let clean = host_sim(&[
+        "gap",
+        s(&clean_log),
+        "--threads",
+        "2",
+        "--json",
+        s(&clean_json),
+    ]);
     assert!(clean.status.success(), "{}", stderr(&clean));
     let clean_out = stdout(&clean);
     for garbage in ["NaN", "inf"] {
@@ -109,19 +117,20 @@ fn gap_fills_nan_cells_says_so_and_prints_finite_figures() {
             "`{garbage}` in the report:\n{out}\nclean:\n{clean_out}"
         );
     }
-    let floor = |text: &str| -> f64 {
-        let rest = &text[text.find("noise floor ").unwrap() + "noise floor ".len()..];
-        rest.split(|c: char| c == ';' || c == ')' || c.is_whitespace())
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
+    // Each signal's noise (what the likelihood divides by and the floor is made of) is of the
+    // clean log's order, not the 8.5e23 of a NaN that got through.
+    let noise = |path: &Path, signal: &str| -> f64 {
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        v["noise"][signal].as_f64().unwrap()
     };
-    let (filled, original) = (floor(&out), floor(&clean_out));
-    assert!(
-        filled.is_finite() && (filled - original).abs() <= 0.1 * original,
-        "noise floor {filled} against {original} on the clean log"
-    );
+    for signal in ["output", "effort"] {
+        let (filled, original) = (noise(&json, signal), noise(&clean_json, signal));
+        assert!(
+            filled.is_finite() && (filled - original).abs() <= 0.1 * original,
+            "{signal} noise {filled} against {original} on the clean log"
+        );
+    }
     // Piped, the progress bar stays off: stderr is one line per event.
     assert!(!err.contains('\r'), "{err:?}");
     // serde_json writes a non-finite figure as null.

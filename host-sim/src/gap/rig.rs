@@ -325,15 +325,7 @@ impl Rig {
             RigModel::Paper(m) => {
                 let per = m.plant.motor_per_pinion();
                 let motor_deg = motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
-                Record::from_samples(
-                    &t,
-                    &reference,
-                    &output,
-                    &effort,
-                    motor_deg,
-                    0.01,
-                    current,
-                )
+                Record::from_samples(&t, &reference, &output, &effort, motor_deg, 0.01, current)
             }
             RigModel::Emps(_) => Record {
                 dt: self.grid_s(),
