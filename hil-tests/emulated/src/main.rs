@@ -252,8 +252,14 @@ fn count_fast_loop(meter: &InstructionMeter, current: &mut Counts, position: &mu
     let mut counter = AliveCounter::wrapping(0);
     for k in 0..4_000u32 {
         let now_us = 1_000 + 50 * u64::from(k);
+        // Outside the measurement, at the firmware's rates: a column sample every 2 ms (the
+        // encoder task, which also keeps the fast loop's supervisor watchdog fed; at 10 ms the
+        // fast loop would switch the bridge off half the time and count its idle path) and
+        // the 100 Hz reference.
+        if k % 40 == 0 {
+            let _ = ecu.on_encoder(now_us, SteeringDeg(0.02 * (k / 40) as f32));
+        }
         if k % 200 == 0 {
-            // The 100 Hz reference and a column sample, outside the measurement.
             counter = counter.next();
             let frame = protocol.encode_reference(&Reference {
                 angle: SteeringDeg(10.0),
@@ -261,7 +267,6 @@ fn count_fast_loop(meter: &InstructionMeter, current: &mut Counts, position: &mu
                 counter,
                 clear_faults: false,
             });
-            let _ = ecu.on_encoder(now_us, SteeringDeg(0.1 * (k / 200) as f32));
             let _ = ecu.on_reference_frame(now_us, &frame);
         }
         let code = code_of(((k / 40) % 6) as u8);
