@@ -48,7 +48,7 @@ use crate::gains::SiGains;
 use crate::gearing::Gearing;
 use crate::paper_mode::{
     CURRENT_LIMIT, CURRENT_LOOP_HZ, MOTOR_LA_H, MOTOR_RA_OHM, POSITION_LOOP_HZ,
-    POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ, STEERING_RANGE_DEG, VOLTAGE_LIMIT,
+    POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ, VOLTAGE_LIMIT, reference_at_motor,
 };
 use crate::reference::{Interpolator, ReferenceError, Setpoint};
 use crate::sensors::{COLUMN_ENCODER_COUNTS, HALL_COUNTS_PER_REV, motor_from_hall};
@@ -227,13 +227,7 @@ impl ColumnShaper {
 
     /// A new reference sample at the wheel; refused as paper mode refuses it.
     pub fn push_reference(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
-        if !angle.is_finite() {
-            return Err(ReferenceError::NotFinite);
-        }
-        if angle.0.abs() > STEERING_RANGE_DEG {
-            return Err(ReferenceError::OutOfRange);
-        }
-        let r = self.gearing.motor_from_steering(SteeringRad::from(angle)).0;
+        let r = reference_at_motor(self.gearing, angle)?.0;
         let t = 1.0 / REFERENCE_HZ as f32;
         let r1 = self.history[0].unwrap_or(r);
         let r2 = self.history[1].unwrap_or(r1);
@@ -260,13 +254,7 @@ impl ColumnShaper {
     /// become a position step of `lag1_s` times the ramp rate (4.9 deg at 100 deg/s) at the
     /// start of every enable, and again at its end.
     pub fn push_unshaped(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
-        if !angle.is_finite() {
-            return Err(ReferenceError::NotFinite);
-        }
-        if angle.0.abs() > STEERING_RANGE_DEG {
-            return Err(ReferenceError::OutOfRange);
-        }
-        let r = self.gearing.motor_from_steering(SteeringRad::from(angle)).0;
+        let r = reference_at_motor(self.gearing, angle)?.0;
         self.history = [Some(r), Some(r)];
         self.plain.push(MotorRad(r))?;
         self.shaping = false;

@@ -45,6 +45,21 @@ pub const MOTOR_LA_H: f32 = 0.279e-3;
 /// Steering range accepted as a reference, deg at the wheel (section 2: -90..+90 deg).
 pub const STEERING_RANGE_DEG: f32 = 90.0;
 
+/// A reference sample at the wheel as a motor angle; refused if it is not finite or beyond
+/// +-[`STEERING_RANGE_DEG`]. Every controller takes its samples through this.
+pub fn reference_at_motor(
+    gearing: Gearing,
+    angle: SteeringDeg,
+) -> Result<MotorRad, ReferenceError> {
+    if !angle.is_finite() {
+        return Err(ReferenceError::NotFinite);
+    }
+    if angle.0.abs() > STEERING_RANGE_DEG {
+        return Err(ReferenceError::OutOfRange);
+    }
+    Ok(gearing.motor_from_steering(SteeringRad::from(angle)))
+}
+
 /// The whole cascade: reference interpolator, position loop, current loop.
 #[derive(Debug, Clone)]
 pub struct Cascade {
@@ -127,13 +142,7 @@ impl Cascade {
     /// A new reference sample at the wheel. Refused (and the ramp in progress continues) if
     /// it is not finite or beyond +-[`STEERING_RANGE_DEG`].
     pub fn push_reference(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
-        if !angle.is_finite() {
-            return Err(ReferenceError::NotFinite);
-        }
-        if angle.0.abs() > STEERING_RANGE_DEG {
-            return Err(ReferenceError::OutOfRange);
-        }
-        let motor = self.gearing.motor_from_steering(SteeringRad::from(angle));
+        let motor = reference_at_motor(self.gearing, angle)?;
         self.interpolator.push(motor)
     }
 

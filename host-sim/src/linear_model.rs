@@ -630,17 +630,7 @@ impl LinearModel {
     /// The loop transfer `L(e^{j w Tp}) = C P` with the loop broken at the current set-point.
     pub fn loop_transfer(&self, f_hz: f64) -> Complex<f64> {
         let z = Complex::from_polar(1.0, TAU * f_hz * self.tp);
-        let n = self.a_inner.nrows();
-        let mut m =
-            DMatrix::<Complex<f64>>::from_fn(n, n, |i, j| Complex::new(-self.a_inner[(i, j)], 0.0));
-        for i in 0..n {
-            m[(i, i)] += z;
-        }
-        let rhs = DVector::<Complex<f64>>::from_fn(n, |i, _| Complex::new(self.b_inner[i], 0.0));
-        let p = m
-            .lu()
-            .solve(&rhs)
-            .map_or(Complex::new(f64::NAN, f64::NAN), |x| x[state::THETA_ROT]);
+        let (p, _) = self.plant_per_current(z);
         let zi = z.inv();
         let one = Complex::new(1.0, 0.0);
         let c = self.gains.position_kp
