@@ -42,6 +42,7 @@ use steering_ecu::can::Frame;
 use steering_ecu::canopen::NodeId;
 use steering_ecu::canopen::epos4::{Epos4Config, PositionScale};
 use steering_ecu::commutation::{BRIDGE_OFF, BridgeCommand, HallDecoder, code_of};
+use steering_ecu::controller::ControllerKind;
 use steering_ecu::direct::FastLoop;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::ports::{Bridge, ColumnEncoderPort, CurrentSense, EncoderError, HallInputs};
@@ -223,6 +224,11 @@ impl SimEcu {
     /// 0 wherever the motor stands, so this rehearses the ECU's motor-origin alignment.
     /// A non-finite angle is taken as 0.
     pub fn paper_at(column_deg: f64) -> SimEcu {
+        Self::at(column_deg, ControllerKind::Paper)
+    }
+
+    /// [`SimEcu::paper_at`] with the ECU running `controller` (direct drive).
+    pub fn at(column_deg: f64, controller: ControllerKind) -> SimEcu {
         let column_rad = if column_deg.is_finite() {
             column_deg.to_radians()
         } else {
@@ -234,7 +240,11 @@ impl SimEcu {
         MockDriver::get().reset();
         // Leaked: the task futures borrow them for 'static, like the firmware's statics.
         let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(std::cell::RefCell::new(
-            Ecu::paper().expect("the paper configuration is valid"),
+            match controller {
+                ControllerKind::Paper => Ecu::paper(),
+                ControllerKind::Ecu => Ecu::ecu_direct(),
+            }
+            .expect("the paper configuration is valid"),
         ))));
         let reference_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
         let tx_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));

@@ -10,6 +10,7 @@ use super::monitor::Monitor;
 use super::profile::{self, Profile, ReferenceSender, parse_as_state};
 use super::{BringupError, Transport, candump, epos, pump};
 use crate::scenario::Sweep;
+use crate::sim::Controller;
 use crate::sim_ecu::{Injection, SimEcu};
 use clap::{Args, Parser, Subcommand};
 use std::io::{BufRead, Write};
@@ -20,6 +21,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use steering_ecu::as_state::AsState;
 use steering_ecu::canopen::NodeId;
 use steering_ecu::canopen::epos4::{Epos4Config, PositionScale};
+use steering_ecu::controller::ControllerKind;
 use steering_ecu::protocol::PERIOD_US;
 
 #[derive(Parser, Debug)]
@@ -53,6 +55,10 @@ pub struct Cli {
         allow_negative_numbers = true
     )]
     pub sim_column_deg: f64,
+    /// With `--iface sim`: the simulated ECU's steering controller, `paper` (the paper's
+    /// cascade) or `ecu` (the ECU's own, README "ECU mode").
+    #[arg(long, global = true, value_enum, default_value_t = Controller::Paper)]
+    pub controller: Controller,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -239,7 +245,11 @@ pub fn main() -> ExitCode {
 
 fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     if cli.iface == "sim" {
-        let mut sim = SimEcu::paper_at(cli.sim_column_deg);
+        let kind = match cli.controller {
+            Controller::Paper => ControllerKind::Paper,
+            Controller::Ecu => ControllerKind::Ecu,
+        };
+        let mut sim = SimEcu::at(cli.sim_column_deg, kind);
         if let Some(spec) = &cli.sim_inject {
             let bad = || BringupError::Profile {
                 reason: format!(
