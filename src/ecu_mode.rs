@@ -71,9 +71,10 @@ const COLUMN_SLEW_RAD_PER_S: f32 = 1.745_33;
 /// One count of the 12-bit column encoder, rad.
 const COLUMN_COUNT_RAD: f32 = TAU / COLUMN_ENCODER_COUNTS as f32;
 
-/// The model-derived constants of ECU mode. [`EcuTuning::PAPER`] is the paper's plant; host-sim
-/// derives the same numbers from any plant with `EcuTuning::from_model`-style arithmetic (see
-/// `host-sim/src/ecu_tuning.rs`).
+/// The model-derived constants of ECU mode. [`EcuTuning::PAPER`] is the paper's plant, and the
+/// only tuning there is: host-sim runs it unchanged on other plants (`--plant FILE`) to measure
+/// its robustness, and the unit test `paper_tuning_matches_the_tables` recomputes it from
+/// Tables 1, 2 and 4.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct EcuTuning {

@@ -454,6 +454,12 @@ fn physical_limit(cfg: &RunConfig) -> PhysicalLimit {
     }
 }
 
+/// A bound on the bandwidth as `host-sim` prints it: "  3.79 Hz", or "above 50 Hz" (the
+/// reference's Nyquist limit, where `bandwidth_bound_hz` stops looking).
+fn bound_text(bound_hz: Option<f64>) -> String {
+    bound_hz.map_or("above 50 Hz".to_string(), |b| format!("{b:6.2} Hz"))
+}
+
 /// A bandwidth as a share of its bound: "61 %", or "-" when either is missing.
 fn share_of_bound(bandwidth_hz: Option<f64>, bound_hz: Option<f64>) -> String {
     match (bandwidth_hz, bound_hz) {
@@ -522,11 +528,14 @@ fn limits_cmd(amplitude_deg: f64, supply_v: f64, json: Option<&Path>) -> Result<
         limit.saturated().voltage_limit_v
     );
     let mut bounds = Vec::new();
-    let hz = |b: Option<f64>| b.map_or("above 50 Hz".to_string(), |b| format!("{b:6.2} Hz"));
     for a in amplitudes {
         let b = limit.bandwidth_bound_hz(a);
         let sat = limit.saturated().bandwidth_bound_hz(a);
-        say!("  {a:5} deg: {} sinusoidal, {} saturated", hz(b), hz(sat));
+        say!(
+            "  {a:5} deg: {} sinusoidal, {} saturated",
+            bound_text(b),
+            bound_text(sat)
+        );
         bounds.push(serde_json::json!({
             "amplitude_deg": a,
             "bandwidth_bound_hz": b,
@@ -589,11 +598,10 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
     let limit = physical_limit(&cfg);
     let bound = limit.bandwidth_bound_hz(sweep.amplitude_deg);
     let saturated = limit.saturated().bandwidth_bound_hz(sweep.amplitude_deg);
-    let hz = |b: Option<f64>| b.map_or("above 50 Hz".to_string(), |b| format!("{b:6.2} Hz"));
     say!(
         "  physical bound     {}  ({} A / {} V sinusoidal on this plant, any controller: \
          `host-sim limits`); the bandwidth is {} of it",
-        hz(bound),
+        bound_text(bound),
         limit.current_limit_a,
         limit.voltage_limit_v,
         share_of_bound(rep.bandwidth_hz, bound)
@@ -601,7 +609,7 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
     say!(
         "  saturated bound    {}  (the same limits as square waves: fundamentals 4/pi higher); \
          the bandwidth is {} of it",
-        hz(saturated),
+        bound_text(saturated),
         share_of_bound(rep.bandwidth_hz, saturated)
     );
     // The linear model of the paper cascade (exact sensors, no limits); not for other controllers.
@@ -645,7 +653,7 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
         say!(
             "  (at 1 deg, below the speed limit: {bw:.2} Hz, {} of its bound of {})",
             share_of_bound(Some(bw), small_bound),
-            small_bound.map_or("above 50 Hz".to_string(), |b| format!("{b:.2} Hz"))
+            bound_text(small_bound).trim_start()
         );
     }
     if let Some(path) = &common.json {

@@ -43,9 +43,16 @@ static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Pape
 /// Held by each test for its whole run, so no scenario starts with another test's choice.
 static SCENARIOS: StdMutex<()> = StdMutex::new(());
 
-fn set_controller(kind: ControllerKind) {
-    if let Ok(mut c) = CONTROLLER.lock() {
-        *c = kind;
+/// Runs `scenario` once with each controller, holding [`SCENARIOS`] throughout so no other
+/// test's scenario starts with this one's choice.
+fn in_both_modes(scenario: impl Fn(ControllerKind)) {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        if let Ok(mut c) = CONTROLLER.lock() {
+            *c = kind;
+        }
+        scenario(kind);
     }
 }
 const PERIOD_STEPS: u64 = 10_000 / STEP_US;
@@ -300,12 +307,9 @@ fn repeat(event: Event, n: usize) -> Vec<Event> {
 
 #[test]
 fn the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference_in();
-    }
+    in_both_modes(|_| {
+        the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference_in()
+    });
 }
 
 fn the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference_in() {
@@ -355,12 +359,9 @@ fn the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference_i
 
 #[test]
 fn a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered_in();
-    }
+    in_both_modes(|_| {
+        a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered_in()
+    });
 }
 
 fn a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered_in() {
@@ -406,12 +407,7 @@ fn a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered_in()
 
 #[test]
 fn a_silent_drive_latches_heartbeat_lost() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        a_silent_drive_latches_heartbeat_lost_in();
-    }
+    in_both_modes(|_| a_silent_drive_latches_heartbeat_lost_in());
 }
 
 fn a_silent_drive_latches_heartbeat_lost_in() {
@@ -438,12 +434,7 @@ fn a_silent_drive_latches_heartbeat_lost_in() {
 
 #[test]
 fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault_in();
-    }
+    in_both_modes(|_| on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault_in());
 }
 
 fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault_in() {
@@ -491,12 +482,7 @@ fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault_in() 
 /// power-up; the CSP target must be the drive's position plus the column-derived offset.
 #[test]
 fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up_in();
-    }
+    in_both_modes(|_| the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up_in());
 }
 
 fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up_in() {
@@ -525,12 +511,7 @@ fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up_in() {
 /// target then ramps to a far reference at the documented rate instead of stepping to it.
 #[test]
 fn an_epos4_enable_ramps_the_target_from_the_measured_position() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        an_epos4_enable_ramps_the_target_from_the_measured_position_in();
-    }
+    in_both_modes(|_| an_epos4_enable_ramps_the_target_from_the_measured_position_in());
 }
 
 fn an_epos4_enable_ramps_the_target_from_the_measured_position_in() {
@@ -563,12 +544,7 @@ fn an_epos4_enable_ramps_the_target_from_the_measured_position_in() {
 /// speed) and reads them back; the drive holds them.
 #[test]
 fn the_bring_up_writes_the_drive_limits() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        the_bring_up_writes_the_drive_limits_in();
-    }
+    in_both_modes(|_| the_bring_up_writes_the_drive_limits_in());
 }
 
 fn the_bring_up_writes_the_drive_limits_in() {

@@ -39,9 +39,16 @@ const RUNS: usize = 40;
 /// The controller the next scenario's ECU runs (both drive the same tests).
 static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Paper);
 
-fn set_controller(kind: ControllerKind) {
-    if let Ok(mut c) = CONTROLLER.lock() {
-        *c = kind;
+/// Runs `scenario` once with each controller, holding [`SCENARIOS`] throughout so no other
+/// test's scenario starts with this one's choice.
+fn in_both_modes(scenario: impl Fn(ControllerKind)) {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
+        eprintln!("{kind:?} mode");
+        if let Ok(mut c) = CONTROLLER.lock() {
+            *c = kind;
+        }
+        scenario(kind);
     }
 }
 
@@ -233,15 +240,10 @@ fn run_from(
 
 #[test]
 fn steering_rules_end_to_end_on_the_firmware_tasks() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        set_controller(kind);
-        steering_rules_end_to_end(kind);
-    }
+    in_both_modes(|_| steering_rules_end_to_end());
 }
 
-fn steering_rules_end_to_end(kind: ControllerKind) {
-    eprintln!("steering rules, {kind:?} mode");
+fn steering_rules_end_to_end() {
     // Timeline, 10 ms per entry:
     //   0-9    AS Off, 0 deg          -> drive disabled
     //   10-59  AS Ready/Driving 10 deg -> tracking, the column reaches 10 deg
@@ -317,11 +319,7 @@ fn steering_rules_end_to_end(kind: ControllerKind) {
 
 #[test]
 fn sensor_faults_latch_through_the_tasks_and_switch_the_bridge_off() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        set_controller(kind);
-        sensor_faults_latch(kind);
-    }
+    in_both_modes(sensor_faults_latch);
 }
 
 fn sensor_faults_latch(kind: ControllerKind) {
@@ -387,12 +385,7 @@ fn sensor_faults_latch(kind: ControllerKind) {
 /// 20 deg for 200 ms.
 #[test]
 fn a_runaway_latches_within_50_ms_of_the_saturated_push() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        a_runaway_latches_within_50_ms_of_the_saturated_push_in();
-    }
+    in_both_modes(|_| a_runaway_latches_within_50_ms_of_the_saturated_push_in());
 }
 
 fn a_runaway_latches_within_50_ms_of_the_saturated_push_in() {
@@ -441,12 +434,7 @@ fn a_runaway_latches_within_50_ms_of_the_saturated_push_in() {
 /// (or latches the disagreement for good).
 #[test]
 fn the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up_in();
-    }
+    in_both_modes(|_| the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up_in());
 }
 
 fn the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up_in() {
@@ -477,12 +465,7 @@ fn the_motor_origin_is_aligned_to_the_column_wherever_the_car_powers_up_in() {
 /// The receive side of the bus: bus-off ends routing and latches the fault.
 #[test]
 fn bus_off_ends_reception_and_latches_the_fault() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        set_controller(kind);
-        bus_off_ends_reception_and_latches_the_fault_in();
-    }
+    in_both_modes(|_| bus_off_ends_reception_and_latches_the_fault_in());
 }
 
 fn bus_off_ends_reception_and_latches_the_fault_in() {
