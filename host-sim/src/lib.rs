@@ -3,6 +3,7 @@
 pub mod analysis;
 pub mod bringup;
 pub mod canbus;
+pub mod effect_plant;
 pub mod epos4_sim;
 pub mod gap;
 pub mod golden;

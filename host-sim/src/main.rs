@@ -7,6 +7,7 @@
 
 use clap::{Args, Parser, Subcommand};
 use host_sim::analysis::FrequencyResponse;
+use host_sim::effect_plant::PlantEffects;
 use host_sim::linear_model::{LimitedBy, LinearModel, MINUS_3_DB, Output, PhysicalLimit};
 use host_sim::logfmt::Log;
 use host_sim::plant::PlantParams;
@@ -144,6 +145,12 @@ struct Common {
     /// (to see the overshoot it prevents).
     #[arg(long)]
     no_current_guard: bool,
+    /// Effects the linear plant leaves out, as KEY=VALUE[,...]: backlash_deg (play in the
+    /// belt/nut, deg at the wheel), column_play_deg, coulomb_n (rack friction, N),
+    /// motor_coulomb_nm, motor_stribeck_nm, stribeck_rad_s, tire_n with tire_n_per_mm.
+    /// E.g. `--plant-effects backlash_deg=1.5,coulomb_n=200`.
+    #[arg(long, value_name = "LIST", default_value = "")]
+    plant_effects: PlantEffects,
 }
 
 impl Common {
@@ -180,6 +187,7 @@ impl Common {
             supply_v: self.supply_v,
             controller: self.controller,
             current_guard: !self.no_current_guard,
+            effects: self.plant_effects,
             ..RunConfig::default()
         })
     }
@@ -685,13 +693,19 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
     Ok(())
 }
 
-fn sensors_label(common: &Common) -> &'static str {
-    match (common.controller, common.ideal_sensors) {
+/// The controller, its sensors, and the plant's added effects if any.
+fn sensors_label(common: &Common) -> String {
+    let loop_ = match (common.controller, common.ideal_sensors) {
         (Controller::Ecu, _) => {
             "ECU mode: Hall feedback and timing, 12-bit column encoder at 500 Hz"
         }
         (Controller::Paper, true) => "paper mode, exact motor angle fed back",
         (Controller::Paper, false) => "paper mode: Hall feedback, 12-bit column encoder",
+    };
+    if common.plant_effects.is_none() {
+        loop_.to_string()
+    } else {
+        format!("{loop_}; plant effects {}", common.plant_effects)
     }
 }
 

@@ -232,7 +232,7 @@ pub mod state {
 }
 
 /// What the control loop and the logger see of an actuator; the simulated plant implements it,
-/// and so will plants with unmodelled effects added.
+/// and so does the plant with unmodelled effects (`effect_plant.rs`).
 pub trait Actuator {
     /// Advance one current-loop period with the terminal voltage held.
     fn step(&mut self, voltage_v: f64);
@@ -242,6 +242,8 @@ pub trait Actuator {
     fn motor_rad(&self) -> f64;
     /// Angle at the column encoder (pinion end, delta_P of section 3.2), rad.
     fn column_rad(&self) -> f64;
+    /// Put the actuator at rest at a column angle: no current, no speed, nothing loaded.
+    fn set_at_rest(&mut self, column_rad: f64);
 }
 
 /// The linear plant, discretised exactly for a fixed step.
@@ -360,14 +362,13 @@ impl LinearPlant {
     pub fn state(&self) -> [f64; 7] {
         self.x
     }
-
-    /// Put the actuator at rest at a steering angle (belt and column unloaded).
-    pub fn set_at_rest(&mut self, column_rad: f64) {
-        self.x = self.params.at_rest(column_rad);
-    }
 }
 
 impl Actuator for LinearPlant {
+    fn set_at_rest(&mut self, column_rad: f64) {
+        self.x = self.params.at_rest(column_rad);
+    }
+
     fn step(&mut self, voltage_v: f64) {
         let x = self.x;
         for (i, row) in self.ad.iter().enumerate() {

@@ -7,6 +7,7 @@
 //! samples the current, computes the voltage and holds it for 50 us (no computation delay is
 //! modelled: the EPOS4 updates its PWM within the period).
 
+use crate::effect_plant::{EffectPlant, PlantEffects};
 use crate::logfmt::{Log, Row};
 use crate::plant::{Actuator, LinearPlant, PlantError, PlantParams};
 use steering_ecu::control::AntiWindup;
@@ -63,6 +64,8 @@ pub struct RunConfig {
     pub controller: Controller,
     /// What the log's angle columns hold (the control loop is not affected).
     pub logged_angles: LoggedAngles,
+    /// Effects added to the plant (`--plant-effects`); none runs the linear plant.
+    pub effects: PlantEffects,
 }
 
 /// What the log's `sw_deg` and `motor_rad` columns hold.
@@ -90,6 +93,7 @@ impl Default for RunConfig {
             controller: Controller::Paper,
             logged_angles: LoggedAngles::Sensors,
             current_guard: true,
+            effects: PlantEffects::NONE,
         }
     }
 }
@@ -175,7 +179,26 @@ pub fn run(reference_deg: &[f64], cfg: &RunConfig) -> Result<Run, SimError> {
 }
 
 /// [`run`], with every cascade call shown to `tap` (Hall feedback only: the tap sees Hall counts).
+/// The plant is the linear one of eqs. 1-8, or the effect plant when `cfg.effects` has any.
 pub fn run_tapped(
+    reference_deg: &[f64],
+    cfg: &RunConfig,
+    tap: &mut impl Tap,
+) -> Result<Run, SimError> {
+    let dt = 1.0 / CURRENT_LOOP_HZ as f64;
+    if cfg.effects.is_none() {
+        let mut plant = LinearPlant::new(cfg.plant, dt).map_err(SimError::Plant)?;
+        run_on(&mut plant, reference_deg, cfg, tap)
+    } else {
+        let mut plant = EffectPlant::new(cfg.plant, cfg.effects, dt).map_err(SimError::Plant)?;
+        run_on(&mut plant, reference_deg, cfg, tap)
+    }
+}
+
+/// The closed loop around any [`Actuator`] stepped at the current-loop rate (its parameters
+/// must be `cfg.plant`: the controller's gearing and winding model are taken from there).
+pub fn run_on<A: Actuator>(
+    plant: &mut A,
     reference_deg: &[f64],
     cfg: &RunConfig,
     tap: &mut impl Tap,
@@ -192,8 +215,6 @@ pub fn run_tapped(
         });
     }
     let si = cfg.gains.to_si().map_err(SimError::Gains)?;
-    let mut plant =
-        LinearPlant::new(cfg.plant, 1.0 / CURRENT_LOOP_HZ as f64).map_err(SimError::Plant)?;
     let gearing = Gearing::new(
         cfg.plant.belt_reduction as f32,
         cfg.plant.tau_bs as f32,

@@ -10,15 +10,11 @@
 
 use super::Record;
 use super::rig::{EmpsModel, PaperModel};
-use crate::plant::{PlantParams, state};
-use nalgebra::SMatrix;
-use steering_ecu::gearing::Gearing;
-use steering_ecu::paper_mode::{
-    CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, Cascade, POSITION_TICKS_PER_REFERENCE,
-    REFERENCE_HZ,
-};
-use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
-use steering_ecu::units::{Amps, SteeringDeg, Volts};
+use crate::effect_plant::{Bristle, EffectPlant, PlantEffects, Play};
+use crate::plant::{Actuator, state};
+use crate::sim::{self, RunConfig};
+use steering_ecu::paper_mode::{CURRENT_LOOP_HZ, REFERENCE_HZ};
+use steering_ecu::sensors::ColumnEncoder;
 
 /// The candidate effects, each with its size; zero means absent.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
@@ -44,6 +40,8 @@ pub struct Effects {
     pub supply_v: f64,
     /// Coulomb friction at the rack, N (paper rig only).
     pub rack_coulomb_n: f64,
+    /// Play in the belt/nut, full width, deg at the wheel (paper rig only).
+    pub belt_play: f64,
 }
 
 impl Effects {
@@ -82,222 +80,57 @@ fn delayed(reference: &[f64], delay_s: f64, dt: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Play (backlash) operator: the output follows the input only once the gap is taken up.
-#[derive(Debug, Clone, Copy)]
-struct Play {
-    half: f64,
-    y: f64,
-}
-
-impl Play {
-    fn new(width: f64, y0: f64) -> Self {
-        Play {
-            half: 0.5 * width.max(0.0),
-            y: y0,
+impl Effects {
+    /// The effects that live in the paper actuator, as the effect plant takes them (the delay
+    /// and the supply are the loop's, not the plant's).
+    pub fn plant_effects(&self) -> PlantEffects {
+        PlantEffects {
+            belt_play_deg: self.belt_play,
+            column_play_deg: self.backlash,
+            motor_coulomb_nm: self.coulomb,
+            motor_stribeck_nm: self.stribeck,
+            stribeck_velocity_rad_s: self.stribeck_velocity,
+            rack_coulomb_n: self.rack_coulomb_n,
+            tire_force_n: self.tire_force_n,
+            tire_stiffness_n_per_mm: self.tire_stiffness_n_per_mm,
         }
-    }
-    fn step(&mut self, x: f64) -> f64 {
-        self.y = self.y.clamp(x - self.half, x + self.half);
-        self.y
     }
 }
 
-/// Elasto-plastic bristle: deflection follows the motion, clamped at `f_max / k`.
-#[derive(Debug, Clone, Copy)]
-struct Bristle {
-    k: f64,
-    z_max: f64,
-    z: f64,
-    x_last: f64,
-}
-
-impl Bristle {
-    fn new(f_max: f64, k_n_per_m: f64, x0: f64) -> Self {
-        let on = f_max > 0.0 && k_n_per_m > 0.0;
-        Bristle {
-            k: if on { k_n_per_m } else { 0.0 },
-            z_max: if on { f_max / k_n_per_m } else { 0.0 },
-            z: 0.0,
-            x_last: x0,
-        }
-    }
-    /// Force opposing the motion, N.
-    fn force(&mut self, x: f64) -> f64 {
-        if self.k == 0.0 {
-            return 0.0;
-        }
-        self.z = (self.z + x - self.x_last).clamp(-self.z_max, self.z_max);
-        self.x_last = x;
-        self.k * self.z
-    }
-}
-
-/// The paper's plant with two torque inputs added (motor shaft, ball screw), discretised
-/// exactly for the current-loop step like [`crate::plant::LinearPlant`].
-#[derive(Debug, Clone)]
-pub struct EffectPlant {
-    params: PlantParams,
-    ad: [[f64; 7]; 7],
-    /// Columns: voltage, torque at the motor, torque at the screw.
-    bd: [[f64; 3]; 7],
-    x: [f64; 7],
-    dt_s: f64,
-}
-
-impl EffectPlant {
-    pub fn new(params: PlantParams, dt_s: f64) -> Self {
-        let (a, b) = params.electromechanical_state_space();
-        let mut aug = SMatrix::<f64, 10, 10>::zeros();
-        aug.fixed_view_mut::<7, 7>(0, 0).copy_from(&(a * dt_s));
-        for i in 0..7 {
-            aug[(i, 7)] = b[i] * dt_s;
-        }
-        aug[(state::W_ROT, 8)] = dt_s / params.j_rot;
-        aug[(state::W_BS, 9)] = dt_s / params.j_bs_equivalent();
-        let e = aug.exp();
-        let mut ad = [[0.0; 7]; 7];
-        let mut bd = [[0.0; 3]; 7];
-        for i in 0..7 {
-            for j in 0..7 {
-                ad[i][j] = e[(i, j)];
-            }
-            for j in 0..3 {
-                bd[i][j] = e[(i, 7 + j)];
-            }
-        }
-        EffectPlant {
-            params,
-            ad,
-            bd,
-            x: [0.0; 7],
-            dt_s,
-        }
-    }
-
-    pub fn set_at_rest(&mut self, column_rad: f64) {
-        self.x = self.params.at_rest(column_rad);
-    }
-
-    pub fn step(&mut self, voltage_v: f64, motor_torque: f64, screw_torque: f64) {
-        let x = self.x;
-        for i in 0..7 {
-            let b = &self.bd[i];
-            let mut acc = b[0] * voltage_v + b[1] * motor_torque + b[2] * screw_torque;
-            for (a, xj) in self.ad[i].iter().zip(x.iter()) {
-                acc += a * xj;
-            }
-            self.x[i] = acc;
-        }
-    }
-
-    pub fn x(&self) -> &[f64; 7] {
-        &self.x
-    }
-    pub fn dt_s(&self) -> f64 {
-        self.dt_s
-    }
-    pub fn column_rad(&self) -> f64 {
-        self.x[state::THETA_BS] * self.params.screw_to_pinion()
-    }
-}
-
-/// Smooth-enough Coulomb(+Stribeck) torque opposing `w`: saturated-linear around zero with a
-/// slope that one explicit step of inertia `j` at step `dt` cannot overshoot (c dt / j <= 1/4).
-fn friction(fc: f64, fs: f64, vs: f64, w: f64, j: f64, dt: f64) -> f64 {
-    let level = fc + fs * (-(w / vs).powi(2)).exp();
-    if level <= 0.0 {
-        return 0.0;
-    }
-    let w_eps = 4.0 * level * dt / j;
-    -level * (w / w_eps).clamp(-1.0, 1.0)
-}
-
-/// The paper's actuator in paper mode with `effects`, from `rec.reference` (100 Hz, deg).
-/// The record's grid is the 100 Hz reference grid; angles are taken at the end of each 10 ms
-/// period, the current is averaged over it (the log's semantics, [`super::Record`]).
+/// The paper's actuator in paper mode with `effects`, from `rec.reference` (100 Hz, deg): the
+/// closed loop of `sim::run` (the firmware's cascade, Hall and encoder quantisation) around the
+/// effect plant, logged at 100 Hz. The record's grid is the 100 Hz reference grid, and the log
+/// has its semantics ([`super::Record`]): angles at the end of each 10 ms period, the current
+/// averaged over it. An unusable model gives an empty output (the caller's cost is then NaN).
 pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
     let p = m.plant;
-    let dt = 1.0 / CURRENT_LOOP_HZ as f64;
     let reference = delayed(&rec.reference, fx.delay_s, 1.0 / REFERENCE_HZ as f64);
-    let mut out = SimOut {
-        output: Vec::with_capacity(reference.len()),
-        effort: Vec::with_capacity(reference.len()),
-        motor: Vec::with_capacity(reference.len()),
+    let cfg = RunConfig {
+        plant: p,
+        gains: m.gains.to_epos(),
+        supply_v: if fx.supply_v > 0.0 {
+            fx.supply_v
+        } else {
+            m.supply_v
+        },
+        log_rate_hz: REFERENCE_HZ,
+        effects: fx.plant_effects(),
+        ..RunConfig::default()
     };
-    let Some(&first) = reference.first() else {
-        return out;
-    };
-    let gains = match m.gains.to_epos().to_si() {
-        Ok(g) => g,
-        Err(_) => return out,
-    };
-    let Some(gearing) = Gearing::new(p.belt_reduction as f32, p.tau_bs as f32, p.tau_p as f32)
-    else {
-        return out;
-    };
-    let mut cascade = Cascade::new(&gains, gearing);
-    cascade.set_winding(p.ra as f32, p.la as f32);
-    let supply = if fx.supply_v > 0.0 {
-        fx.supply_v
-    } else {
-        m.supply_v
-    };
-    cascade.set_voltage_limit(Volts(supply as f32));
-    let mut plant = EffectPlant::new(p, dt);
-    plant.set_at_rest(first.to_radians());
-    let x0 = plant.x();
-    cascade.reset(hall_from_motor(x0[state::THETA_ROT]));
-    let encoder = ColumnEncoder { zero_raw: 0 };
-    let mut play = Play::new(fx.backlash.to_radians(), plant.column_rad());
-    let rack0 = x0[state::THETA_BS] * p.tau_bs;
-    let mut bristle = Bristle::new(fx.tire_force_n, fx.tire_stiffness_n_per_mm * 1e3, rack0);
-    let vs = if fx.stribeck_velocity > 0.0 {
-        fx.stribeck_velocity
-    } else {
-        1.0
+    let Ok(run) = sim::run(&reference, &cfg) else {
+        return SimOut::default();
     };
     let per_motor = p.motor_per_pinion();
-    let j_screw = p.j_bs_equivalent();
-    let n_cur = (POSITION_TICKS_PER_REFERENCE * CURRENT_TICKS_PER_POSITION_TICK) as f64;
-    for &sample in &reference {
-        let _ = cascade.push_reference(SteeringDeg(sample as f32));
-        let mut i_acc = 0.0;
-        let mut col = plant.column_rad();
-        for _ in 0..POSITION_TICKS_PER_REFERENCE {
-            let x = plant.x();
-            let hall = hall_from_motor(x[state::THETA_ROT]);
-            cascade.position_step(hall);
-            for _ in 0..CURRENT_TICKS_PER_POSITION_TICK {
-                let x = plant.x();
-                let i_meas = x[state::CURRENT];
-                let v = cascade.current_step(Amps(i_meas as f32)).voltage.0 as f64;
-                let t_motor = friction(fx.coulomb, fx.stribeck, vs, x[state::W_ROT], p.j_rot, dt);
-                let rack = x[state::THETA_BS] * p.tau_bs;
-                let t_rack_friction = friction(
-                    fx.rack_coulomb_n * p.tau_bs,
-                    0.0,
-                    1.0,
-                    x[state::W_BS],
-                    j_screw,
-                    dt,
-                );
-                let t_screw = -bristle.force(rack) * p.tau_bs + t_rack_friction;
-                plant.step(v, t_motor, t_screw);
-                i_acc += plant.x()[state::CURRENT];
-            }
-            // The play follows the column at the position rate, as the encoder would see it.
-            col = play.step(plant.column_rad());
-        }
-        // The log's semantics: angles at the instant the period ends, the current's mean
-        // over the period.
-        let sw = encoder.angle(encoder.raw_from_angle(col));
-        let hall_end = hall_from_motor(plant.x()[state::THETA_ROT]);
-        out.output.push((sw.0 as f64).to_degrees());
-        out.effort.push(i_acc / n_cur);
-        out.motor
-            .push((motor_from_hall(hall_end).0 as f64 / per_motor).to_degrees());
+    let log = run.log;
+    SimOut {
+        output: log.sw_deg,
+        effort: log.current_a,
+        motor: log
+            .motor_rad
+            .iter()
+            .map(|m| (m / per_motor).to_degrees())
+            .collect(),
     }
-    out
 }
 
 /// Replays the motor -> steering segment (belt, screw, rack, column, encoder) from a motor
@@ -314,12 +147,9 @@ pub fn replay_downstream(m: &PaperModel, rec: &Record, fx: &Effects) -> Option<V
     let per_motor = p.motor_per_pinion();
     let rad = |deg: f64| deg.to_radians() * per_motor;
     let first = *motor.first()?;
-    let mut plant = EffectPlant::new(p, dt);
+    let mut plant = EffectPlant::new(p, fx.plant_effects(), dt).ok()?;
     plant.set_at_rest(first.to_radians());
     let encoder = ColumnEncoder { zero_raw: 0 };
-    let mut play = Play::new(fx.backlash.to_radians(), plant.column_rad());
-    let rack0 = plant.x()[state::THETA_BS] * p.tau_bs;
-    let mut bristle = Bristle::new(fx.tire_force_n, fx.tire_stiffness_n_per_mm * 1e3, rack0);
     let wn = std::f64::consts::TAU * 300.0;
     let substeps = ((rec.dt / dt).round() as usize).max(1);
     let mut out = Vec::with_capacity(motor.len());
@@ -328,19 +158,15 @@ pub fn replay_downstream(m: &PaperModel, rec: &Record, fx: &Effects) -> Option<V
         let here = rad(motor[k.saturating_sub(1)]);
         let next = rad(motor[k]);
         let w_ref = (next - here) / rec.dt;
-        let mut col = plant.column_rad();
         for j in 0..substeps {
-            let x = *plant.x();
+            let x = plant.state();
             let theta_ref = here + w_ref * ((j + 1) as f64 * dt);
             let torque = p.j_rot
                 * (wn * wn * (theta_ref - x[state::THETA_ROT])
                     + 2.0 * wn * (w_ref - x[state::W_ROT]));
-            let rack = x[state::THETA_BS] * p.tau_bs;
-            let t_screw = -bristle.force(rack) * p.tau_bs;
-            plant.step(p.ke * x[state::W_ROT], torque, t_screw);
-            col = play.step(plant.column_rad());
+            plant.step_driven(p.ke * x[state::W_ROT], torque);
         }
-        out.push((encoder.angle(encoder.raw_from_angle(col)).0 as f64).to_degrees());
+        out.push((encoder.angle(encoder.raw_from_angle(plant.column_rad())).0 as f64).to_degrees());
     }
     Some(out)
 }
