@@ -681,9 +681,12 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
         let bode = bode_plot(sweep, &rep, &small_rep, analytic.as_ref().map(|a| &a.0));
         save_svg(dir, "sweep_bode.svg", |p| bode.save(p))?;
         let time = time_plot(
-            &format!(
-                "Sine sweep 0-{} Hz, {} deg at the wheel",
-                sweep.f_end_hz, sweep.amplitude_deg
+            &plot_title(
+                common,
+                &format!(
+                    "Sine sweep 0-{} Hz, {} deg at the wheel",
+                    sweep.f_end_hz, sweep.amplitude_deg
+                ),
             ),
             &run,
             common.supply_v,
@@ -748,6 +751,19 @@ fn bode_plot(
 /// The Bode plot's name for the linear model's curve (`linear_model.rs`).
 const ANALYTIC_LABEL: &str = "analytic (linear model)";
 
+/// A figure's title with the controller, and the plant's added effects if any.
+fn plot_title(common: &Common, what: &str) -> String {
+    let mode = match common.controller {
+        Controller::Paper => "paper mode",
+        Controller::Ecu => "ECU mode",
+    };
+    if common.plant_effects.is_none() {
+        format!("{what} ({mode})")
+    } else {
+        format!("{what} ({mode}, plant with {})", common.plant_effects)
+    }
+}
+
 fn time_plot(title: &str, run: &Run, supply_v: f64) -> TimePlot {
     let log = &run.log;
     let empty: Vec<f64> = Vec::new();
@@ -811,7 +827,11 @@ fn track_cmd(reference: &[f64], name: &str, common: &Common) -> Result<()> {
     }
     save_log(&run.log, common)?;
     if let Some(dir) = &common.plots {
-        let plot = time_plot(&format!("Track run: {name}"), &run, common.supply_v);
+        let plot = time_plot(
+            &plot_title(common, &format!("Track run: {name}")),
+            &run,
+            common.supply_v,
+        );
         save_svg(dir, "track_time.svg", |p| plot.save(p))?;
     }
     Ok(())
@@ -842,7 +862,7 @@ fn step_cmd(amplitude_deg: f64, duration_s: f64, common: &Common) -> Result<()> 
     save_log(&run.log, common)?;
     if let Some(dir) = &common.plots {
         let plot = time_plot(
-            &format!("Step of {amplitude_deg} deg at the wheel"),
+            &plot_title(common, &format!("Step of {amplitude_deg} deg at the wheel")),
             &run,
             common.supply_v,
         );

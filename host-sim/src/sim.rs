@@ -163,7 +163,9 @@ pub trait Tap {
     fn current(&mut self, measured: Amps, out: &CurrentOutput);
 }
 
-struct NoTap;
+/// A tap that looks at nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoTap;
 
 impl Tap for NoTap {
     fn reset(&mut self, _: i32) {}

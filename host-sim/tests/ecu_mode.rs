@@ -3,11 +3,14 @@
 //! measured beside it on the same plant. The targets are issue 14's.
 #![allow(clippy::unwrap_used)] // test helpers: a failed unwrap is a failed test
 
+use host_sim::analysis::tracking_error;
+use host_sim::effect_plant::PlantEffects;
+use host_sim::gap::generator::{RkPlant, Truth};
 use host_sim::linear_model::{LinearModel, PhysicalLimit};
 use host_sim::plant::PlantParams;
 use host_sim::report;
 use host_sim::scenario::{self, Sweep};
-use host_sim::sim::{Controller, RunConfig};
+use host_sim::sim::{self, Controller, NoTap, RunConfig};
 use steering_ecu::ecu_mode::EcuTuning;
 use steering_ecu::gains::EposGains;
 
@@ -61,12 +64,55 @@ fn ecu_mode_tracks_the_builtin_profile_within_1_3_deg_rmse() {
     assert_eq!(ecu.summary.rejected_references, 0);
 }
 
+/// Issue 14's plant with effects: 1.5 deg of play in the belt/nut (at the wheel) and 200 N of
+/// Coulomb friction at the rack.
+const PLAY_AND_FRICTION: &str = "backlash_deg=1.5,coulomb_n=200";
+
+#[test]
+fn ecu_mode_tracks_within_1_5_deg_with_belt_play_and_rack_friction() {
+    let track = scenario::builtin_track();
+    let effects = PlantEffects::parse(PLAY_AND_FRICTION).unwrap();
+    let on_effects = |controller| RunConfig {
+        effects,
+        ..with(controller)
+    };
+    let (ecu, _) = report::track(&track, &on_effects(Controller::Ecu)).unwrap();
+    let (paper, _) = report::track(&track, &on_effects(Controller::Paper)).unwrap();
+    println!(
+        "track RMSE with {PLAY_AND_FRICTION}: ECU mode {:.2} deg, paper mode {:.2} deg",
+        ecu.rmse_deg, paper.rmse_deg
+    );
+    assert!(ecu.rmse_deg <= 1.5, "{} deg", ecu.rmse_deg);
+    assert!(ecu.max_current_a <= 20.0 && ecu.max_voltage_v <= 24.0);
+
+    // A second plant that could disagree: the selftest's independent world (RK4 ODE, play
+    // as a belt spring with a dead band, tanh friction at the rack), same sizes, same loop.
+    let truth = Truth {
+        plant: PlantParams::PAPER,
+        rack_friction_n: 200.0,
+        belt_play_deg: 1.5,
+        dahl_force_n: 0.0,
+        dahl_stiffness_n_per_mm: 0.0,
+        reference_delay_s: 0.0,
+    };
+    let cfg = with(Controller::Ecu);
+    let run = sim::run_on(&mut RkPlant::new(truth), &track, &cfg, &mut NoTap).unwrap();
+    let rk = tracking_error(&run.log.ref_sw_deg, &run.log.sw_deg).rmse;
+    println!("same on the RK4 world: ECU mode {rk:.2} deg");
+    assert!(
+        (rk - ecu.rmse_deg).abs() <= 0.15 * ecu.rmse_deg,
+        "RK4 world {rk} deg vs effect plant {} deg",
+        ecu.rmse_deg
+    );
+}
+
 /// Current set-point over the last second of 2 s holding a reference that leaves the motor on
 /// a Hall edge (0.13 deg: 2.6 Hall counts), RMS and peak, A.
-fn holding_current(controller: Controller) -> (f64, f64) {
+fn holding_current(controller: Controller, effects: PlantEffects) -> (f64, f64) {
     let reference = scenario::step(0.13, 0.1, 2.0);
     let cfg = RunConfig {
         log_rate_hz: 2000,
+        effects,
         ..with(controller)
     };
     let (_, run) = report::step(&reference, 0.13, &cfg).unwrap();
@@ -86,13 +132,24 @@ fn holding_current(controller: Controller) -> (f64, f64) {
 
 #[test]
 fn holding_still_the_current_set_point_stays_quiet_in_ecu_mode() {
-    let (rms, peak) = holding_current(Controller::Ecu);
-    let (paper_rms, paper_peak) = holding_current(Controller::Paper);
+    let (rms, peak) = holding_current(Controller::Ecu, PlantEffects::NONE);
+    let (paper_rms, paper_peak) = holding_current(Controller::Paper, PlantEffects::NONE);
     println!(
         "holding still: ECU mode {rms:.2} A RMS (peak {peak:.2} A), paper mode {paper_rms:.2} A \
          RMS (peak {paper_peak:.2} A)"
     );
     assert!(rms <= 1.0, "{rms} A RMS");
+    // With play in the belt and friction at the rack the column integral must not hunt
+    // across the gap (a limit cycle would show as a current swinging towards the limit).
+    let effects = PlantEffects::parse(PLAY_AND_FRICTION).unwrap();
+    let (fx_rms, fx_peak) = holding_current(Controller::Ecu, effects);
+    println!(
+        "holding still with {PLAY_AND_FRICTION}: ECU mode {fx_rms:.2} A RMS (peak {fx_peak:.2} A)"
+    );
+    assert!(
+        fx_rms <= 1.0 && fx_peak < 20.0,
+        "{fx_rms} A RMS, peak {fx_peak} A"
+    );
     assert!(peak < 19.0, "{peak} A: at the limit");
     // Paper mode's D term on Hall steps is what this fixes: it does reach the limit.
     assert!(paper_peak >= 19.9, "{paper_peak} A");

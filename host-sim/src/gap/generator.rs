@@ -18,7 +18,7 @@
 
 use super::selftest::Rng;
 use super::{CurrentSamples, Record};
-use crate::plant::PlantParams;
+use crate::plant::{Actuator, PlantParams};
 use crate::scenario::Sweep;
 use steering_ecu::gains::EposGains;
 use steering_ecu::gearing::Gearing;
@@ -178,6 +178,7 @@ type State = [f64; 8];
 
 /// The ODE of the paper's plant (eqs. 1-8 with the printing errors corrected, see
 /// `plant-and-control.md`), written out term by term with the effects in place.
+#[derive(Debug, Clone)]
 struct Ode {
     p: PlantParams,
     j_bs: f64,
@@ -253,6 +254,57 @@ impl Ode {
         if self.truth.dahl_force_n > 0.0 {
             x[7] = x[7].clamp(-self.truth.dahl_force_n, self.truth.dahl_force_n);
         }
+    }
+}
+
+/// The world's plant as an [`Actuator`], so `sim::run_on` can close any of the firmware's
+/// loops around it: a second plant, integrated and written independently of
+/// `effect_plant.rs`, to check figures measured on that one (issue 14's track with play and
+/// friction).
+#[derive(Debug, Clone)]
+pub struct RkPlant {
+    ode: Ode,
+    x: State,
+}
+
+impl RkPlant {
+    /// The world of `truth` (its plant and its effects; the reference delay is the loop's
+    /// and is not applied here).
+    pub fn new(truth: Truth) -> RkPlant {
+        RkPlant {
+            ode: Ode::new(truth),
+            x: [0.0; 8],
+        }
+    }
+}
+
+impl Actuator for RkPlant {
+    fn step(&mut self, voltage_v: f64) {
+        self.ode
+            .rk4(&mut self.x, voltage_v, 1.0 / CURRENT_LOOP_HZ as f64);
+    }
+    fn current_a(&self) -> f64 {
+        self.x[0]
+    }
+    fn motor_rad(&self) -> f64 {
+        self.x[1]
+    }
+    fn column_rad(&self) -> f64 {
+        self.x[3] * self.ode.g
+    }
+    fn set_at_rest(&mut self, column_rad: f64) {
+        let p = &self.ode.p;
+        let th_bs = column_rad / p.screw_to_pinion();
+        self.x = [
+            0.0,
+            th_bs * p.belt_reduction,
+            0.0,
+            th_bs,
+            0.0,
+            column_rad,
+            0.0,
+            0.0,
+        ];
     }
 }
 
