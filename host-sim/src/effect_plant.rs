@@ -34,6 +34,10 @@ pub struct PlantEffects {
     pub tire_force_n: f64,
     /// Tyre scrub: the bristle's stiffness at the rack, N/mm.
     pub tire_stiffness_n_per_mm: f64,
+    /// The tyre's law: an elasto-plastic bristle (linear up to its largest force, then
+    /// sliding), or Dahl's (the force approaches its largest value smoothly,
+    /// dF/dx = k (1 - F/F_max sgn v)).
+    pub tire_dahl: bool,
 }
 
 /// Why a `--plant-effects` list was refused.
@@ -89,10 +93,11 @@ impl PlantEffects {
         rack_coulomb_n: 0.0,
         tire_force_n: 0.0,
         tire_stiffness_n_per_mm: 0.0,
+        tire_dahl: false,
     };
 
     /// The keys of `--plant-effects`, with what each sets.
-    pub const KEYS: [(&'static str, &'static str); 8] = [
+    pub const KEYS: [(&'static str, &'static str); 9] = [
         (
             "backlash_deg",
             "play in the belt/nut, full width, deg at the wheel",
@@ -115,6 +120,10 @@ impl PlantEffects {
         (
             "tire_n_per_mm",
             "tyre scrub: bristle's stiffness at the rack, N/mm",
+        ),
+        (
+            "tire_dahl",
+            "1: the tyre follows Dahl's law, not the elasto-plastic one",
         ),
     ];
 
@@ -159,6 +168,10 @@ impl PlantEffects {
                 "stribeck_rad_s" => &mut fx.stribeck_velocity_rad_s,
                 "tire_n" => &mut fx.tire_force_n,
                 "tire_n_per_mm" => &mut fx.tire_stiffness_n_per_mm,
+                "tire_dahl" => {
+                    fx.tire_dahl = v != 0.0;
+                    continue;
+                }
                 other => return Err(EffectsError::UnknownKey(other.to_string())),
             };
             *slot = v;
@@ -190,11 +203,14 @@ impl std::fmt::Display for PlantEffects {
             ("tire_n", self.tire_force_n),
             ("tire_n_per_mm", self.tire_stiffness_n_per_mm),
         ];
-        let present: Vec<String> = items
+        let mut present: Vec<String> = items
             .iter()
             .filter(|(_, v)| *v != 0.0)
             .map(|(k, v)| format!("{k}={v}"))
             .collect();
+        if self.tire_dahl {
+            present.push("tire_dahl=1".into());
+        }
         if present.is_empty() {
             f.write_str("none")
         } else {
@@ -223,13 +239,15 @@ impl Play {
     }
 }
 
-/// Elasto-plastic bristle: deflection follows the motion, clamped at `f_max / k`.
+/// Tyre bristle at the rack: elasto-plastic (deflection follows the motion, clamped at
+/// `f_max / k`) or Dahl's law (`dF = k dx (1 - F/f_max sgn dx)`, stepped per motion increment).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Bristle {
     k: f64,
     z_max: f64,
     z: f64,
     x_last: f64,
+    dahl: bool,
 }
 
 impl Bristle {
@@ -240,15 +258,31 @@ impl Bristle {
             z_max: if on { f_max / k_n_per_m } else { 0.0 },
             z: 0.0,
             x_last: x0,
+            dahl: false,
         }
+    }
+
+    /// The same bristle under Dahl's law.
+    pub(crate) fn dahl(mut self) -> Self {
+        self.dahl = true;
+        self
     }
     /// Force opposing the motion, N.
     pub(crate) fn force(&mut self, x: f64) -> f64 {
         if self.k == 0.0 {
             return 0.0;
         }
-        self.z = (self.z + x - self.x_last).clamp(-self.z_max, self.z_max);
+        let dx = x - self.x_last;
         self.x_last = x;
+        if self.dahl {
+            // z = F / k: dz = dx (1 - z/z_max sgn dx); exact for the step's dx when the
+            // motion does not reverse within it.
+            let s = dx.signum();
+            let target = s * self.z_max;
+            self.z = target + (self.z - target) * (-dx.abs() / self.z_max).exp();
+        } else {
+            self.z = (self.z + dx).clamp(-self.z_max, self.z_max);
+        }
         self.k * self.z
     }
 }
@@ -256,7 +290,15 @@ impl Bristle {
 /// Coulomb(+Stribeck) torque opposing `w`: saturated-linear around zero with a slope that one
 /// explicit step of inertia `j` at step `dt` cannot overshoot (c dt / j <= 1/4).
 fn friction(fc: f64, fs: f64, vs: f64, w: f64, j: f64, dt: f64) -> f64 {
-    let level = fc + fs * (-(w / vs).powi(2)).exp();
+    // Absent friction costs nothing: the simulation runs this twice per 50 us step.
+    if fc == 0.0 && fs == 0.0 {
+        return 0.0;
+    }
+    let level = if fs == 0.0 {
+        fc
+    } else {
+        fc + fs * (-(w / vs).powi(2)).exp()
+    };
     if level <= 0.0 {
         return 0.0;
     }
@@ -440,6 +482,9 @@ impl Actuator for EffectPlant {
             self.effects.tire_stiffness_n_per_mm * 1e3,
             rack,
         );
+        if self.effects.tire_dahl {
+            self.tire = self.tire.dahl();
+        }
     }
 }
 
@@ -534,6 +579,32 @@ mod tests {
         let free = drift(PlantEffects::NONE);
         assert!(free > 1.0, "free pinion moved only {free} deg");
         assert!(held < 0.05 * free, "held {held} deg vs free {free} deg");
+    }
+
+    #[test]
+    fn dahl_tyre_approaches_its_force_smoothly_and_the_bristle_has_a_corner() {
+        // 1000 N, 500 N/mm: z_max = 2 mm. After 1 mm of travel from rest the elasto-plastic
+        // bristle is linear (500 N); Dahl's is below it (1000 (1 - e^-0.5) = 393 N); after
+        // 10 mm both are at the largest force, within 1 %.
+        let travel = |dahl: bool, mm: f64| {
+            let mut b = Bristle::new(1000.0, 500e3, 0.0);
+            if dahl {
+                b = b.dahl();
+            }
+            let mut f = 0.0;
+            for k in 1..=1000 {
+                f = b.force(mm * 1e-3 * k as f64 / 1000.0);
+            }
+            f
+        };
+        assert!((travel(false, 1.0) - 500.0).abs() < 1e-6);
+        assert!(
+            (travel(true, 1.0) - 393.5).abs() < 0.5,
+            "{}",
+            travel(true, 1.0)
+        );
+        assert!((travel(true, 10.0) - 1000.0).abs() < 10.0);
+        assert!((travel(false, 10.0) - 1000.0).abs() < 1e-6);
     }
 
     #[test]

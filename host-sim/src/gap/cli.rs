@@ -97,8 +97,8 @@ fn options(args: &GapArgs, rig: &Rig) -> Result<Options> {
             .map(|n| {
                 EffectKind::from_name(n.trim()).ok_or_else(|| {
                     format!(
-                        "--effects: unknown effect {n:?} (backlash, coulomb_friction, coulomb_friction_rack, delay, \
-                         tire_ground, supply_sag)"
+                        "--effects: unknown effect {n:?} (backlash, backlash_belt, coulomb_friction, coulomb_friction_rack, delay, \
+                         tire_ground, tire_ground_dahl, supply_sag)"
                     )
                 })
             })

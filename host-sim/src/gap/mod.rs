@@ -194,16 +194,26 @@ pub enum EffectKind {
     /// Coulomb friction at the rack (the `coulomb_friction` family's second place): acting
     /// through the soft belt it makes output hysteresis that friction at the motor cannot.
     RackFriction,
+    /// Play in the belt/nut (the `backlash` family's second place): the motor turns through
+    /// the gap without pulling the nut, so the motor angle and the column part on every
+    /// reversal, which play between the pinion and the encoder cannot do.
+    BeltPlay,
+    /// The tyre under Dahl's law (the `tire_ground` family's second form): the force
+    /// approaches its largest value smoothly, where the elasto-plastic bristle has a corner.
+    TireDahl,
 }
 
 impl EffectKind {
-    /// The paper rig's candidates: the four core effects and friction at the rack.
-    pub const PAPER: [EffectKind; 5] = [
+    /// The paper rig's candidates: the four core effects, friction at the rack and play in
+    /// the belt/nut.
+    pub const PAPER: [EffectKind; 7] = [
         EffectKind::Backlash,
+        EffectKind::BeltPlay,
         EffectKind::CoulombFriction,
         EffectKind::RackFriction,
         EffectKind::Delay,
         EffectKind::TireGround,
+        EffectKind::TireDahl,
     ];
 
     /// The four the issue asks for, in the order they are reported.
@@ -222,6 +232,8 @@ impl EffectKind {
             EffectKind::TireGround => "tire_ground",
             EffectKind::SupplySag => "supply_sag",
             EffectKind::RackFriction => "coulomb_friction_rack",
+            EffectKind::BeltPlay => "backlash_belt",
+            EffectKind::TireDahl => "tire_ground_dahl",
         }
     }
 
@@ -230,6 +242,8 @@ impl EffectKind {
     pub fn family(self) -> &'static str {
         match self {
             EffectKind::RackFriction => "coulomb_friction",
+            EffectKind::BeltPlay => "backlash",
+            EffectKind::TireDahl => "tire_ground",
             k => k.name(),
         }
     }
@@ -242,6 +256,8 @@ impl EffectKind {
             EffectKind::TireGround,
             EffectKind::SupplySag,
             EffectKind::RackFriction,
+            EffectKind::BeltPlay,
+            EffectKind::TireDahl,
         ]
         .into_iter()
         .find(|k| k.name() == name)
@@ -289,7 +305,7 @@ impl EffectKind {
                 0.0,
                 if paper { 2.0 } else { 0.5 },
             )],
-            (EffectKind::TireGround, RigModel::Paper(_)) => vec![
+            (EffectKind::TireGround | EffectKind::TireDahl, RigModel::Paper(_)) => vec![
                 spec("force_n", 0.0, 3000.0, 0.0, 60.0),
                 spec("stiffness_n_per_mm", 50.0, 2000.0, 600.0, 50.0),
             ],
@@ -305,6 +321,10 @@ impl EffectKind {
                 vec![spec("force_n", 0.0, 2000.0, 0.0, 40.0)]
             }
             (EffectKind::RackFriction, _) => vec![],
+            (EffectKind::BeltPlay, RigModel::Paper(_)) => {
+                vec![spec("width_deg", 0.0, 4.0, 0.0, 0.1)]
+            }
+            (EffectKind::BeltPlay | EffectKind::TireDahl, _) => vec![],
         }
     }
 
@@ -324,15 +344,18 @@ impl EffectKind {
             (EffectKind::Delay, RigModel::Paper(_)) => 5.0,
             // 150 N at the rack is 0.024 Nm at the motor through tau_bs and the belt (Table
             // 2): the friction minimum's size.
-            (EffectKind::TireGround, RigModel::Paper(_)) => 150.0,
+            (EffectKind::TireGround | EffectKind::TireDahl, RigModel::Paper(_)) => 150.0,
             (EffectKind::SupplySag, _) => 0.0,
             // 200 N at the rack is 0.03 Nm at the motor through tau_bs and the belt (Table
             // 2), the motor friction's minimum.
             (EffectKind::RackFriction, _) => 200.0,
+            // As the column play: 0.3 deg at the wheel is 26 deg of motor, 6 Hall counts, so
+            // the motor sees it plainly; the column encoder's three counts are the limit.
+            (EffectKind::BeltPlay, _) => 0.3,
             (EffectKind::Backlash, RigModel::Emps(_)) => 2e-5,
             (EffectKind::CoulombFriction, RigModel::Emps(_)) => 2.0,
             (EffectKind::Delay, RigModel::Emps(m)) => 0.2e3 * m.ts_s,
-            (EffectKind::TireGround, RigModel::Emps(_)) => 2.0,
+            (EffectKind::TireGround | EffectKind::TireDahl, RigModel::Emps(_)) => 2.0,
         }
     }
 
@@ -354,6 +377,12 @@ impl EffectKind {
             }
             EffectKind::SupplySag => fx.supply_v = get(0),
             EffectKind::RackFriction => fx.rack_coulomb_n = get(0),
+            EffectKind::BeltPlay => fx.belt_play = get(0),
+            EffectKind::TireDahl => {
+                fx.tire_force_n = get(0);
+                fx.tire_stiffness_n_per_mm = get(1);
+                fx.tire_dahl = true;
+            }
         }
     }
 }

@@ -42,6 +42,8 @@ pub struct Effects {
     pub rack_coulomb_n: f64,
     /// Play in the belt/nut, full width, deg at the wheel (paper rig only).
     pub belt_play: f64,
+    /// The tyre follows Dahl's law instead of the elasto-plastic bristle (paper rig only).
+    pub tire_dahl: bool,
 }
 
 impl Effects {
@@ -93,6 +95,7 @@ impl Effects {
             rack_coulomb_n: self.rack_coulomb_n,
             tire_force_n: self.tire_force_n,
             tire_stiffness_n_per_mm: self.tire_stiffness_n_per_mm,
+            tire_dahl: self.tire_dahl,
         }
     }
 }

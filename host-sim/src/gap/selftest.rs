@@ -77,6 +77,12 @@ fn draw_effect(kind: EffectKind, rng: &mut Rng, fx: &mut Effects) {
         }
         EffectKind::SupplySag => fx.supply_v = rng.range(14.0, 20.0),
         EffectKind::RackFriction => fx.rack_coulomb_n = rng.range(400.0, 1500.0),
+        EffectKind::BeltPlay => fx.belt_play = rng.range(0.6, 2.5),
+        EffectKind::TireDahl => {
+            fx.tire_force_n = rng.range(300.0, 1500.0);
+            fx.tire_stiffness_n_per_mm = rng.range(200.0, 1000.0);
+            fx.tire_dahl = true;
+        }
     }
 }
 
