@@ -42,6 +42,18 @@ pub fn identify(
     iterations: usize,
     progress: bool,
 ) -> Result<Identified, String> {
+    identify_with(rig, rec, iterations, progress, &Effects::nominal())
+}
+
+/// Fit Table 4 with effects `fx` held in the plant: what the car's parameters explain once
+/// an effect is in place (the diagnosis's test of a second effect).
+pub fn identify_with(
+    rig: &Rig,
+    rec: &Record,
+    iterations: usize,
+    progress: bool,
+    fx: &Effects,
+) -> Result<Identified, String> {
     let RigModel::Paper(model) = &rig.model else {
         return Err(format!(
             "identify needs a paper-type rig (Table 4); rig {} is not one",
@@ -89,10 +101,9 @@ pub fn identify(
     let bar = Progress::new(1 + iterations * (specs.len() + 2), progress);
     let residual = |p: &[f64]| -> Vec<f64> {
         let r = with(p);
-        scorer.residual(rec, &simulate(&r, rec, &Effects::nominal()))
+        scorer.residual(rec, &simulate(&r, rec, fx))
     };
-    let fx = Effects::nominal();
-    let before = scorer.fit(rec, &simulate(rig, rec, &fx));
+    let before = scorer.fit(rec, &simulate(rig, rec, fx));
     let res = levenberg_marquardt(
         &specs,
         FitOptions {
@@ -104,7 +115,7 @@ pub fn identify(
         &|| bar.tick(),
     );
     bar.finish();
-    let after = scorer.fit(rec, &simulate(&with(&res.params), rec, &fx));
+    let after = scorer.fit(rec, &simulate(&with(&res.params), rec, fx));
     Ok(Identified {
         params: names
             .iter()
