@@ -1,6 +1,7 @@
 //! The nominal models of a rig with the candidate effects added, simulated in closed loop from
-//! a log's reference: the paper's actuator under the firmware's own cascade (paper mode), and
-//! the EMPS axis under its P-PD controller.
+//! a log's reference: the paper's actuator under the firmware's own cascade (paper mode), the
+//! EMPS axis under its P-PD controller, and the BAM XL330 servo pendulum under its firmware's
+//! P controller.
 //!
 //! Each effect is zero-sized by default (`Effects::default()` is the nominal model). The
 //! nonlinear effects are written so that they stay stable at the loop rates: Coulomb friction
@@ -9,7 +10,7 @@
 //! is a play operator on the measured angle, and the delay shifts the reference.
 
 use super::Record;
-use super::rig::{EmpsModel, PaperModel};
+use super::rig::{BamModel, EmpsModel, PaperModel};
 use crate::effect_plant::{Bristle, EffectPlant, PlantEffects, Play};
 use crate::plant::{Actuator, state};
 use crate::sim::{self, RunConfig};
@@ -243,6 +244,88 @@ pub fn simulate_emps(m: &EmpsModel, rec: &Record, fx: &Effects) -> SimOut {
             } else {
                 q += 0.5 * (v + v_new) * h;
                 v = v_new;
+            }
+        }
+    }
+    out
+}
+
+/// Standard gravity, m/s^2.
+const GRAVITY: f64 = 9.81;
+
+/// The BAM XL330 pendulum under its firmware P controller, on the record's uniform grid
+/// (`Rig::bam`; model as in `host-sim/data/bam-xl330/README.md`). At every integration step
+/// the firmware reads its encoder (4096 counts/rev) and sets
+/// `duty = sat(error_gain kp (goal - position))`; the winding sees `duty vin`, and at the
+/// output shaft `J w' = kt (duty vin - kt w) / R - Kv w - m g l sin(theta) - friction`, with
+/// `J` the armature plus the point mass. While the drive is off (`supply_v` 0) the bridge is
+/// open: no motor torque and no back-EMF braking, the pendulum falls freely against friction
+/// alone. Each step logs the encoder reading (through the play of `fx.backlash`) and the duty
+/// at its start, as the servo's registers are read.
+pub fn simulate_bam(m: &BamModel, rec: &Record, fx: &Effects) -> SimOut {
+    let n = rec.reference.len();
+    let mut out = SimOut {
+        output: Vec::with_capacity(n),
+        effort: Vec::with_capacity(n),
+        motor: Vec::new(),
+    };
+    if n == 0 || m.r_ohm <= 0.0 {
+        return out;
+    }
+    let reference = delayed(&rec.reference, fx.delay_s, m.ts_s);
+    let sub = m.substeps.max(1);
+    let h = m.ts_s / sub as f64;
+    let kv = if fx.viscous_override.is_finite() {
+        fx.viscous_override
+    } else {
+        m.viscous_nm_s_per_rad
+    };
+    let fc = fx.coulomb.max(0.0);
+    let fs = fx.stribeck.max(0.0);
+    let ws = if fx.stribeck_velocity > 0.0 {
+        fx.stribeck_velocity
+    } else {
+        1.0
+    };
+    let inertia = m.armature_kg_m2 + m.mass_kg * m.length_m * m.length_m;
+    let weight = m.mass_kg * GRAVITY * m.length_m;
+    let quantum = std::f64::consts::TAU / m.encoder_counts.max(1.0);
+    let encoder = |theta: f64| (theta / quantum).round() * quantum;
+    // The firmware's duty from what its encoder reads through the play.
+    let duty = |goal: f64, read: f64| (m.error_gain * m.kp * (goal - read)).clamp(-1.0, 1.0);
+    // Start at the first measured position, at rest.
+    let mut theta = rec.output.first().copied().unwrap_or(reference[0]);
+    let mut w = 0.0;
+    let mut play = Play::new(fx.backlash, theta);
+    for k in 0..n {
+        let vin = rec.supply_v.as_ref().map_or(0.0, |s| s[k]);
+        let on = vin > 0.0;
+        let read = encoder(play.step(theta));
+        out.output.push(read);
+        out.effort
+            .push(if on { duty(reference[k], read) } else { 0.0 });
+        for _ in 0..sub {
+            let read = encoder(play.step(theta));
+            let motor = if on {
+                m.kt * (duty(reference[k], read) * vin - m.kt * w) / m.r_ohm
+            } else {
+                0.0
+            };
+            let free = motor - kv * w - weight * theta.sin();
+            let level = fc + fs * (-(w / ws).powi(2)).exp();
+            // Stick-aware Coulomb: at rest, friction holds whatever it can.
+            if w == 0.0 && free.abs() <= level {
+                continue;
+            }
+            let dir = if w != 0.0 { w.signum() } else { free.signum() };
+            let w_new = w + (free - level * dir) / inertia * h;
+            if level > 0.0 && w != 0.0 && w_new.signum() != w.signum() {
+                // Crossed zero velocity within the step: stop there.
+                theta += w * h * 0.5;
+                w = 0.0;
+            } else {
+                theta += 0.5 * (w + w_new) * h;
+                w = w_new;
             }
         }
     }
