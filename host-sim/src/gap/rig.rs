@@ -519,8 +519,8 @@ fn bam_record(m: &BamModel, name: &str, c: &BamColumns) -> Result<Record, RigErr
                 path: name.to_string(),
                 message: format!(
                     "the PWM follows a firmware gain of about kp = {shown:.0}, not the rig's \
-                     kp = {}: use a rig with that gain (`Rig::bam_at_kp`, or `kp` in a rig \
-                     file)",
+                     kp = {}: give a rig file with that `kp` (a copy of \
+                     host-sim/rigs/bam.json)",
                     m.kp
                 ),
             });

@@ -1,0 +1,222 @@
+//! The BAM XL330 servo pendulum (real data, `host-sim/data/bam-xl330`, in the repository so
+//! that a clone alone passes): fitted on one trajectory, checked on another at the same firmware
+//! gain, the verdict is Coulomb friction at two gains and the validation log's position error
+//! falls by at least a quarter; the torque-off free fall stops where the log stops only with
+//! that friction; and the rig refuses a log it cannot read rightly.
+
+use host_sim::gap::model::Effects;
+use host_sim::gap::rig::{Rig, RigModel};
+use host_sim::gap::{EffectKind, Options, Record, Scorer, diagnose, simulate};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("data/bam-xl330")
+        .join(name)
+}
+
+/// RMS of the measured position from the scorer's skip on, rad.
+fn rms_position(rig: &Rig, rec: &Record) -> f64 {
+    let s = Scorer::new(rig, rec).skip();
+    let y = &rec.output[s..];
+    (y.iter().map(|v| v * v).sum::<f64>() / y.len() as f64).sqrt()
+}
+
+/// Diagnoses `train` and checks the verdict and the validation error on `validate`.
+fn friction_named_and_validation_error_falls(kp: f64, train: &str, validate: &str) {
+    let rig = Rig::bam_at_kp(kp);
+    let rec = rig.load_record(&data(train)).expect(train);
+    let val = rig.load_record(&data(validate)).expect(validate);
+    let opts = Options {
+        effects: EffectKind::for_rig(&rig),
+        threads: 2,
+        ..Options::default()
+    };
+    let d = diagnose(&rig, &rec, Some(&val), &opts);
+    println!("{}", d.summary());
+    assert_eq!(
+        d.verdict.effects,
+        vec!["coulomb_friction".to_string()],
+        "kp {kp}, {train}"
+    );
+    let before = d.baseline_validation.expect("validation fit");
+    let after = d.verdict.fit_validation.expect("validation fit");
+    let y = rms_position(&rig, &val);
+    println!(
+        "kp {kp} {train} -> {validate}: position RMS error {:.4} -> {:.4} rad ({:.1} -> {:.1} % \
+         of the position's RMS {y:.4} rad); duty error {:.1} -> {:.1} %",
+        before.rms_output,
+        after.rms_output,
+        100.0 * before.rms_output / y,
+        100.0 * after.rms_output / y,
+        before.effort_rel_error_pct,
+        after.effort_rel_error_pct
+    );
+    assert!(
+        after.rms_output <= 0.75 * before.rms_output,
+        "validation position error {:.4} -> {:.4} rad: less than a quarter off",
+        before.rms_output,
+        after.rms_output
+    );
+    assert!(after.effort_rel_error_pct < before.effort_rel_error_pct);
+    // Friction above BAM's own Coulomb term (M1, 0.0128 N m) and inside the fit's bounds.
+    let tc = d.ranking[0].params["torque_nm"];
+    assert!((0.0128..0.19).contains(&tc), "Coulomb {tc} N m");
+}
+
+#[test]
+fn bam_verdict_is_friction_at_kp400_and_validation_position_error_falls() {
+    let rig = Rig::load(&PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("rigs/bam.json"))
+        .expect("rigs/bam.json");
+    assert_eq!(
+        rig,
+        Rig::bam(),
+        "rigs/bam.json matches the built-in BAM rig"
+    );
+    friction_named_and_validation_error_falls(
+        400.0,
+        "2026-01-15_10h29m14_sin_sin_kp400.csv.gz",
+        "2026-01-15_10h29m29_up_and_down_kp400.csv.gz",
+    );
+}
+
+#[test]
+fn bam_verdict_is_friction_at_kp200_on_other_trajectories() {
+    friction_named_and_validation_error_falls(
+        200.0,
+        "2026-01-15_10h29m04_sin_time_square_kp200.csv.gz",
+        "2026-01-15_10h28m42_sin_sin_kp200.csv.gz",
+    );
+}
+
+/// Range (max - min) of a slice.
+fn range(y: &[f64]) -> f64 {
+    y.iter().copied().fold(f64::MIN, f64::max) - y.iter().copied().fold(f64::MAX, f64::min)
+}
+
+#[test]
+fn torque_off_is_a_free_fall_that_only_friction_stops() {
+    let rig = Rig::bam();
+    let rec = rig
+        .load_record(&data("2026-01-15_10h29m21_lift_and_drop_kp400.csv.gz"))
+        .expect("lift_and_drop kp400");
+    let supply = rec
+        .supply_v
+        .as_ref()
+        .expect("the BAM record carries the supply");
+    let off: Vec<usize> = (0..rec.len()).filter(|&k| supply[k] == 0.0).collect();
+    // The log disables torque at 2.0 s of its 6.0 s.
+    assert!((750..850).contains(&off.len()), "{} steps off", off.len());
+    let nominal = simulate(&rig, &rec, &Effects::nominal());
+    assert!(off.iter().all(|&k| nominal.effort[k] == 0.0));
+    // In the last second the real pendulum has stopped (a few encoder counts), off centre.
+    let last = rec.len() - (1.0 / rec.dt) as usize;
+    assert!(range(&rec.output[last..]) < 0.01);
+    // Viscous damping alone (0.0037 N m s/rad on 6.7e-3 kg m^2) leaves it swinging.
+    assert!(
+        range(&nominal.output[last..]) > 0.1,
+        "nominal model's last second spans {:.3} rad",
+        range(&nominal.output[last..])
+    );
+    // The Coulomb torque that best replays the torque-off part, on a 2 mN m grid.
+    let free_fall_rms = |coulomb: f64| -> f64 {
+        let mut fx = Effects::nominal();
+        fx.coulomb = coulomb;
+        let sim = simulate(&rig, &rec, &fx);
+        let sq: f64 = off
+            .iter()
+            .map(|&k| (sim.output[k] - rec.output[k]).powi(2))
+            .sum();
+        (sq / off.len() as f64).sqrt()
+    };
+    let (best, best_rms) = (0..=40)
+        .map(|i| 0.002 * i as f64)
+        .map(|c| (c, free_fall_rms(c)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap();
+    let nominal_rms = free_fall_rms(0.0);
+    println!(
+        "free fall: position RMS error {nominal_rms:.4} rad without friction, {best_rms:.4} rad \
+         with {best:.3} N m"
+    );
+    assert!(best_rms < 0.4 * nominal_rms);
+    // More than BAM's M1 Coulomb term (0.0128 N m), and it stops the pendulum as the log does.
+    assert!((0.02..0.08).contains(&best), "free-fall Coulomb {best} N m");
+    let mut fx = Effects::nominal();
+    fx.coulomb = best;
+    let stopped = simulate(&rig, &rec, &fx);
+    assert!(
+        range(&stopped.output[last..]) < 0.01,
+        "with {best} N m of Coulomb friction the last second spans {:.3} rad",
+        range(&stopped.output[last..])
+    );
+}
+
+/// A real BAM log, unpacked, for the bad-file tests to spoil.
+fn real_log_text() -> String {
+    let gz = std::fs::read(data("2026-01-15_10h29m14_sin_sin_kp400.csv.gz")).unwrap();
+    let mut text = String::new();
+    flate2::read::GzDecoder::new(&gz[..])
+        .read_to_string(&mut text)
+        .unwrap();
+    text
+}
+
+fn load_err(rig: &Rig, path: &Path) -> String {
+    match rig.load_record(path) {
+        Ok(_) => panic!("{} was read", path.display()),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn bam_rig_refuses_a_missing_column_and_non_increasing_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = Rig::bam();
+    let text = real_log_text();
+    let lines: Vec<&str> = text.lines().collect();
+    // Without the supply column: the motor's voltage is unknown.
+    let col = lines[0]
+        .split(',')
+        .position(|c| c == "input_volts_V")
+        .unwrap();
+    let dropped: Vec<String> = lines
+        .iter()
+        .map(|l| {
+            let mut f: Vec<&str> = l.split(',').collect();
+            f.remove(col);
+            f.join(",")
+        })
+        .collect();
+    let no_supply = dir.path().join("no_supply.csv");
+    std::fs::write(&no_supply, dropped.join("\n")).unwrap();
+    let e = load_err(&rig, &no_supply);
+    assert!(
+        e.contains("no_supply.csv") && e.contains("input_volts_V"),
+        "{e}"
+    );
+    // Two rows swapped: time goes back at file line 102.
+    let mut swapped: Vec<&str> = lines.clone();
+    swapped.swap(100, 101);
+    let back = dir.path().join("time_back.csv");
+    std::fs::write(&back, swapped.join("\n")).unwrap();
+    let e = load_err(&rig, &back);
+    assert!(e.contains("time_back.csv") && e.contains("102"), "{e}");
+}
+
+#[test]
+fn bam_rig_refuses_a_log_taken_at_another_gain() {
+    let rig = Rig::bam();
+    let RigModel::Bam(m) = &rig.model else {
+        panic!("Rig::bam is a BAM rig")
+    };
+    assert_eq!(m.kp, 400.0);
+    let e = load_err(&rig, &data("2026-01-15_10h28m42_sin_sin_kp200.csv.gz"));
+    assert!(e.contains("kp = 200"), "{e}");
+    assert!(
+        Rig::bam_at_kp(200.0)
+            .load_record(&data("2026-01-15_10h28m42_sin_sin_kp200.csv.gz"))
+            .is_ok()
+    );
+}
