@@ -2,10 +2,12 @@
 //! that a clone alone passes): fitted on one trajectory, checked on another at the same firmware
 //! gain, the verdict is Coulomb friction at two gains and the validation log's position error
 //! falls by at least a quarter; the torque-off free fall stops where the log stops only with
-//! that friction; and the rig refuses a log it cannot read rightly.
+//! friction; BAM's published M1 and M6 parameter sets run through the same model (the paper
+//! gives no XL330 figure to compare with); and the rig refuses a log it cannot read rightly.
+#![allow(clippy::unwrap_used)] // test helpers: a failed unwrap is a failed test
 
-use host_sim::gap::model::Effects;
-use host_sim::gap::rig::{Rig, RigModel};
+use host_sim::gap::model::{Effects, GearFriction, simulate_bam_with};
+use host_sim::gap::rig::{BamModel, Rig, RigModel};
 use host_sim::gap::{EffectKind, Options, Record, Scorer, diagnose, simulate};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -219,4 +221,61 @@ fn bam_rig_refuses_a_log_taken_at_another_gain() {
             .load_record(&data("2026-01-15_10h28m42_sin_sin_kp200.csv.gz"))
             .is_ok()
     );
+}
+
+/// BAM's own XL330 parameter sets (`bam/params/xl330/m1.json`, `m6.json` in `Rhoban/bam`), run
+/// through this rig's model in place of its nominal constants; the position RMS error, rad.
+fn bam_parameter_sets(kp: f64, file: &str) -> (f64, f64, f64) {
+    let rig = Rig::bam_at_kp(kp);
+    let RigModel::Bam(m) = &rig.model else {
+        panic!("Rig::bam_at_kp is a BAM rig")
+    };
+    let rec = rig.load_record(&data(file)).expect(file);
+    let scorer = Scorer::new(&rig, &rec);
+    let error = |model: &BamModel, friction: &GearFriction| {
+        scorer
+            .fit(&rec, &simulate_bam_with(model, &rec, friction, 0.0, 0.0))
+            .rms_output
+    };
+    // M1 is the nominal model with its Coulomb term back.
+    let m1 = GearFriction {
+        kc: 0.01283,
+        ..GearFriction::default()
+    };
+    let m6_model = BamModel {
+        kt: 0.36601,
+        r_ohm: 2.81139,
+        armature_kg_m2: 1.8077e-3,
+        viscous_nm_s_per_rad: 5.3597e-3,
+        ..m.clone()
+    };
+    let m6 = GearFriction {
+        kc: 4.7712e-3,
+        kcs: 4.6763e-3,
+        ws: 2.89037,
+        alpha: 8.68326,
+        km: 0.266786,
+        ke: 8.5159e-6,
+        kms: 1.0723e-5,
+        kes: 0.0807793,
+        keq: 4.90257e-3,
+        kmq: 9.97247e-3,
+    };
+    let nominal = error(m, &GearFriction::default());
+    let (e1, e6) = (error(m, &m1), error(&m6_model, &m6));
+    println!("{file}: position RMS error nominal {nominal:.4}, M1 {e1:.4}, M6 {e6:.4} rad");
+    (nominal, e1, e6)
+}
+
+#[test]
+fn bam_m6_friction_through_this_model_beats_m1_on_the_sin_sin_logs() {
+    // The validation log of the kp 400 case: M6's load-dependent friction does not help here.
+    bam_parameter_sets(400.0, "2026-01-15_10h29m29_up_and_down_kp400.csv.gz");
+    for (kp, file) in [
+        (400.0, "2026-01-15_10h29m14_sin_sin_kp400.csv.gz"),
+        (200.0, "2026-01-15_10h28m42_sin_sin_kp200.csv.gz"),
+    ] {
+        let (nominal, e1, e6) = bam_parameter_sets(kp, file);
+        assert!(e1 < nominal && e6 < 0.8 * e1, "{file}");
+    }
 }
