@@ -173,7 +173,7 @@ fn load_err(rig: &Rig, path: &Path) -> String {
 }
 
 #[test]
-fn bam_rig_refuses_a_missing_column_and_non_increasing_time() {
+fn bam_rig_refuses_a_missing_column_non_increasing_time_and_a_drive_without_supply() {
     let dir = tempfile::tempdir().unwrap();
     let rig = Rig::bam();
     let text = real_log_text();
@@ -205,6 +205,27 @@ fn bam_rig_refuses_a_missing_column_and_non_increasing_time() {
     std::fs::write(&back, swapped.join("\n")).unwrap();
     let e = load_err(&rig, &back);
     assert!(e.contains("time_back.csv") && e.contains("102"), "{e}");
+    // A supply of 0 V while the drive is on (file line 51), and a torque flag of 2 (line 61).
+    let spoil = |row: usize, column: &str, value: &str, file: &str| -> String {
+        let c = lines[0].split(',').position(|n| n == column).unwrap();
+        let mut rows: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+        let mut f: Vec<&str> = lines[row].split(',').collect();
+        f[c] = value;
+        rows[row] = f.join(",");
+        let path = dir.path().join(file);
+        std::fs::write(&path, rows.join("\n")).unwrap();
+        load_err(&rig, &path)
+    };
+    let e = spoil(50, "input_volts_V", "0", "no_volts.csv");
+    assert!(
+        e.contains("no_volts.csv") && e.contains("line 51") && e.contains("supply"),
+        "{e}"
+    );
+    let e = spoil(60, "torque_enable", "2", "flag.csv");
+    assert!(
+        e.contains("flag.csv") && e.contains("line 61") && e.contains("torque_enable"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -455,6 +455,7 @@ impl Rig {
                     pwm: &effort,
                     supply: &supply.unwrap_or_default(),
                     torque_enable: &torque_enable.unwrap_or_default(),
+                    lines: &table.lines,
                 },
             )?,
         };
@@ -470,6 +471,8 @@ struct BamColumns<'a> {
     pwm: &'a [f64],
     supply: &'a [f64],
     torque_enable: &'a [f64],
+    /// The file's line of each row, for errors.
+    lines: &'a [usize],
 }
 
 /// A BAM log on the model's uniform grid `t0 + k ts`. The servo is read at its own uneven
@@ -481,6 +484,26 @@ struct BamColumns<'a> {
 /// law: a log taken at another gain is refused with the gain it shows, not fitted wrongly.
 fn bam_record(m: &BamModel, name: &str, c: &BamColumns) -> Result<Record, RigError> {
     let t = c.t;
+    // A flag that is neither 0 nor 1, or a drive on without a supply, would be simulated as
+    // something the servo never did: refused with its line.
+    for j in 0..t.len() {
+        let line = c.lines.get(j).copied().unwrap_or(0);
+        let refuse = |message: String| RigError::Parse {
+            path: name.to_string(),
+            message: format!("line {line}: {message}"),
+        };
+        match c.torque_enable[j] {
+            0.0 => {}
+            1.0 if c.supply[j] >= 1.0 => {}
+            1.0 => {
+                return Err(refuse(format!(
+                    "supply {} V with torque enabled: the motor's voltage is unknown",
+                    c.supply[j]
+                )));
+            }
+            v => return Err(refuse(format!("torque_enable is {v}, neither 0 nor 1"))),
+        }
+    }
     let last = t.len() - 1;
     let n = ((t[last] - t[0]) / m.ts_s + 1e-6).floor() as usize + 1;
     let held = |k: usize| t.partition_point(|v| *v <= t[0] + k as f64 * m.ts_s).max(1) - 1;
