@@ -293,8 +293,9 @@ impl EffectKind {
                 spec("force_n", 0.0, 100.0, 0.0, 0.5),
                 spec("viscous_ns_per_m", 0.0, 2.0 * m.fv, m.fv, 2.0),
             ],
+            // Up to 0.5 N m, under the stall torque at 7.4 V through BAM's M1 kt and R (0.71 N m).
             (EffectKind::CoulombFriction, RigModel::Bam(m)) => vec![
-                spec("torque_nm", 0.0, 0.2, 0.0, 1e-3),
+                spec("torque_nm", 0.0, 0.5, 0.0, 1e-3),
                 spec(
                     "viscous_nm_s_per_rad",
                     0.0,
