@@ -16,8 +16,8 @@ pub struct GapArgs {
     /// A second log, checked with the parameters fitted on LOG only.
     #[arg(long, value_name = "LOG2")]
     pub validate: Option<PathBuf>,
-    /// Rig file (JSON, see host-sim/rigs/); `paper` (default) and `emps` are built in.
-    #[arg(long, value_name = "paper|emps|FILE")]
+    /// Rig file (JSON, see host-sim/rigs/); `paper` (default), `emps` and `bam` are built in.
+    #[arg(long, value_name = "paper|emps|bam|FILE")]
     pub rig: Option<PathBuf>,
     /// Refit Table 4 to LOG first (`identify`) and diagnose against that model.
     #[arg(long)]

@@ -193,6 +193,7 @@ pub fn locate(rig: &Rig, rec: &Record, scorer: &Scorer, sim0: &SimOut, after: &S
     let limit = match &rig.model {
         RigModel::Paper(_) => 0.9 * steering_ecu::paper_mode::CURRENT_LIMIT.0 as f64,
         RigModel::Emps(m) => 0.9 * m.vsat,
+        RigModel::Bam(_) => 0.9,
     };
     let at_limit: Vec<bool> = y_e.iter().map(|e| e.abs() >= limit).collect();
     let mut aa: Vec<f64> = a.iter().map(|x| x.abs()).collect();
@@ -259,7 +260,7 @@ pub fn locate(rig: &Rig, rec: &Record, scorer: &Scorer, sim0: &SimOut, after: &S
     let mut segments = Vec::new();
     let downstream = match &rig.model {
         RigModel::Paper(m) => super::model::replay_downstream(m, rec, &Effects::nominal()),
-        RigModel::Emps(_) => None,
+        RigModel::Emps(_) | RigModel::Bam(_) => None,
     };
     if let (Some(m), false, Some(replay)) = (&rec.motor, sim0.motor.is_empty(), &downstream) {
         let e1: f64 = (s..n).map(|k| (sim0.motor[k] - m[k]).powi(2)).sum();

@@ -53,6 +53,8 @@ pub struct Record {
     pub motor: Option<Vec<f64>>,
     /// A known disturbance added to the effort (EMPS pulses).
     pub disturbance: Option<Vec<f64>>,
+    /// The measured supply at each step, V; 0 while the drive is off (BAM: torque disabled).
+    pub supply_v: Option<Vec<f64>>,
 }
 
 /// What a log's current column holds.
@@ -167,6 +169,7 @@ impl Record {
             effort,
             motor: motor.map(|m| (0..n).map(|k| interp_at(t, &m, end(k))).collect()),
             disturbance: None,
+            supply_v: None,
         }
     }
 
@@ -273,6 +276,11 @@ impl EffectKind {
                 EffectKind::Delay,
                 EffectKind::TireGround,
             ],
+            RigModel::Bam(_) => vec![
+                EffectKind::Backlash,
+                EffectKind::CoulombFriction,
+                EffectKind::Delay,
+            ],
         }
     }
 
@@ -290,6 +298,9 @@ impl EffectKind {
             (EffectKind::Backlash, RigModel::Paper(_)) => {
                 vec![spec("width_deg", 0.0, 4.0, 0.0, 0.1)]
             }
+            (EffectKind::Backlash, RigModel::Bam(_)) => {
+                vec![spec("width_rad", 0.0, 0.1, 0.0, 1e-3)]
+            }
             (EffectKind::Backlash, _) => vec![spec("width_m", 0.0, 2e-3, 0.0, 1e-5)],
             (EffectKind::CoulombFriction, RigModel::Paper(_)) => {
                 vec![spec("torque_nm", 0.0, 0.5, 0.0, 0.01)]
@@ -297,6 +308,17 @@ impl EffectKind {
             (EffectKind::CoulombFriction, RigModel::Emps(m)) => vec![
                 spec("force_n", 0.0, 100.0, 0.0, 0.5),
                 spec("viscous_ns_per_m", 0.0, 2.0 * m.fv, m.fv, 2.0),
+            ],
+            // Up to 0.5 N m, under the stall torque at 7.4 V through BAM's M1 kt and R (0.71 N m).
+            (EffectKind::CoulombFriction, RigModel::Bam(m)) => vec![
+                spec("torque_nm", 0.0, 0.5, 0.0, 1e-3),
+                spec(
+                    "viscous_nm_s_per_rad",
+                    0.0,
+                    0.05,
+                    m.viscous_nm_s_per_rad,
+                    2e-4,
+                ),
             ],
             (EffectKind::Delay, _) => vec![spec(
                 "delay_ms",
@@ -356,6 +378,15 @@ impl EffectKind {
             (EffectKind::CoulombFriction, RigModel::Emps(_)) => 2.0,
             (EffectKind::Delay, RigModel::Emps(m)) => 0.2e3 * m.ts_s,
             (EffectKind::TireGround | EffectKind::TireDahl, RigModel::Emps(_)) => 2.0,
+            // Three counts of the 4096-count encoder.
+            (EffectKind::Backlash, RigModel::Bam(_)) => 3.0 * std::f64::consts::TAU / 4096.0,
+            // Three counts of the 885-count PWM at the 7.4 V supply through kt / R (BAM's M1).
+            (EffectKind::CoulombFriction, RigModel::Bam(m)) => {
+                3.0 / m.pwm_full_scale * 7.4 * m.kt / m.r_ohm
+            }
+            // One step of the grid the log is resampled onto.
+            (EffectKind::Delay, RigModel::Bam(m)) => 1e3 * m.ts_s,
+            (EffectKind::TireGround | EffectKind::TireDahl, RigModel::Bam(_)) => f64::INFINITY,
         }
     }
 
@@ -392,6 +423,7 @@ pub fn simulate(rig: &Rig, rec: &Record, fx: &Effects) -> SimOut {
     match &rig.model {
         RigModel::Paper(m) => model::simulate_paper(m, rec, fx),
         RigModel::Emps(m) => model::simulate_emps(m, rec, fx),
+        RigModel::Bam(m) => model::simulate_bam(m, rec, fx),
     }
 }
 
@@ -1335,6 +1367,7 @@ fn fit_window(
         effort: rec.effort[a..b].to_vec(),
         motor: rec.motor.as_ref().map(|m| m[a..b].to_vec()),
         disturbance: rec.disturbance.as_ref().map(|d| d[a..b].to_vec()),
+        supply_v: rec.supply_v.as_ref().map(|d| d[a..b].to_vec()),
     })
 }
 

@@ -1,6 +1,7 @@
 //! The nominal models of a rig with the candidate effects added, simulated in closed loop from
-//! a log's reference: the paper's actuator under the firmware's own cascade (paper mode), and
-//! the EMPS axis under its P-PD controller.
+//! a log's reference: the paper's actuator under the firmware's own cascade (paper mode), the
+//! EMPS axis under its P-PD controller, and the BAM XL330 servo pendulum under its firmware's
+//! P controller.
 //!
 //! Each effect is zero-sized by default (`Effects::default()` is the nominal model). The
 //! nonlinear effects are written so that they stay stable at the loop rates: Coulomb friction
@@ -9,7 +10,7 @@
 //! is a play operator on the measured angle, and the delay shifts the reference.
 
 use super::Record;
-use super::rig::{EmpsModel, PaperModel};
+use super::rig::{BamModel, EmpsModel, PaperModel};
 use crate::effect_plant::{Bristle, EffectPlant, PlantEffects, Play};
 use crate::plant::{Actuator, state};
 use crate::sim::{self, RunConfig};
@@ -246,6 +247,161 @@ pub fn simulate_emps(m: &EmpsModel, rec: &Record, fx: &Effects) -> SimOut {
             } else {
                 q += 0.5 * (v + v_new) * h;
                 v = v_new;
+            }
+        }
+    }
+    out
+}
+
+/// Standard gravity, m/s^2.
+const GRAVITY: f64 = 9.81;
+
+/// The friction of the BAM servo's gearbox as a budget: the largest torque friction can
+/// oppose, from the velocity `w`, the motor torque `tm` and the external (gravity) torque `te`,
+/// all at the output shaft. Its form is BAM's widest (M6, Duclusaud et al., ICRA 2025,
+/// arXiv 2410.08650, section on the friction models): `Kc + |Km tm - Ke te|
+/// + exp(-|w / ws|^alpha) (Kcs + |Kms tm - Kes te| + Q)`, with `Q = Keq te^2` when the motor
+/// drives (|tm| > |te|) and `Kmq tm^2` when the load backdrives it. The viscous term is the
+/// model's own. Every field 0 is no friction; the diagnosis's Coulomb candidate fills `kc`
+/// (and `kcs`, `ws` for Stribeck).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct GearFriction {
+    /// Coulomb, N m.
+    pub kc: f64,
+    /// Extra static (Stribeck) friction, N m, its velocity (rad/s) and exponent.
+    pub kcs: f64,
+    pub ws: f64,
+    pub alpha: f64,
+    /// Load-dependent shares of the motor and the external torque, sliding and static.
+    pub km: f64,
+    pub ke: f64,
+    pub kms: f64,
+    pub kes: f64,
+    /// Quadratic load terms, 1/(N m), driving (external) and backdriven (motor).
+    pub keq: f64,
+    pub kmq: f64,
+}
+
+impl GearFriction {
+    fn budget(&self, w: f64, tm: f64, te: f64) -> f64 {
+        let stribeck = if self.ws > 0.0 {
+            (-(w / self.ws).abs().powf(self.alpha)).exp()
+        } else {
+            0.0
+        };
+        let q = if tm.abs() > te.abs() {
+            self.keq * te * te
+        } else {
+            self.kmq * tm * tm
+        };
+        self.kc
+            + (self.km * tm - self.ke * te).abs()
+            + stribeck * (self.kcs + (self.kms * tm - self.kes * te).abs() + q)
+    }
+}
+
+/// The BAM XL330 pendulum under its firmware P controller, on the record's uniform grid
+/// (`Rig::bam`; model as in `host-sim/data/bam-xl330/README.md`), with the candidate effects:
+/// Coulomb (and Stribeck) friction, play before the encoder, a delay of the goal. See
+/// [`simulate_bam_with`].
+pub fn simulate_bam(m: &BamModel, rec: &Record, fx: &Effects) -> SimOut {
+    let friction = GearFriction {
+        kc: fx.coulomb.max(0.0),
+        kcs: fx.stribeck.max(0.0),
+        ws: if fx.stribeck_velocity > 0.0 {
+            fx.stribeck_velocity
+        } else {
+            1.0
+        },
+        alpha: 2.0,
+        ..GearFriction::default()
+    };
+    let viscous = if fx.viscous_override.is_finite() {
+        fx.viscous_override
+    } else {
+        m.viscous_nm_s_per_rad
+    };
+    simulate_bam_with(
+        &BamModel {
+            viscous_nm_s_per_rad: viscous,
+            ..m.clone()
+        },
+        rec,
+        &friction,
+        fx.backlash,
+        fx.delay_s,
+    )
+}
+
+/// The BAM pendulum with a given gearbox friction, play (rad, full width) and goal delay (s).
+/// At every integration step the firmware reads its encoder (4096 counts/rev) and sets
+/// `duty = sat(error_gain kp (goal - position))`; the winding sees `duty vin`, and at the
+/// output shaft `J w' = kt (duty vin - kt w) / R - Kv w - m g l sin(theta) - friction`, with
+/// `J` the armature plus the point mass and the friction at most the budget of `friction`
+/// (holding the shaft at rest while it can). While the drive is off (`supply_v` 0) the bridge
+/// is open: no motor torque and no back-EMF braking, the pendulum falls freely against
+/// friction alone. Each step logs the encoder reading and the duty at its start, as the
+/// servo's registers are read.
+pub fn simulate_bam_with(
+    m: &BamModel,
+    rec: &Record,
+    friction: &GearFriction,
+    backlash: f64,
+    delay_s: f64,
+) -> SimOut {
+    let n = rec.reference.len();
+    let mut out = SimOut {
+        output: Vec::with_capacity(n),
+        effort: Vec::with_capacity(n),
+        motor: Vec::new(),
+    };
+    if n == 0 || m.r_ohm <= 0.0 {
+        return out;
+    }
+    let reference = delayed(&rec.reference, delay_s, m.ts_s);
+    let sub = m.substeps.max(1);
+    let h = m.ts_s / sub as f64;
+    let kv = m.viscous_nm_s_per_rad;
+    let inertia = m.armature_kg_m2 + m.mass_kg * m.length_m * m.length_m;
+    let weight = m.mass_kg * GRAVITY * m.length_m;
+    let quantum = std::f64::consts::TAU / m.encoder_counts.max(1.0);
+    let encoder = |theta: f64| (theta / quantum).round() * quantum;
+    // The firmware's duty from what its encoder reads through the play.
+    let duty = |goal: f64, read: f64| (m.error_gain * m.kp * (goal - read)).clamp(-1.0, 1.0);
+    // Start at the first measured position, at rest.
+    let mut theta = rec.output.first().copied().unwrap_or(reference[0]);
+    let mut w = 0.0;
+    let mut play = Play::new(backlash, theta);
+    for k in 0..n {
+        let vin = rec.supply_v.as_ref().map_or(0.0, |s| s[k]);
+        let on = vin > 0.0;
+        let read = encoder(play.step(theta));
+        out.output.push(read);
+        out.effort
+            .push(if on { duty(reference[k], read) } else { 0.0 });
+        for _ in 0..sub {
+            let read = encoder(play.step(theta));
+            let motor = if on {
+                m.kt * (duty(reference[k], read) * vin - m.kt * w) / m.r_ohm
+            } else {
+                0.0
+            };
+            let external = -weight * theta.sin();
+            let free = motor + external - kv * w;
+            let level = friction.budget(w, motor, external);
+            // At rest, friction holds whatever it can.
+            if w == 0.0 && free.abs() <= level {
+                continue;
+            }
+            let dir = if w != 0.0 { w.signum() } else { free.signum() };
+            let w_new = w + (free - level * dir) / inertia * h;
+            if level > 0.0 && w != 0.0 && w_new.signum() != w.signum() {
+                // Crossed zero velocity within the step: stop there.
+                theta += w * h * 0.5;
+                w = 0.0;
+            } else {
+                theta += 0.5 * (w + w_new) * h;
+                w = w_new;
             }
         }
     }

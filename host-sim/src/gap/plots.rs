@@ -51,6 +51,7 @@ pub fn write_all(
     let (out_unit, eff_unit) = match rig.model {
         RigModel::Paper(_) => ("deg", "A"),
         RigModel::Emps(_) => ("m", "V"),
+        RigModel::Bam(_) => ("rad", "duty"),
     };
     let sim0 = simulate(rig, rec, &Effects::nominal());
     let fx = verdict_effects(rig, d);
@@ -129,7 +130,7 @@ pub fn write_all(
 
     let downstream = match &rig.model {
         RigModel::Paper(pm) => super::model::replay_downstream(pm, rec, &Effects::nominal()),
-        RigModel::Emps(_) => None,
+        RigModel::Emps(_) | RigModel::Bam(_) => None,
     };
     if let (Some(m), Some(replay)) = (&rec.motor, &downstream) {
         let n = n.min(replay.len());

@@ -1,6 +1,7 @@
 //! A rig file: which model and controller a log came from, its parameters, and which CSV
-//! columns hold the reference, the output and the effort. Two ship with host-sim
-//! (`host-sim/rigs/`): the paper's actuator (the default, built in) and EMPS.
+//! columns hold the reference, the output and the effort. Three ship with host-sim
+//! (`host-sim/rigs/`): the paper's actuator (the default, built in), EMPS and the BAM XL330
+//! servo pendulum.
 
 use super::{CurrentSamples, Record};
 use crate::logfmt::{LogError, Table, fill_missing};
@@ -23,6 +24,13 @@ pub struct Columns {
     /// A known disturbance added to the effort (EMPS pulses, V); optional.
     #[serde(default)]
     pub disturbance: Option<String>,
+    /// The measured supply voltage (BAM: `input_volts_V`); required by the BAM model.
+    #[serde(default)]
+    pub supply: Option<String>,
+    /// 1 while the drive is on, 0 when torque is disabled (BAM: `torque_enable`); required
+    /// by the BAM model.
+    #[serde(default)]
+    pub torque_enable: Option<String>,
 }
 
 /// Table 3 gains in EPOS4 units, as in `steering_ecu::gains::EposGains`.
@@ -105,11 +113,44 @@ pub struct EmpsModel {
     pub substeps: u32,
 }
 
+/// A Dynamixel XL330 geared servo swinging a pendulum under its own firmware P controller, as
+/// the BAM logs record it (`host-sim/data/bam-xl330/README.md`): a voltage-driven DC motor
+/// behind its gearbox, every quantity at the output shaft. The nominal model is Coulomb-free
+/// (torque constant, winding resistance, armature, viscous friction) so that friction is left
+/// for the diagnosis to find.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BamModel {
+    /// Torque constant at the output shaft, N m/A (also the back-EMF constant, V s/rad).
+    pub kt: f64,
+    /// Winding resistance, ohm.
+    pub r_ohm: f64,
+    /// Rotor and gearbox inertia at the output shaft, kg m^2.
+    pub armature_kg_m2: f64,
+    /// Viscous friction at the output shaft, N m s/rad.
+    pub viscous_nm_s_per_rad: f64,
+    /// Pendulum point mass, kg, and its distance from the axis, m (angle 0 = hanging down).
+    pub mass_kg: f64,
+    pub length_m: f64,
+    /// The firmware's position P gain, in firmware units (the log's `kp`).
+    pub kp: f64,
+    /// Duty per firmware gain unit per rad: `duty = error_gain kp (goal - position)`.
+    pub error_gain: f64,
+    /// The PWM register's full scale: `duty = load_raw / pwm_full_scale`.
+    pub pwm_full_scale: f64,
+    /// Encoder resolution, counts per revolution (the position the firmware sees).
+    pub encoder_counts: f64,
+    /// Step of the uniform grid the log is resampled onto, s.
+    pub ts_s: f64,
+    /// Integration steps per grid step (the firmware's loop runs faster than the log).
+    pub substeps: u32,
+}
+
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum RigModel {
     Paper(PaperModel),
     Emps(EmpsModel),
+    Bam(BamModel),
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -183,6 +224,8 @@ impl Rig {
                 effort: "current_a".into(),
                 motor: Some("motor_rad".into()),
                 disturbance: None,
+                supply: None,
+                torque_enable: None,
             },
             model: RigModel::Paper(PaperModel {
                 plant: PlantParams::PAPER,
@@ -205,6 +248,8 @@ impl Rig {
                 effort: "vir_V".into(),
                 motor: None,
                 disturbance: Some("pulses_N".into()),
+                supply: None,
+                torque_enable: None,
             },
             model: RigModel::Emps(EmpsModel {
                 mass: 95.10,
@@ -221,12 +266,58 @@ impl Rig {
         }
     }
 
-    /// A rig from a JSON file (`host-sim/rigs/*.json`); the names `paper` and `emps` give
-    /// the built-in ones.
+    /// The BAM XL330 pendulum at the firmware gain kp = 400. The motor's constants are BAM's
+    /// Coulomb-viscous model M1 (`host-sim/data/bam-xl330/README.md`) with its Coulomb term
+    /// left out; the pendulum (0.49 kg at 0.10 m) and the P law are the data README's. The
+    /// log is resampled onto a 5 ms grid, about its median row spacing (5.3 ms).
+    pub fn bam() -> Rig {
+        Rig {
+            name: "bam".into(),
+            columns: Columns {
+                time: "t_s".into(),
+                reference: "goal_position_rad".into(),
+                output: "position_rad".into(),
+                effort: "load_raw".into(),
+                motor: None,
+                disturbance: None,
+                supply: Some("input_volts_V".into()),
+                torque_enable: Some("torque_enable".into()),
+            },
+            model: RigModel::Bam(BamModel {
+                kt: 0.3867,
+                r_ohm: 4.017,
+                armature_kg_m2: 1.814e-3,
+                viscous_nm_s_per_rad: 0.003662,
+                mass_kg: 0.49,
+                length_m: 0.10,
+                kp: 400.0,
+                // Counts per rad over BAM's empirical KP divisor (256) and the PWM scale (885).
+                error_gain: (4096.0 / std::f64::consts::TAU) / (256.0 * 885.0),
+                pwm_full_scale: 885.0,
+                encoder_counts: 4096.0,
+                ts_s: 0.005,
+                substeps: 5,
+            }),
+            skip_s: 0.05,
+        }
+    }
+
+    /// The BAM rig at another firmware gain (the logs come at kp 100, 200, 400 and 800).
+    pub fn bam_at_kp(kp: f64) -> Rig {
+        let mut rig = Rig::bam();
+        if let RigModel::Bam(m) = &mut rig.model {
+            m.kp = kp;
+        }
+        rig
+    }
+
+    /// A rig from a JSON file (`host-sim/rigs/*.json`); the names `paper`, `emps` and `bam`
+    /// give the built-in ones.
     pub fn load(path: &Path) -> Result<Rig, RigError> {
         match path.to_str() {
             Some("paper") => return Ok(Rig::paper()),
             Some("emps") => return Ok(Rig::emps()),
+            Some("bam") => return Ok(Rig::bam()),
             _ => {}
         }
         let name = path.display().to_string();
@@ -245,6 +336,7 @@ impl Rig {
         match &self.model {
             RigModel::Paper(_) => 0.01,
             RigModel::Emps(m) => m.ts_s,
+            RigModel::Bam(m) => m.ts_s,
         }
     }
 
@@ -318,6 +410,23 @@ impl Rig {
             Some(c) => col(c, false)?,
             None => None,
         };
+        // The BAM model needs both; a log without them is refused, not run at a guessed supply.
+        let bam_column = |c: &Option<String>, what: &str| -> Result<String, RigError> {
+            c.clone().ok_or_else(|| RigError::Parse {
+                path: name.clone(),
+                message: format!("the BAM rig names no {what} column"),
+            })
+        };
+        let (supply, torque_enable) = match &self.model {
+            RigModel::Bam(_) => (
+                col(&bam_column(&self.columns.supply, "supply")?, true)?,
+                col(
+                    &bam_column(&self.columns.torque_enable, "torque_enable")?,
+                    true,
+                )?,
+            ),
+            _ => (None, None),
+        };
         if t.len() < 20 {
             return Err(RigError::TooShort { path: name });
         }
@@ -334,8 +443,111 @@ impl Rig {
                 effort,
                 motor: None,
                 disturbance,
+                supply_v: None,
             },
+            RigModel::Bam(m) => bam_record(
+                m,
+                &name,
+                &BamColumns {
+                    t: &t,
+                    goal: &reference,
+                    position: &output,
+                    pwm: &effort,
+                    supply: &supply.unwrap_or_default(),
+                    torque_enable: &torque_enable.unwrap_or_default(),
+                    lines: &table.lines,
+                },
+            )?,
         };
         Ok((record, notes))
     }
+}
+
+/// A BAM log's columns as read.
+struct BamColumns<'a> {
+    t: &'a [f64],
+    goal: &'a [f64],
+    position: &'a [f64],
+    pwm: &'a [f64],
+    supply: &'a [f64],
+    torque_enable: &'a [f64],
+    /// The file's line of each row, for errors.
+    lines: &'a [usize],
+}
+
+/// A BAM log on the model's uniform grid `t0 + k ts`. The servo is read at its own uneven
+/// pace (5.3 ms median, 3.5 ms in `lift_and_drop`), and the diagnosis wants one step: the
+/// goal is the last one written at or before each grid time (what the firmware holds), the
+/// position, the PWM (as duty) and the supply are interpolated to it, and the drive counts
+/// as off when the last row at or before it says torque disabled; the record's `supply_v`
+/// is then 0. Before the model runs on it, the log's own PWM is checked against the rig's P
+/// law: a log taken at another gain is refused with the gain it shows, not fitted wrongly.
+fn bam_record(m: &BamModel, name: &str, c: &BamColumns) -> Result<Record, RigError> {
+    let t = c.t;
+    // A flag that is neither 0 nor 1, or a drive on without a supply, would be simulated as
+    // something the servo never did: refused with its line.
+    for j in 0..t.len() {
+        let line = c.lines.get(j).copied().unwrap_or(0);
+        let refuse = |message: String| RigError::Parse {
+            path: name.to_string(),
+            message: format!("line {line}: {message}"),
+        };
+        match c.torque_enable[j] {
+            0.0 => {}
+            1.0 if c.supply[j] >= 1.0 => {}
+            1.0 => {
+                return Err(refuse(format!(
+                    "supply {} V with torque enabled: the motor's voltage is unknown",
+                    c.supply[j]
+                )));
+            }
+            v => return Err(refuse(format!("torque_enable is {v}, neither 0 nor 1"))),
+        }
+    }
+    let last = t.len() - 1;
+    let n = ((t[last] - t[0]) / m.ts_s + 1e-6).floor() as usize + 1;
+    let held = |k: usize| t.partition_point(|v| *v <= t[0] + k as f64 * m.ts_s).max(1) - 1;
+    let at = |y: &[f64], k: usize| super::interp_at(t, y, t[0] + k as f64 * m.ts_s);
+    let on = |j: usize| c.torque_enable[j] >= 0.5;
+    let record = Record {
+        dt: m.ts_s,
+        reference: (0..n).map(|k| c.goal[held(k)]).collect(),
+        output: (0..n).map(|k| at(c.position, k)).collect(),
+        effort: (0..n).map(|k| at(c.pwm, k) / m.pwm_full_scale).collect(),
+        motor: None,
+        disturbance: None,
+        supply_v: Some(
+            (0..n)
+                .map(|k| if on(held(k)) { at(c.supply, k) } else { 0.0 })
+                .collect(),
+        ),
+    };
+    // The gain the log's rows show: duty over error, where the firmware's output is neither
+    // saturated nor within a few encoder counts of zero.
+    let quantum = std::f64::consts::TAU / m.encoder_counts;
+    let mut ratios: Vec<f64> = (0..t.len())
+        .filter(|&j| on(j))
+        .filter_map(|j| {
+            let err = c.goal[j] - c.position[j];
+            let duty = c.pwm[j] / m.pwm_full_scale;
+            (err.abs() > 20.0 * quantum && duty.abs() < 0.9 && duty.abs() > 0.05)
+                .then(|| duty / (m.error_gain * err))
+        })
+        .collect();
+    if ratios.len() >= 20 {
+        ratios.sort_by(|a, b| a.total_cmp(b));
+        let shown = ratios[ratios.len() / 2];
+        if !(0.75 * m.kp..=1.33 * m.kp).contains(&shown) {
+            return Err(RigError::Parse {
+                path: name.to_string(),
+                message: format!(
+                    "the PWM follows a firmware gain of about kp = {shown:.0}, not the rig's \
+                     kp = {}: give a rig file with that `kp` (a copy of \
+                     host-sim/rigs/bam.json)",
+                    m.kp
+                ),
+            });
+        }
+    }
+    Ok(record)
 }
