@@ -11,7 +11,7 @@ use super::profile::{self, Profile, ReferenceSender, parse_as_state};
 use super::{BringupError, Transport, candump, epos, pump};
 use crate::scenario::Sweep;
 use crate::sim::Controller;
-use crate::sim_ecu::{Injection, SimEcu};
+use crate::sim_ecu::{Injection, SimCar, SimDrive, SimEcu};
 use clap::{Args, Parser, Subcommand};
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
@@ -59,8 +59,20 @@ pub struct Cli {
     /// cascade) or `ecu` (the ECU's own, README "ECU mode").
     #[arg(long, global = true, value_enum, default_value_t = Controller::Paper)]
     pub controller: Controller,
+    /// With `--iface sim`: the firmware build the simulated car runs, `epos4` (the default
+    /// build: the ECU's EPOS4 link, CSP, SYNC, heartbeats, PDOs) or `direct` (the ECU's own
+    /// bridge, `--features drive-direct`).
+    #[arg(long, global = true, value_enum, default_value_t = DriveArg::Epos4)]
+    pub drive: DriveArg,
     #[command(subcommand)]
     pub command: Command,
+}
+
+/// `--drive`: which firmware build the simulated car runs.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DriveArg {
+    Epos4,
+    Direct,
 }
 
 #[derive(Subcommand, Debug)]
@@ -243,13 +255,34 @@ pub fn main() -> ExitCode {
     }
 }
 
+/// The vehicle computer of the simulated car while `record` listens: 0.3 s in AS Ready, a
+/// 5 deg, 1 Hz sine for 2 s in AS Driving, 0.2 s of AS Finished and 0.2 s of AS Off, then
+/// silence. On the car someone else steers while `record` listens; without this the recording
+/// would hold no reference frame and `convert` would have no log to build.
+fn record_vehicle_script() -> Result<Vec<(AsState, f64)>, BringupError> {
+    let sine = profile::sine(5.0, 1.0, 2.0)?;
+    let mut script = vec![(AsState::Ready, 0.0); 30];
+    script.extend(sine.samples.iter().map(|&deg| (AsState::Driving, deg)));
+    let last = sine.samples.last().copied().unwrap_or(0.0);
+    script.extend([(AsState::Finished, last); 20]);
+    script.extend([(AsState::Off, last); 20]);
+    Ok(script)
+}
+
 fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     if cli.iface == "sim" {
         let kind = match cli.controller {
             Controller::Paper => ControllerKind::Paper,
             Controller::Ecu => ControllerKind::Ecu,
         };
-        let mut sim = SimEcu::at(cli.sim_column_deg, kind);
+        let mut sim = SimEcu::new(SimCar {
+            column_deg: cli.sim_column_deg,
+            controller: kind,
+            drive: match cli.drive {
+                DriveArg::Epos4 => SimDrive::Epos4,
+                DriveArg::Direct => SimDrive::Direct,
+            },
+        });
         if let Some(spec) = &cli.sim_inject {
             let bad = || BringupError::Profile {
                 reason: format!(
@@ -258,8 +291,23 @@ fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
             };
             let (kind, at) = spec.split_once('@').ok_or_else(bad)?;
             let injection = Injection::parse(kind).ok_or_else(bad)?;
+            if !sim.can_inject(injection) {
+                return Err(BringupError::Profile {
+                    reason: format!(
+                        "--sim-inject `{spec}`: the EPOS4 senses its own current; a current-sense \
+                         fault exists in direct drive only (--drive direct)"
+                    ),
+                });
+            }
             let at_s: f64 = at.parse().map_err(|_| bad())?;
             sim.inject_at((at_s * 1e6) as u64, injection);
+        }
+        if matches!(cli.command, Command::Record { .. }) {
+            eprintln!(
+                "sim: a simulated vehicle computer steers while this records (0.3 s AS Ready, \
+                 a 5 deg 1 Hz sine for 2 s in AS Driving, AS Finished, AS Off)"
+            );
+            sim.script_vehicle(record_vehicle_script()?);
         }
         if cli.fast {
             return Ok(Box::new(sim));
