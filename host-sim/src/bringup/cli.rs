@@ -122,6 +122,15 @@ pub enum Command {
         #[arg(long, value_name = "S")]
         duration_s: Option<f64>,
     },
+    /// The README's first day on the simulated car, in one session: each `steer-can` step the
+    /// README's bring-up list names, its result beside what the README expects, pass or fail
+    /// (exit 1 if any step fails). `--iface sim` only; `--fast` to run it at CPU speed.
+    Rehearse {
+        /// Where the steps' files go (sweep.csv.gz, track.csv.gz, profile.csv, bus.candump,
+        /// log.csv).
+        #[arg(long, default_value = "rehearsal", value_name = "DIR")]
+        dir: PathBuf,
+    },
     /// Convert a candump log to the project's log format (for `host-sim gap`).
     Convert {
         /// The candump file (`candump -l` or `steer-can record`).
@@ -269,45 +278,58 @@ fn record_vehicle_script() -> Result<Vec<(AsState, f64)>, BringupError> {
     Ok(script)
 }
 
+/// The simulated car the global options describe (`--drive`, `--controller`,
+/// `--sim-column-deg`, `--sim-inject`), at t = 0.
+pub(crate) fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
+    let kind = match cli.controller {
+        Controller::Paper => ControllerKind::Paper,
+        Controller::Ecu => ControllerKind::Ecu,
+    };
+    let mut sim = SimEcu::new(SimCar {
+        column_deg: cli.sim_column_deg,
+        controller: kind,
+        drive: match cli.drive {
+            DriveArg::Epos4 => SimDrive::Epos4,
+            DriveArg::Direct => SimDrive::Direct,
+        },
+    });
+    if let Some(spec) = &cli.sim_inject {
+        let bad = || BringupError::Profile {
+            reason: format!(
+                "--sim-inject `{spec}`: expected KIND@SECONDS, KIND one of encoder, overcurrent, epos"
+            ),
+        };
+        let (kind, at) = spec.split_once('@').ok_or_else(bad)?;
+        let injection = Injection::parse(kind).ok_or_else(bad)?;
+        if !sim.can_inject(injection) {
+            return Err(BringupError::Profile {
+                reason: format!(
+                    "--sim-inject `{spec}`: the EPOS4 senses its own current; a current-sense \
+                     fault exists in direct drive only (--drive direct)"
+                ),
+            });
+        }
+        let at_s: f64 = at.parse().map_err(|_| bad())?;
+        sim.inject_at((at_s * 1e6) as u64, injection);
+    }
+    Ok(sim)
+}
+
+/// Let the simulated vehicle computer steer while `record` listens ([`record_vehicle_script`]).
+pub(crate) fn vehicle_for_record(sim: &mut SimEcu) -> Result<(), BringupError> {
+    eprintln!(
+        "sim: a simulated vehicle computer steers while this records (0.3 s AS Ready, a 5 deg \
+         1 Hz sine for 2 s in AS Driving, AS Finished, AS Off)"
+    );
+    sim.script_vehicle(record_vehicle_script()?);
+    Ok(())
+}
+
 fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     if cli.iface == "sim" {
-        let kind = match cli.controller {
-            Controller::Paper => ControllerKind::Paper,
-            Controller::Ecu => ControllerKind::Ecu,
-        };
-        let mut sim = SimEcu::new(SimCar {
-            column_deg: cli.sim_column_deg,
-            controller: kind,
-            drive: match cli.drive {
-                DriveArg::Epos4 => SimDrive::Epos4,
-                DriveArg::Direct => SimDrive::Direct,
-            },
-        });
-        if let Some(spec) = &cli.sim_inject {
-            let bad = || BringupError::Profile {
-                reason: format!(
-                    "--sim-inject `{spec}`: expected KIND@SECONDS, KIND one of encoder, overcurrent, epos"
-                ),
-            };
-            let (kind, at) = spec.split_once('@').ok_or_else(bad)?;
-            let injection = Injection::parse(kind).ok_or_else(bad)?;
-            if !sim.can_inject(injection) {
-                return Err(BringupError::Profile {
-                    reason: format!(
-                        "--sim-inject `{spec}`: the EPOS4 senses its own current; a current-sense \
-                         fault exists in direct drive only (--drive direct)"
-                    ),
-                });
-            }
-            let at_s: f64 = at.parse().map_err(|_| bad())?;
-            sim.inject_at((at_s * 1e6) as u64, injection);
-        }
+        let mut sim = sim_car(cli)?;
         if matches!(cli.command, Command::Record { .. }) {
-            eprintln!(
-                "sim: a simulated vehicle computer steers while this records (0.3 s AS Ready, \
-                 a 5 deg 1 Hz sine for 2 s in AS Driving, AS Finished, AS Off)"
-            );
-            sim.script_vehicle(record_vehicle_script()?);
+            vehicle_for_record(&mut sim)?;
         }
         if cli.fast {
             return Ok(Box::new(sim));
@@ -327,7 +349,7 @@ fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     }
 }
 
-fn decoder(node: NodeId) -> Result<Decoder, BringupError> {
+pub(crate) fn decoder(node: NodeId) -> Result<Decoder, BringupError> {
     let counts = Epos4Config::paper(node).counts_per_rev;
     let scale = PositionScale::new(counts).ok_or_else(|| BringupError::Epos {
         reason: format!("{counts} position increments per revolution"),
@@ -335,12 +357,59 @@ fn decoder(node: NodeId) -> Result<Decoder, BringupError> {
     Ok(Decoder::new(node, scale))
 }
 
-fn stop_flag() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    let f = flag.clone();
-    // A second handler (tests calling twice) is refused; the first one stays, which is fine.
-    let _ = ctrlc::set_handler(move || f.store(true, Ordering::SeqCst));
-    flag
+/// The process's Ctrl-C flag: the handler is installed once and every command (all the steps
+/// of `rehearse` too) watches the same flag.
+pub(crate) fn stop_flag() -> Arc<AtomicBool> {
+    static FLAG: std::sync::OnceLock<Arc<AtomicBool>> = std::sync::OnceLock::new();
+    FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let f = flag.clone();
+        // Refused only if something else installed a handler; then Ctrl-C ends the process.
+        let _ = ctrlc::set_handler(move || f.store(true, Ordering::SeqCst));
+        flag
+    })
+    .clone()
+}
+
+/// What a command found, for the exit code and for `rehearse`'s comparison with the README.
+#[derive(Debug)]
+pub enum Outcome {
+    Monitor(Monitor),
+    Epos(epos::EposReport),
+    /// `send`: what the tool saw on the bus, its own frames included.
+    Send(Monitor),
+    Campaign(CampaignOutcome),
+    Record {
+        frames: u64,
+        monitor: Monitor,
+    },
+    Convert(logbuild::Built),
+    /// `rehearse`: every step matched the README.
+    Rehearsed {
+        all_passed: bool,
+    },
+}
+
+impl Outcome {
+    fn exit_code(&self) -> ExitCode {
+        match self {
+            Outcome::Campaign(c) if c.aborted.is_some() => ExitCode::from(EXIT_ABORTED),
+            Outcome::Rehearsed { all_passed: false } => ExitCode::FAILURE,
+            _ => ExitCode::SUCCESS,
+        }
+    }
+}
+
+/// What a campaign ended with.
+#[derive(Debug)]
+pub struct CampaignOutcome {
+    pub aborted: Option<campaign::AbortReason>,
+    pub profile_samples: usize,
+    pub profile_samples_sent: usize,
+    pub rate_limited: usize,
+    pub final_status: Option<steering_ecu::protocol::Status>,
+    pub log_rows: usize,
+    pub recording: PathBuf,
 }
 
 fn run(cli: Cli) -> Result<ExitCode, BringupError> {
@@ -348,45 +417,71 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
         reason: format!("--node {}: a CANopen node ID is 1 to 127", cli.node),
     })?;
     let dec = decoder(node)?;
-    match &cli.command {
+    let outcome = match &cli.command {
         Command::Convert {
             candump: path,
             out,
             all_rows,
-        } => {
-            convert(path, out, &dec, *all_rows)?;
-            Ok(ExitCode::SUCCESS)
+        } => Outcome::Convert(convert(path, out, &dec, *all_rows)?),
+        Command::Rehearse { dir } => {
+            if cli.iface != "sim" {
+                return Err(BringupError::Profile {
+                    reason: format!(
+                        "rehearse runs on the simulated car only (--iface sim), not on {}",
+                        cli.iface
+                    ),
+                });
+            }
+            super::rehearse::rehearse(&cli, dir)?
         }
+        command => {
+            let mut t = open(&cli)?;
+            execute(command, node, &dec, t.as_mut())?
+        }
+    };
+    Ok(outcome.exit_code())
+}
+
+/// Runs one command that needs the bus on `t` (every command but `convert` and `rehearse`).
+pub(crate) fn execute(
+    command: &Command,
+    node: NodeId,
+    dec: &Decoder,
+    t: &mut dyn Transport,
+) -> Result<Outcome, BringupError> {
+    match command {
         Command::Monitor {
             duration_s,
             each,
             refresh_s,
-        } => {
-            let mut t = open(&cli)?;
-            monitor(t.as_mut(), &dec, *duration_s, *each, *refresh_s)?;
-            Ok(ExitCode::SUCCESS)
-        }
+        } => Ok(Outcome::Monitor(monitor(
+            t,
+            dec,
+            *duration_s,
+            *each,
+            *refresh_s,
+        )?)),
         Command::Epos {
             what: EposCommand::Check,
         } => {
-            let mut t = open(&cli)?;
-            let report = epos::check(t.as_mut(), node)?;
+            let report = epos::check(t, node)?;
             say!("{}", report.text().trim_end());
-            Ok(ExitCode::SUCCESS)
+            Ok(Outcome::Epos(report))
         }
         Command::Send {
             as_state,
             no_finish,
             profile,
-        } => {
-            let mut t = open(&cli)?;
-            send(t.as_mut(), &dec, *as_state, !*no_finish, profile)?;
-            Ok(ExitCode::SUCCESS)
-        }
+        } => Ok(Outcome::Send(send(
+            t,
+            dec,
+            *as_state,
+            !*no_finish,
+            profile,
+        )?)),
         Command::Record { out, duration_s } => {
-            let mut t = open(&cli)?;
-            record(t.as_mut(), &dec, out, *duration_s)?;
-            Ok(ExitCode::SUCCESS)
+            let (frames, monitor) = record(t, dec, out, *duration_s)?;
+            Ok(Outcome::Record { frames, monitor })
         }
         Command::Campaign { kind } => {
             let (profile, common) = match kind {
@@ -395,9 +490,11 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
                     (profile::track(track.csv.as_deref())?, common)
                 }
             };
-            let mut t = open(&cli)?;
-            campaign_cmd(t.as_mut(), &dec, profile, common)
+            Ok(Outcome::Campaign(campaign_cmd(t, dec, profile, common)?))
         }
+        Command::Convert { .. } | Command::Rehearse { .. } => Err(BringupError::Profile {
+            reason: "convert and rehearse do not run on a bus".into(),
+        }),
     }
 }
 
@@ -410,7 +507,12 @@ fn to_sweep(a: &SweepArgs) -> Sweep {
     }
 }
 
-fn convert(path: &Path, out: &Path, dec: &Decoder, all_rows: bool) -> Result<(), BringupError> {
+pub(crate) fn convert(
+    path: &Path,
+    out: &Path,
+    dec: &Decoder,
+    all_rows: bool,
+) -> Result<logbuild::Built, BringupError> {
     let file = candump::read(path)?;
     if file.dropped_backwards > 0 {
         eprintln!(
@@ -448,7 +550,7 @@ fn convert(path: &Path, out: &Path, dec: &Decoder, all_rows: bool) -> Result<(),
         built.log.len(),
         built.log.t.last().copied().unwrap_or(0.0)
     );
-    Ok(())
+    Ok(built)
 }
 
 fn monitor(
@@ -457,7 +559,7 @@ fn monitor(
     duration_s: Option<f64>,
     each: bool,
     refresh_s: f64,
-) -> Result<(), BringupError> {
+) -> Result<Monitor, BringupError> {
     let stop = stop_flag();
     let mut m = Monitor::new(*dec);
     let start = t.now_us();
@@ -501,7 +603,7 @@ fn monitor(
             waited_ms: (t.now_us() - start) / 1000,
         });
     }
-    Ok(())
+    Ok(m)
 }
 
 fn record(
@@ -509,7 +611,7 @@ fn record(
     dec: &Decoder,
     out: &Path,
     duration_s: Option<f64>,
-) -> Result<(), BringupError> {
+) -> Result<(u64, Monitor), BringupError> {
     let stop = stop_flag();
     let io = |source| BringupError::Io {
         context: format!("cannot write {}", out.display()),
@@ -550,7 +652,7 @@ fn record(
     crate::out::progress_end();
     say!("{n} frames written to {}", out.display());
     say!("{}", m.summary().trim_end());
-    Ok(())
+    Ok((n, m))
 }
 
 /// The progress line on stderr, at most 10 times a second of the run.
@@ -604,7 +706,7 @@ fn campaign_cmd(
     dec: &Decoder,
     profile: Profile,
     args: &CampaignArgs,
-) -> Result<ExitCode, BringupError> {
+) -> Result<CampaignOutcome, BringupError> {
     let ready = campaign::ready_check(t, dec)?;
     let plan = format!(
         "campaign on {}: {}\n  AS state claimed: Ready for the lead-in, {} for the profile, \
@@ -672,22 +774,25 @@ fn campaign_cmd(
         })
         .unwrap_or_else(|| "no status frame at the end".into());
     match run.aborted {
-        Some(reason) => {
-            say!(
-                "ABORTED: {reason}; {} of {} profile samples sent; AS Finished sent; {fin}",
-                run.profile_samples_sent,
-                c.profile.samples.len()
-            );
-            Ok(ExitCode::from(EXIT_ABORTED))
-        }
-        None => {
-            say!(
-                "completed: {} profile samples sent; AS Finished sent; {fin}",
-                run.profile_samples_sent
-            );
-            Ok(ExitCode::SUCCESS)
-        }
+        Some(reason) => say!(
+            "ABORTED: {reason}; {} of {} profile samples sent; AS Finished sent; {fin}",
+            run.profile_samples_sent,
+            c.profile.samples.len()
+        ),
+        None => say!(
+            "completed: {} profile samples sent; AS Finished sent; {fin}",
+            run.profile_samples_sent
+        ),
     }
+    Ok(CampaignOutcome {
+        aborted: run.aborted,
+        profile_samples: c.profile.samples.len(),
+        profile_samples_sent: run.profile_samples_sent,
+        rate_limited: c.profile.rate_limited,
+        final_status: run.final_status,
+        log_rows: built.log.len(),
+        recording: record_path,
+    })
 }
 
 fn send(
@@ -696,7 +801,7 @@ fn send(
     as_state: Option<AsState>,
     finish: bool,
     which: &SendProfile,
-) -> Result<(), BringupError> {
+) -> Result<Monitor, BringupError> {
     let stop = stop_flag();
     let (profile, as_state, clear) = match which {
         SendProfile::ClearFaults => (
@@ -793,7 +898,7 @@ fn send(
             waited_ms: (profile.duration_s() * 1000.0) as u64,
         });
     }
-    Ok(())
+    Ok(m)
 }
 
 #[cfg(test)]

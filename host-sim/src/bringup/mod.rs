@@ -33,6 +33,7 @@ pub mod epos;
 pub mod logbuild;
 pub mod monitor;
 pub mod profile;
+pub mod rehearse;
 #[cfg(target_os = "linux")]
 pub mod socketcan;
 
@@ -173,6 +174,11 @@ impl<T: Transport> WallPaced<T> {
             inner,
             opened: std::time::Instant::now(),
         }
+    }
+
+    /// The paced transport itself (to script the simulated car between commands).
+    pub fn inner_mut(&mut self) -> &mut T {
+        &mut self.inner
     }
 
     fn wall_us(&self) -> u64 {
