@@ -69,6 +69,9 @@ pub const STEP_US: u64 = 50;
 pub const SUPPLY_V: f64 = 24.0;
 /// Frame time on the bus, µs (8 bytes at 1 Mbit/s, about 130 bit times).
 pub const BUS_LATENCY_US: u64 = 130;
+/// Wall-clock time of the simulation's t = 0 in its recordings, s since the Unix epoch: a fixed,
+/// recognisable origin, so recordings of the simulation repeat byte for byte.
+pub const EPOCH_S: f64 = 1_700_000_000.0;
 /// The EPOS4's node on the simulated bus (the firmware's default).
 pub const EPOS_NODE: u8 = 1;
 
@@ -579,7 +582,6 @@ impl Transport for SimEcu {
     }
 
     fn epoch_s(&self) -> f64 {
-        // A fixed, recognisable origin, so recordings of the simulation repeat byte for byte.
-        1_700_000_000.0
+        EPOCH_S
     }
 }

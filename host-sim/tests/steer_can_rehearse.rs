@@ -6,8 +6,8 @@
 
 use std::process::{Command, Stdio};
 
-/// The inline `steer-can ...` commands of the README's bring-up section (outside fenced
-/// blocks), mentions of `rehearse` itself left out.
+/// The inline `steer-can ...` commands of the README's bring-up section from its numbered
+/// list on (outside fenced blocks), mentions of `rehearse` itself left out.
 fn readme_steer_can_commands() -> usize {
     let readme =
         std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../README.md")).unwrap();
@@ -23,9 +23,10 @@ fn readme_steer_can_commands() -> usize {
         .min()
         .unwrap()
         + 4;
+    let list = body.find("\n1. **").unwrap();
     let mut text = String::new();
     let mut fenced = false;
-    for line in body[..end].lines() {
+    for line in body[list..end].lines() {
         if line.starts_with("```") {
             fenced = !fenced;
         } else if !fenced {

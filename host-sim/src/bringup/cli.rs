@@ -32,7 +32,8 @@ use steering_ecu::protocol::PERIOD_US;
              profiles, the test campaign, recording"
 )]
 pub struct Cli {
-    /// SocketCAN interface (`can0`), or `sim` for the simulated ECU in virtual time.
+    /// SocketCAN interface (`can0`); `sim` for a simulated car of this call alone; `sim:PATH`
+    /// for the car `steer-can sim-car --socket PATH` serves to every call.
     #[arg(long, global = true, default_value = "can0")]
     pub iface: String,
     /// The EPOS4's CANopen node ID.
@@ -130,6 +131,13 @@ pub enum Command {
         /// log.csv).
         #[arg(long, default_value = "rehearsal", value_name = "DIR")]
         dir: PathBuf,
+    },
+    /// Run one simulated car (as `--iface sim` builds it) for many calls: serve its bus on a
+    /// Unix socket until Ctrl-C; attach with `--iface sim:PATH`.
+    SimCar {
+        /// The socket file to serve on.
+        #[arg(long, value_name = "PATH")]
+        socket: PathBuf,
     },
     /// Convert a candump log to the project's log format (for `host-sim gap`).
     Convert {
@@ -336,6 +344,12 @@ fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
         }
         return Ok(Box::new(super::WallPaced::new(sim)));
     }
+    #[cfg(unix)]
+    if let Some(path) = cli.iface.strip_prefix("sim:") {
+        return Ok(Box::new(super::simsock::SimSocket::connect(Path::new(
+            path,
+        ))?));
+    }
     #[cfg(target_os = "linux")]
     {
         Ok(Box::new(super::socketcan::SocketCan::open(&cli.iface)?))
@@ -388,6 +402,8 @@ pub enum Outcome {
     Rehearsed {
         all_passed: bool,
     },
+    /// `sim-car` stopped (Ctrl-C).
+    Served,
 }
 
 impl Outcome {
@@ -433,6 +449,11 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
                 });
             }
             super::rehearse::rehearse(&cli, dir)?
+        }
+        #[cfg(unix)]
+        Command::SimCar { socket } => {
+            super::simsock::serve(sim_car(&cli)?, socket, &stop_flag())?;
+            Outcome::Served
         }
         command => {
             let mut t = open(&cli)?;
@@ -492,9 +513,11 @@ pub(crate) fn execute(
             };
             Ok(Outcome::Campaign(campaign_cmd(t, dec, profile, common)?))
         }
-        Command::Convert { .. } | Command::Rehearse { .. } => Err(BringupError::Profile {
-            reason: "convert and rehearse do not run on a bus".into(),
-        }),
+        Command::Convert { .. } | Command::Rehearse { .. } | Command::SimCar { .. } => {
+            Err(BringupError::Profile {
+                reason: "convert, rehearse and sim-car do not run on a bus".into(),
+            })
+        }
     }
 }
 

@@ -34,6 +34,8 @@ pub mod logbuild;
 pub mod monitor;
 pub mod profile;
 pub mod rehearse;
+#[cfg(unix)]
+pub mod simsock;
 #[cfg(target_os = "linux")]
 pub mod socketcan;
 

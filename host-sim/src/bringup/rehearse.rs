@@ -94,8 +94,8 @@ fn item_title(line: &str) -> Option<String> {
     Some(format!("{number}. {title}"))
 }
 
-/// The items of the list and the `steer-can` commands of the section, in the README's order.
-/// A mention of `rehearse` itself is not a step.
+/// The items of the list and the `steer-can` commands in and after it, in the README's order
+/// (the section's introduction is not the first day). A mention of `rehearse` is not a step.
 pub fn first_day(readme: &str) -> Result<(Vec<ReadmeItem>, Vec<ReadmeStep>), String> {
     let text = section(readme)?;
     let mut items: Vec<ReadmeItem> = Vec::new();
@@ -123,7 +123,13 @@ pub fn first_day(readme: &str) -> Result<(Vec<ReadmeItem>, Vec<ReadmeStep>), Str
             if i > 0 {
                 if in_code {
                     let command = code.split_whitespace().collect::<Vec<_>>().join(" ");
-                    let item = current.clone().unwrap_or_else(|| "Before the list.".into());
+                    code.clear();
+                    in_code = false;
+                    // The section's introduction names commands too; the first day starts
+                    // with the list.
+                    let Some(item) = current.clone() else {
+                        continue;
+                    };
                     if let Some(it) = items.iter_mut().rev().find(|it| it.title == item)
                         && it.first_code.is_none()
                     {
@@ -137,9 +143,9 @@ pub fn first_day(readme: &str) -> Result<(Vec<ReadmeItem>, Vec<ReadmeStep>), Str
                         }
                         steps.push(ReadmeStep { item, command });
                     }
-                    code.clear();
+                    continue;
                 }
-                in_code = !in_code;
+                in_code = true;
             }
             if in_code {
                 code.push_str(part);
@@ -349,8 +355,8 @@ fn run_step(
             out,
             all_rows,
         } => cli::convert(candump, out, dec, *all_rows).map(Outcome::Convert),
-        Command::Rehearse { .. } => {
-            return fail("a first-day step", "rehearse inside rehearse".into());
+        Command::Rehearse { .. } | Command::SimCar { .. } => {
+            return fail("a first-day step", "not a step of a session".into());
         }
         other => cli::execute(other, node, dec, car.transport()),
     };
@@ -392,7 +398,7 @@ fn expected_of(command: &Command, session: &Session) -> &'static str {
         }
         Command::Record { .. } => "the raw bus in a candump -l file",
         Command::Convert { .. } => "a log from the recording's references and ECU frames",
-        Command::Rehearse { .. } => "",
+        Command::Rehearse { .. } | Command::SimCar { .. } => "",
     }
 }
 
