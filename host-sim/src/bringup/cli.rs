@@ -1,7 +1,9 @@
 //! The `steer-can` command line: argument parsing, the confirmation prompt, Ctrl-C, progress
-//! on stderr, results on stdout. `--iface sim` runs every command against the simulated ECU
-//! (`crate::sim_ecu`) in virtual time: the tests use it, and a team can rehearse the bring-up
-//! on a laptop before the car is there.
+//! on stderr, results on stdout. `--iface sim` runs every command against the simulated car
+//! (`crate::sim_ecu`, the default firmware unless `--drive direct`), held to the wall clock
+//! unless `--fast`: the tests use it, and a team can rehearse the bring-up on a laptop before
+//! the car is there (`rehearse`, `sim-car`). Each command returns what it found
+//! ([`Outcome`]) besides printing it, so `rehearse` judges values, not text.
 
 use super::campaign::{self, Campaign, Live};
 use super::decode::{Decoder, faults_in_words};

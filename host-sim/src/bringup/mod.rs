@@ -6,13 +6,14 @@
 //! Theory of operation:
 //!
 //! ```text
-//!   steer-can <command> --iface can0|sim
+//!   steer-can <command> --iface can0|sim|sim:PATH
 //!        |
 //!        v
 //!   Transport (send a frame, receive until a deadline, now_us)   <- the only I/O
 //!        |-- SocketCan (Linux, wall clock; thin)                  `socketcan.rs`
-//!        '-- SimEcu (the firmware's tasks + plant + EPOS4 sim,     `crate::sim_ecu`
-//!                    in-memory bus, virtual time)
+//!        |-- SimEcu (the firmware's tasks + plant + EPOS4 sim,     `crate::sim_ecu`
+//!        |           in-memory bus, virtual time; WallPaced holds it to the wall clock)
+//!        '-- SimSocket (a SimEcu that `sim-car` serves to many calls) `simsock.rs`
 //!   decode   frame -> Decoded (reference, status, motor, EPOS4 PDO/SDO/EMCY/heartbeat, NMT)
 //!   monitor  Decoded stream -> counters, CRC errors, counter gaps, last values
 //!   profile  step / sine / sweep / track samples at 100 Hz, limited to the ECU's 400 deg/s
@@ -20,10 +21,12 @@
 //!            aborts on a fault bit, an EMCY, a silent ECU or Ctrl-C, always ending in AS Off
 //!   record   every frame with its time -> candump `-l` file        `candump.rs`
 //!   logbuild reference + status + motor frames -> log rows (t, ref_sw_deg, sw_deg, ...)
+//!   rehearse the README's first-day list, read from the README, on one SimEcu   `rehearse.rs`
 //! ```
 //!
 //! Every command takes its time from the transport, so a campaign against the simulated ECU
-//! runs in virtual time, as fast as the simulation goes, and one on the car in wall-clock time.
+//! runs in virtual time (held to the wall clock unless `--fast`), and one on the car in
+//! wall-clock time.
 
 pub mod campaign;
 pub mod candump;
