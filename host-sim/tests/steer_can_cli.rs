@@ -439,3 +439,35 @@ fn the_simulated_car_runs_either_controller() {
     println!("2 Hz sine on the simulated car: RMS error paper {paper:.2} deg, ECU {ecu:.2} deg");
     assert!(ecu < 0.6 * paper, "paper {paper} deg, ECU {ecu} deg");
 }
+
+/// The ready check's advice for a latched fault is a command the tool accepts (it named a
+/// `--clear-faults` option that does not exist).
+#[test]
+fn the_ready_checks_advice_is_a_command_that_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("x.csv");
+    // The column encoder silent from power-up: the fault is latched before the ready check.
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "--sim-inject",
+        "encoder@0",
+        "campaign",
+        "sweep",
+        "--yes",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    let advice = err
+        .split('`')
+        .nth(1)
+        .unwrap_or_else(|| panic!("no command in {err}"));
+    assert!(advice.starts_with("steer-can "), "{err}");
+    let words: Vec<&str> = advice.split_whitespace().skip(1).collect();
+    let mut args = vec!["--iface", "sim"];
+    args.extend(&words);
+    let o = steer_can(&args);
+    assert!(o.status.success(), "`{advice}` is refused: {}", stderr(&o));
+}

@@ -97,3 +97,33 @@ fn rehearse_refuses_a_real_interface() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("simulated car only"), "{err}");
 }
+
+/// A car that is not fine fails the rehearsal: a column encoder that stops answering half a
+/// second in shows in the first monitor step, and the exit code says so.
+#[test]
+fn a_broken_car_fails_the_rehearsal() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_steer-can"))
+        .args([
+            "--iface",
+            "sim",
+            "--fast",
+            "--sim-inject",
+            "encoder@0.5",
+            "rehearse",
+            "--dir",
+        ])
+        .arg(dir.path())
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    let first = out
+        .lines()
+        .map(str::trim)
+        .find(|l| *l == "PASS" || *l == "FAIL");
+    assert_eq!(first, Some("FAIL"), "{out}");
+    assert!(out.contains("column encoder"), "{out}");
+    assert!(out.contains("see FAIL above"), "{out}");
+}
