@@ -107,6 +107,22 @@ impl SimCar {
     };
 }
 
+/// The ECU as the firmware's EPOS4 build makes it at start-up (`main.rs`), with the EPOS4 at
+/// [`EPOS_NODE`]: the link with the paper's settings, and the ECU mode's feedforward gains
+/// when that controller runs. Also the link's settings, for the simulated drive's scale.
+pub fn epos4_ecu(controller: ControllerKind, now_us: u64) -> Option<(Ecu, Epos4Config)> {
+    let mut config = Epos4Config::paper(NodeId::new(EPOS_NODE)?);
+    if controller == ControllerKind::Ecu {
+        config.gains = Ecu::ecu_mode_epos4_gains();
+    }
+    let link = Epos4Link::new(config, now_us).ok()?;
+    let ecu = match controller {
+        ControllerKind::Paper => Ecu::paper_epos4(link),
+        ControllerKind::Ecu => Ecu::ecu_epos4(link),
+    }?;
+    Some((ecu, config))
+}
+
 /// Hands a frame the ECU received to the task that consumes it, as the firmware's receive
 /// task does ([`FirmwareRoutes`]: consumer 0 the reference task, 1 the EPOS4 link); a full
 /// queue drops the frame, as on the chip. Frames for no consumer are dropped.
@@ -317,19 +333,14 @@ impl SimEcu {
             .unwrap_or_else(|poisoned| poisoned.into_inner());
         MockDriver::get().reset();
         let node = NodeId::new(EPOS_NODE).expect("node 1 is valid");
-        // The firmware's start-up (`main.rs`): the link's settings, with the ECU mode's
-        // feedforward gains when that controller runs.
-        let mut config = Epos4Config::paper(node);
-        if car.controller == ControllerKind::Ecu {
-            config.gains = Ecu::ecu_mode_epos4_gains();
-        }
-        let ecu = match (car.drive, car.controller) {
-            (SimDrive::Direct, ControllerKind::Paper) => Ecu::paper(),
-            (SimDrive::Direct, ControllerKind::Ecu) => Ecu::ecu_direct(),
-            (SimDrive::Epos4, kind) => Epos4Link::new(config, 0).ok().and_then(|link| match kind {
-                ControllerKind::Paper => Ecu::paper_epos4(link),
-                ControllerKind::Ecu => Ecu::ecu_epos4(link),
-            }),
+        let (ecu, config) = match (car.drive, car.controller) {
+            (SimDrive::Direct, ControllerKind::Paper) => {
+                Ecu::paper().map(|e| (e, Epos4Config::paper(node)))
+            }
+            (SimDrive::Direct, ControllerKind::Ecu) => {
+                Ecu::ecu_direct().map(|e| (e, Epos4Config::paper(node)))
+            }
+            (SimDrive::Epos4, kind) => epos4_ecu(kind, 0),
         }
         .expect("the paper configuration is valid");
         // Leaked: the task futures borrow them for 'static, like the firmware's statics.

@@ -9,15 +9,14 @@ use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
 use host_sim::canbus::{CanBus, RandomFaults};
 use host_sim::epos4_sim::Epos4Sim;
-use host_sim::sim_ecu::route_to_ecu;
+use host_sim::sim_ecu::{epos4_ecu, route_to_ecu};
 use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::canopen::cia402::State;
-use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale, od};
+use steering_ecu::canopen::epos4::{PositionScale, od};
 use steering_ecu::canopen::{NodeId, ObjectAddress};
 use steering_ecu::controller::ControllerKind;
-use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
 use steering_ecu::gearing::Gearing;
 use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
@@ -148,15 +147,8 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
         .lock()
         .map(|c| *c)
         .unwrap_or(ControllerKind::Paper);
-    let mut config = Epos4Config::paper(node());
-    if kind == ControllerKind::Ecu {
-        config.gains = Ecu::ecu_mode_epos4_gains();
-    }
-    let link = Epos4Link::new(config, 0).unwrap();
-    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(match kind {
-        ControllerKind::Paper => Ecu::paper_epos4(link).unwrap(),
-        ControllerKind::Ecu => Ecu::ecu_epos4(link).unwrap(),
-    }))));
+    let (ecu, config) = epos4_ecu(kind, 0).unwrap();
+    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(ecu))));
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
     let mut bus = CanBus::new(seed, 130);
