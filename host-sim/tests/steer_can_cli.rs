@@ -471,3 +471,34 @@ fn the_ready_checks_advice_is_a_command_that_runs() {
     let o = steer_can(&args);
     assert!(o.status.success(), "`{advice}` is refused: {}", stderr(&o));
 }
+
+/// A current-sense fault needs the ECU's own current sensing: on the EPOS4-mode car it is
+/// refused with the option that has it, not silently ignored; on the direct-drive car it
+/// trips the over-current check.
+#[test]
+fn a_current_sense_fault_is_for_the_direct_drive_car() {
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "--sim-inject",
+        "overcurrent@0.2",
+        "monitor",
+        "--duration-s",
+        "0.5",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--drive direct"), "{}", stderr(&o));
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "--drive",
+        "direct",
+        "--sim-inject",
+        "overcurrent@0.2",
+        "send",
+        "--as-state",
+        "driving",
+        "step",
+    ]);
+    assert!(stdout(&o).contains("over-current"), "{}", stdout(&o));
+}

@@ -304,7 +304,7 @@ pub(crate) fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
         },
     });
     if let Some(spec) = &cli.sim_inject {
-        let bad = || BringupError::Profile {
+        let bad = || BringupError::Usage {
             reason: format!(
                 "--sim-inject `{spec}`: expected KIND@SECONDS, KIND one of encoder, overcurrent, epos"
             ),
@@ -312,7 +312,7 @@ pub(crate) fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
         let (kind, at) = spec.split_once('@').ok_or_else(bad)?;
         let injection = Injection::parse(kind).ok_or_else(bad)?;
         if !sim.can_inject(injection) {
-            return Err(BringupError::Profile {
+            return Err(BringupError::Usage {
                 reason: format!(
                     "--sim-inject `{spec}`: the EPOS4 senses its own current; a current-sense \
                      fault exists in direct drive only (--drive direct)"
@@ -443,7 +443,7 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
         } => Outcome::Convert(convert(path, out, &dec, *all_rows)?),
         Command::Rehearse { dir } => {
             if cli.iface != "sim" {
-                return Err(BringupError::Profile {
+                return Err(BringupError::Usage {
                     reason: format!(
                         "rehearse runs on the simulated car only (--iface sim), not on {}",
                         cli.iface
@@ -516,7 +516,7 @@ pub(crate) fn execute(
             Ok(Outcome::Campaign(campaign_cmd(t, dec, profile, common)?))
         }
         Command::Convert { .. } | Command::Rehearse { .. } | Command::SimCar { .. } => {
-            Err(BringupError::Profile {
+            Err(BringupError::Usage {
                 reason: "convert, rehearse and sim-car do not run on a bus".into(),
             })
         }

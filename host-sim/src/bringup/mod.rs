@@ -101,6 +101,8 @@ pub enum BringupError {
     Log { reason: String },
     /// The operator said no at the confirmation prompt.
     NotConfirmed,
+    /// A command line the tool cannot act on (an option that does not fit, a bad value).
+    Usage { reason: String },
 }
 
 impl fmt::Display for BringupError {
@@ -127,6 +129,7 @@ impl fmt::Display for BringupError {
             BringupError::Profile { reason } => write!(f, "profile: {reason}"),
             BringupError::Epos { reason } => write!(f, "EPOS4: {reason}"),
             BringupError::Log { reason } => write!(f, "log: {reason}"),
+            BringupError::Usage { reason } => write!(f, "{reason}"),
             BringupError::NotConfirmed => write!(
                 f,
                 "not confirmed; nothing was sent (answer `yes`, or pass --yes in a script)"

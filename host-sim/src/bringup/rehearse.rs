@@ -200,18 +200,18 @@ struct Verdict {
 /// Runs the rehearsal; prints each step and returns whether all matched.
 pub fn rehearse(outer: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
     if outer.drive != cli::DriveArg::Epos4 {
-        return Err(BringupError::Profile {
+        return Err(BringupError::Usage {
             reason: "rehearse follows the README's list for the default firmware (EPOS4 mode); \
                      leave out --drive direct"
                 .into(),
         });
     }
-    let (items, steps) = first_day(README).map_err(|reason| BringupError::Profile { reason })?;
+    let (items, steps) = first_day(README).map_err(|reason| BringupError::Usage { reason })?;
     std::fs::create_dir_all(dir).map_err(|source| BringupError::Io {
         context: format!("cannot create {}", dir.display()),
         source,
     })?;
-    let node = NodeId::new(outer.node).ok_or_else(|| BringupError::Profile {
+    let node = NodeId::new(outer.node).ok_or_else(|| BringupError::Usage {
         reason: format!("--node {}: a CANopen node ID is 1 to 127", outer.node),
     })?;
     let dec = cli::decoder(node)?;

@@ -44,7 +44,7 @@ fn frame_line(stamped: &Stamped) -> String {
 /// Serves `sim` on `socket` until `stop` is raised; removes the socket file at the end.
 pub fn serve(mut sim: SimEcu, socket: &Path, stop: &AtomicBool) -> Result<(), BringupError> {
     if UnixStream::connect(socket).is_ok() {
-        return Err(BringupError::Profile {
+        return Err(BringupError::Usage {
             reason: format!("{}: a simulated car already serves there", socket.display()),
         });
     }
