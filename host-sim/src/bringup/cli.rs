@@ -258,6 +258,7 @@ macro_rules! say {
         crate::out::stdout_line("steer-can", format_args!($($arg)*))
     };
 }
+pub(crate) use say;
 
 /// Exit code of a campaign that stopped on a fault or Ctrl-C (the log is still written).
 pub const EXIT_ABORTED: u8 = 3;

@@ -11,7 +11,7 @@
 //! still latched when the next `monitor` looks, and `send clear-faults` clears it. The files
 //! the steps write (logs, recordings, the track profile) go to `--dir`.
 
-use super::cli::{self, Cli, Command, Outcome, SendProfile};
+use super::cli::{self, Cli, Command, Outcome, SendProfile, say};
 use super::decode::{Decoder, ecu_state_words, faults_in_words, nmt_words};
 use super::monitor::Monitor;
 use super::{BringupError, Transport, WallPaced};
@@ -221,7 +221,7 @@ pub fn rehearse(outer: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
     } else {
         Car::Paced(WallPaced::new(sim))
     };
-    println!(
+    say!(
         "rehearsal of the README's first day on the simulated car ({}), one session; files in {}",
         if outer.fast {
             "--fast"
@@ -244,7 +244,7 @@ pub fn rehearse(outer: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
             }
         }
         said.push(&step.item);
-        println!(
+        say!(
             "\n=== step {} of {}: [{}] {}",
             k + 1,
             steps.len(),
@@ -252,16 +252,16 @@ pub fn rehearse(outer: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
             step.command
         );
         let verdict = run_step(&step.command, dir, &mut car, node, &dec, &mut session);
-        println!("  README expects: {}", verdict.expected);
-        println!("  seen:           {}", verdict.seen);
-        println!("  {}", if verdict.pass { "PASS" } else { "FAIL" });
+        say!("  README expects: {}", verdict.expected);
+        say!("  seen:           {}", verdict.seen);
+        say!("  {}", if verdict.pass { "PASS" } else { "FAIL" });
         if verdict.pass {
             passed += 1;
         } else {
             failed += 1;
         }
         if stop.load(Ordering::SeqCst) {
-            println!("interrupted");
+            say!("interrupted");
             break;
         }
     }
@@ -271,7 +271,7 @@ pub fn rehearse(outer: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
         }
     }
     let all_passed = failed == 0 && passed == steps.len();
-    println!(
+    say!(
         "\nrehearsal: {passed} of {} steps match the README{}",
         steps.len(),
         if all_passed {
@@ -291,7 +291,7 @@ fn say_not_rehearsed(it: &ReadmeItem, dir: &Path) {
         ),
         _ => "on the car only (no steer-can command)".into(),
     };
-    println!("\n--- [{}] {what}", it.title);
+    say!("\n--- [{}] {what}", it.title);
 }
 
 /// Parse the README's command and run it in the session.
