@@ -52,7 +52,7 @@ mod firmware {
     use steering_ecu::ecu::Ecu;
     use steering_ecu::ports::{BusError, CanRx, CanTx, ColumnEncoderPort, EncoderError};
     use steering_ecu::sensors::ColumnEncoder;
-    use steering_ecu::tasks::{self, FrameQueue, Route, RouterCounters, SharedEcu};
+    use steering_ecu::tasks::{self, FirmwareRoutes, FrameQueue, RouterCounters, SharedEcu};
 
     #[cfg(feature = "drive-direct")]
     mod bridge;
@@ -188,20 +188,6 @@ mod firmware {
             ecu,
         )
         .await
-    }
-
-    /// Reference frames to the reference task, the EPOS4's to the drive link.
-    struct FirmwareRoutes;
-
-    impl Route for FirmwareRoutes {
-        fn route(&self, frame: &Frame) -> Option<usize> {
-            match frame.id().raw() {
-                steering_ecu::tasks::VEHICLE_REFERENCE_ID => Some(0),
-                // EMCY 0x081.., TPDOs 0x181.. 0x4FF, SDO responses 0x581.., heartbeat 0x701..
-                0x081..=0x0FF | 0x181..=0x4FF | 0x581..=0x5FF | 0x701..=0x77F => Some(1),
-                _ => None,
-            }
-        }
     }
 
     /// Rate of the loop that will run the control step (the later issue hangs CAN and the EPOS4

@@ -141,6 +141,23 @@ pub trait Route {
     fn route(&self, frame: &Frame) -> Option<usize>;
 }
 
+/// The firmware's routing (`main.rs`), kept here so the simulated car routes as the chip does:
+/// the vehicle's reference to consumer 0 (the reference task), the EPOS4's EMCY (0x081..),
+/// TPDOs (0x181..0x4FF), SDO answers (0x581..) and heartbeat (0x701..) to consumer 1 (the drive
+/// link).
+#[derive(Debug, Clone, Copy)]
+pub struct FirmwareRoutes;
+
+impl Route for FirmwareRoutes {
+    fn route(&self, frame: &Frame) -> Option<usize> {
+        match frame.id().raw() {
+            VEHICLE_REFERENCE_ID => Some(0),
+            0x081..=0x0FF | 0x181..=0x4FF | 0x581..=0x5FF | 0x701..=0x77F => Some(1),
+            _ => None,
+        }
+    }
+}
+
 /// What the router saw that the state machine must know.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

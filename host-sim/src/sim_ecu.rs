@@ -1,31 +1,41 @@
-//! The simulated ECU on the car's bus: the firmware's own tasks (`steering_ecu::tasks`:
-//! reference receiver, status sender, encoder reader) and its `Ecu` in direct drive mode,
-//! driving the paper's plant, plus the simulated EPOS4 at its node, all on one in-memory CAN
-//! bus in virtual time. A host tool attaches as a third node through [`crate::bringup::Transport`],
+//! The simulated car on the bus: the firmware's own tasks (`steering_ecu::tasks`: reference
+//! receiver, status sender, encoder reader and, in EPOS4 mode, the EPOS4 link) and its `Ecu`,
+//! the simulated EPOS4 at its node and the paper's plant, all on one in-memory CAN bus in
+//! virtual time. A host tool attaches as a further node through [`crate::bringup::Transport`],
 //! so every `steer-can` command runs against it exactly as against the car.
+//!
+//! Two builds of the car, as the firmware has two drive modes ([`SimDrive`]):
+//! - EPOS4 mode (the firmware's default build): the ECU's link brings the EPOS4 up (SDO
+//!   configuration, CSP mode 8, SYNC every 10 ms, heartbeats, PDOs) and the simulated EPOS4
+//!   (`crate::epos4_sim`) runs the paper's cascade on its own copy of the paper plant.
+//! - direct drive: the ECU's own fast loop (`steering_ecu::direct::FastLoop`: Hall
+//!   commutation, current sense, bridge; position 2 kHz, current 20 kHz) runs as the
+//!   firmware's ADC interrupt runs it, as in `tests/firmware_tasks.rs`, on the plant here. The
+//!   simulated EPOS4 stays on the bus, unconfigured, as a drive a direct-drive car does not use.
 //!
 //! How the tasks run: the same task functions the STM32 runs, polled once per 50 µs step by a
 //! small single-threaded executor here (a no-op waker, every task polled every step), with
 //! embassy-time's mock driver advanced by the step. Polling every step costs nothing at this
 //! rate and lets the host code call in and out (`recv_until`) instead of handing control to
-//! embassy's `Executor::run_until`. The direct-drive fast loop (`steering_ecu::direct::
-//! FastLoop`: Hall commutation, current sense, bridge; position 2 kHz, current 20 kHz) runs as
-//! the firmware's ADC interrupt runs it, as in `tests/firmware_tasks.rs`.
+//! embassy's `Executor::run_until`. The ECU's received frames go through the firmware's own
+//! routing ([`steering_ecu::tasks::FirmwareRoutes`], [`route_to_ecu`]).
 //!
 //! The mock clock is global to the process, so one `SimEcu` lives at a time: `new` waits for
 //! the previous one to be dropped.
 //!
 //! ```text
-//!  step (50 µs):  bus delivers due frames -> ECU port: 0x100 to the reference queue
+//!  step (50 µs):  bus delivers due frames -> ECU port: routed to the reference / drive queue
 //!                                          -> EPOS4 port: Epos4Sim::on_frame, answers sent
 //!                                          -> host port: inbox
-//!                 poll the three tasks; status/motor frames from the TX queue onto the bus
-//!                 EPOS4 advance (heartbeat, its own loops)
-//!                 fast loop (Hall code, phase currents -> bridge command; position tick
-//!                 every 10th step), plant step, encoder value
-//!                 mock clock += 50 µs
+//!                 vehicle computer (if scripted): its reference frame every 10 ms
+//!                 poll the tasks; the ECU's frames from the TX queue onto the bus
+//!                 EPOS4 advance (heartbeat, PDOs, its own loops on its plant)
+//!                 direct drive only: fast loop (Hall code, phase currents -> bridge command;
+//!                 position tick every 10th step), plant step
+//!                 encoder value; mock clock += 50 µs
 //! ```
 
+use crate::bringup::profile::ReferenceSender;
 use crate::bringup::{BringupError, Clock, Stamped, Transport};
 use crate::canbus::{CanBus, Port};
 use crate::epos4_sim::Epos4Sim;
@@ -38,18 +48,19 @@ use std::pin::Pin;
 use std::rc::Rc;
 use std::sync::{Mutex, MutexGuard};
 use std::task::{Context, Waker};
+use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
 use steering_ecu::canopen::NodeId;
-use steering_ecu::canopen::epos4::{Epos4Config, PositionScale};
+use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale};
 use steering_ecu::commutation::{BRIDGE_OFF, BridgeCommand, HallDecoder, code_of};
 use steering_ecu::controller::ControllerKind;
 use steering_ecu::direct::FastLoop;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::ports::{Bridge, ColumnEncoderPort, CurrentSense, EncoderError, HallInputs};
-use steering_ecu::protocol::REFERENCE_ID;
+use steering_ecu::protocol::PERIOD_US;
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
 use steering_ecu::steering::Output;
-use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
+use steering_ecu::tasks::{self, FirmwareRoutes, FrameQueue, Route, SharedEcu};
 use steering_ecu::units::{Amps, Volts};
 
 /// Simulation step, µs (the current loop's 20 kHz).
@@ -58,11 +69,71 @@ pub const STEP_US: u64 = 50;
 pub const SUPPLY_V: f64 = 24.0;
 /// Frame time on the bus, µs (8 bytes at 1 Mbit/s, about 130 bit times).
 pub const BUS_LATENCY_US: u64 = 130;
+/// Wall-clock time of the simulation's t = 0 in its recordings, s since the Unix epoch: a fixed,
+/// recognisable origin, so recordings of the simulation repeat byte for byte.
+pub const EPOCH_S: f64 = 1_700_000_000.0;
 /// The EPOS4's node on the simulated bus (the firmware's default).
 pub const EPOS_NODE: u8 = 1;
 
 /// One simulated ECU per process at a time (the mock clock is global).
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// Which firmware build the simulated car runs (the firmware's `drive-epos4` / `drive-direct`
+/// features).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SimDrive {
+    /// The default build: the ECU commands the EPOS4 over CANopen (CSP, SYNC, PDOs).
+    #[default]
+    Epos4,
+    /// The ECU's own three-phase bridge.
+    Direct,
+}
+
+/// How the simulated car is built and powered up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimCar {
+    /// Steering angle at power-up, deg at the wheel (a non-finite one is taken as 0).
+    pub column_deg: f64,
+    pub controller: ControllerKind,
+    pub drive: SimDrive,
+}
+
+impl SimCar {
+    /// The default firmware (EPOS4 mode, the paper's controller), powered up straight.
+    pub const DEFAULT: SimCar = SimCar {
+        column_deg: 0.0,
+        controller: ControllerKind::Paper,
+        drive: SimDrive::Epos4,
+    };
+}
+
+/// The ECU as the firmware's EPOS4 build makes it at start-up (`main.rs`), with the EPOS4 at
+/// [`EPOS_NODE`]: the link with the paper's settings, and the ECU mode's feedforward gains
+/// when that controller runs. Also the link's settings, for the simulated drive's scale.
+pub fn epos4_ecu(controller: ControllerKind, now_us: u64) -> Option<(Ecu, Epos4Config)> {
+    let mut config = Epos4Config::paper(NodeId::new(EPOS_NODE)?);
+    if controller == ControllerKind::Ecu {
+        config.gains = Ecu::ecu_mode_epos4_gains();
+    }
+    let link = Epos4Link::new(config, now_us).ok()?;
+    let ecu = match controller {
+        ControllerKind::Paper => Ecu::paper_epos4(link),
+        ControllerKind::Ecu => Ecu::ecu_epos4(link),
+    }?;
+    Some((ecu, config))
+}
+
+/// Hands a frame the ECU received to the task that consumes it, as the firmware's receive
+/// task does ([`FirmwareRoutes`]: consumer 0 the reference task, 1 the EPOS4 link); a full
+/// queue drops the frame, as on the chip. Frames for no consumer are dropped.
+pub fn route_to_ecu(frame: Frame, reference: &FrameQueue, drive: &FrameQueue) {
+    let queue = match FirmwareRoutes.route(&frame) {
+        Some(0) => reference,
+        Some(_) => drive,
+        None => return,
+    };
+    let _ = queue.try_send(frame);
+}
 
 /// A fault put into the simulation on purpose.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,7 +141,8 @@ pub enum Injection {
     /// The column encoder stops answering (SPI timeout).
     EncoderNoResponse,
     /// The current sensor reads this many amps more than flows (a broken sensor or a short):
-    /// the over-current check sees it.
+    /// the over-current check sees it. Direct drive only (the EPOS4 measures its own
+    /// current): see [`SimEcu::can_inject`].
     CurrentOffset(f64),
     /// The EPOS4 reports a drive error with this CANopen error code (EMCY + Fault state).
     EposFault(u16),
@@ -182,17 +254,28 @@ pub fn direct_drive_period_sensed(
 
 type Task = Pin<Box<dyn Future<Output = ()>>>;
 
+/// A scripted vehicle computer ([`SimEcu::script_vehicle`]).
+struct Vehicle {
+    port: Port,
+    script: VecDeque<(AsState, f64)>,
+    sender: ReferenceSender,
+    next_us: u64,
+}
+
 /// The simulated ECU, its actuator, the EPOS4 and the bus.
 pub struct SimEcu {
     ecu: &'static SharedEcu,
     reference_frames: &'static FrameQueue,
+    drive_frames: &'static FrameQueue,
     tx_frames: &'static FrameQueue,
     tasks: Vec<Task>,
+    drive: SimDrive,
     encoder: Rc<EncoderState>,
     bus: CanBus,
     ecu_port: Port,
     epos_port: Port,
     host_port: Port,
+    vehicle: Option<Vehicle>,
     plant: LinearPlant,
     fast: FastLoop,
     epos: Epos4Sim,
@@ -229,8 +312,19 @@ impl SimEcu {
 
     /// [`SimEcu::paper_at`] with the ECU running `controller` (direct drive).
     pub fn at(column_deg: f64, controller: ControllerKind) -> SimEcu {
-        let column_rad = if column_deg.is_finite() {
-            column_deg.to_radians()
+        Self::new(SimCar {
+            column_deg,
+            controller,
+            drive: SimDrive::Direct,
+        })
+    }
+
+    /// The car `car` describes, at t = 0; the EPOS4 sends its boot-up message first, as it
+    /// boots before the ECU's link starts. Waits while another `SimEcu` of this process is
+    /// alive.
+    pub fn new(car: SimCar) -> SimEcu {
+        let column_rad = if car.column_deg.is_finite() {
+            car.column_deg.to_radians()
         } else {
             0.0
         };
@@ -238,22 +332,29 @@ impl SimEcu {
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
         MockDriver::get().reset();
-        // Leaked: the task futures borrow them for 'static, like the firmware's statics.
-        let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(std::cell::RefCell::new(
-            match controller {
-                ControllerKind::Paper => Ecu::paper(),
-                ControllerKind::Ecu => Ecu::ecu_direct(),
+        let node = NodeId::new(EPOS_NODE).expect("node 1 is valid");
+        let (ecu, config) = match (car.drive, car.controller) {
+            (SimDrive::Direct, ControllerKind::Paper) => {
+                Ecu::paper().map(|e| (e, Epos4Config::paper(node)))
             }
-            .expect("the paper configuration is valid"),
-        ))));
+            (SimDrive::Direct, ControllerKind::Ecu) => {
+                Ecu::ecu_direct().map(|e| (e, Epos4Config::paper(node)))
+            }
+            (SimDrive::Epos4, kind) => epos4_ecu(kind, 0),
+        }
+        .expect("the paper configuration is valid");
+        // Leaked: the task futures borrow them for 'static, like the firmware's statics.
+        let ecu: &'static SharedEcu =
+            Box::leak(Box::new(SharedEcu::new(std::cell::RefCell::new(ecu))));
         let reference_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
+        let drive_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
         let tx_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
         let encoder = Rc::new(EncoderState {
             column_rad: Cell::new(column_rad),
             broken: Cell::new(false),
         });
         let port: &'static mut SimEncoder = Box::leak(Box::new(SimEncoder(encoder.clone())));
-        let tasks: Vec<Task> = vec![
+        let mut tasks: Vec<Task> = vec![
             Box::pin(async move {
                 tasks::reference_task(reference_frames.receiver(), ecu).await;
             }),
@@ -264,27 +365,37 @@ impl SimEcu {
                 tasks::encoder_task(port, ColumnEncoder { zero_raw: 0 }, ecu).await;
             }),
         ];
+        if car.drive == SimDrive::Epos4 {
+            tasks.push(Box::pin(async move {
+                tasks::drive_task(drive_frames.receiver(), tx_frames.sender(), ecu).await;
+            }));
+        }
         let mut bus = CanBus::new(1, BUS_LATENCY_US);
         let ecu_port = bus.attach();
         let epos_port = bus.attach();
         let host_port = bus.attach();
-        let node = NodeId::new(EPOS_NODE).expect("node 1 is valid");
-        let config = Epos4Config::paper(node);
         let scale = PositionScale::new(config.counts_per_rev).expect("84 inc/rev");
-        let epos = Epos4Sim::new_at(node, scale, column_rad).expect("the paper plant discretises");
+        let mut epos =
+            Epos4Sim::new_at(node, scale, column_rad).expect("the paper plant discretises");
+        for frame in epos.advance(0) {
+            bus.send(epos_port, frame, 0);
+        }
         let mut plant = LinearPlant::new(PlantParams::PAPER, STEP_US as f64 * 1e-6)
             .expect("the paper plant discretises");
         plant.set_at_rest(column_rad);
         SimEcu {
             ecu,
             reference_frames,
+            drive_frames,
             tx_frames,
             tasks,
+            drive: car.drive,
             encoder,
             bus,
             ecu_port,
             epos_port,
             host_port,
+            vehicle: None,
             plant,
             fast: FastLoop::new(0, Volts(SUPPLY_V as f32)),
             epos,
@@ -294,6 +405,30 @@ impl SimEcu {
             scheduled: Vec::new(),
             _one_at_a_time: guard,
         }
+    }
+
+    /// Which drive the car runs.
+    pub fn drive(&self) -> SimDrive {
+        self.drive
+    }
+
+    /// A vehicle computer on its own node that sends `script` as its reference frames (AS
+    /// state, angle at the wheel in deg), one every 10 ms from the next whole period, and then
+    /// falls silent (end the script in AS Off, or the ECU sees a reference timeout). For
+    /// `steer-can record`, which on the car records while someone else steers. Replaces an
+    /// earlier script.
+    pub fn script_vehicle(&mut self, script: Vec<(AsState, f64)>) {
+        let port = match &self.vehicle {
+            Some(v) => v.port,
+            None => self.bus.attach(),
+        };
+        let period = u64::from(PERIOD_US);
+        self.vehicle = Some(Vehicle {
+            port,
+            script: script.into(),
+            sender: ReferenceSender::default(),
+            next_us: self.now_us.div_ceil(period) * period,
+        });
     }
 
     /// The ECU's last output (demand, state, faults).
@@ -320,14 +455,34 @@ impl SimEcu {
 
     /// Column angle of the simulated actuator, deg at the wheel.
     pub fn column_deg(&self) -> f64 {
-        self.plant.column_rad().to_degrees()
+        self.column_rad().to_degrees()
     }
 
+    fn column_rad(&self) -> f64 {
+        match self.drive {
+            SimDrive::Epos4 => self.epos.column_rad(),
+            SimDrive::Direct => self.plant.column_rad(),
+        }
+    }
+
+    /// Motor current of the simulated actuator, A.
     pub fn current_a(&self) -> f64 {
-        self.plant.current_a()
+        match self.drive {
+            SimDrive::Epos4 => self.epos.current_a(),
+            SimDrive::Direct => self.plant.current_a(),
+        }
     }
 
-    /// Apply `injection` now.
+    /// Whether `injection` has an effect on this car: a current-sense offset needs the ECU's
+    /// own current sensing (direct drive).
+    pub fn can_inject(&self, injection: Injection) -> bool {
+        !matches!(
+            (injection, self.drive),
+            (Injection::CurrentOffset(_), SimDrive::Epos4)
+        )
+    }
+
+    /// Apply `injection` now (one [`SimEcu::can_inject`] refuses has no effect).
     pub fn inject(&mut self, injection: Injection) {
         match injection {
             Injection::EncoderNoResponse => self.encoder.broken.set(true),
@@ -362,10 +517,11 @@ impl SimEcu {
         }
         for (port, frame) in self.bus.deliver(now) {
             if port == self.ecu_port {
-                // The firmware's router: reference frames to the reference task. Direct drive
-                // has no EPOS4 link task, so the drive's frames go nowhere.
-                if frame.id() == REFERENCE_ID {
-                    let _ = self.reference_frames.try_send(frame);
+                // Direct drive has no EPOS4 link task: its queue stays empty-handed, as the
+                // firmware built for direct drive routes to a link it does not run.
+                route_to_ecu(frame, self.reference_frames, self.drive_frames);
+                if self.drive == SimDrive::Direct {
+                    while self.drive_frames.try_receive().is_ok() {}
                 }
             } else if port == self.epos_port {
                 for answer in self.epos.on_frame(&frame) {
@@ -374,6 +530,14 @@ impl SimEcu {
             } else if port == self.host_port {
                 self.inbox.push_back(Stamped { t_us: now, frame });
             }
+        }
+        if let Some(v) = &mut self.vehicle
+            && now >= v.next_us
+            && let Some((as_state, deg)) = v.script.pop_front()
+        {
+            let frame = v.sender.frame(deg, as_state, false);
+            self.bus.send(v.port, frame, now);
+            v.next_us += u64::from(PERIOD_US);
         }
         let mut cx = Context::from_waker(Waker::noop());
         for task in &mut self.tasks {
@@ -385,14 +549,16 @@ impl SimEcu {
         for frame in self.epos.advance(now) {
             self.bus.send(self.epos_port, frame, now);
         }
-        direct_drive_period(
-            &mut self.plant,
-            &mut self.fast,
-            self.ecu,
-            now,
-            self.current_offset,
-        );
-        self.encoder.column_rad.set(self.plant.column_rad());
+        if self.drive == SimDrive::Direct {
+            direct_drive_period(
+                &mut self.plant,
+                &mut self.fast,
+                self.ecu,
+                now,
+                self.current_offset,
+            );
+        }
+        self.encoder.column_rad.set(self.column_rad());
         MockDriver::get().advance(Duration::from_micros(STEP_US));
         self.now_us += STEP_US;
     }
@@ -427,7 +593,6 @@ impl Transport for SimEcu {
     }
 
     fn epoch_s(&self) -> f64 {
-        // A fixed, recognisable origin, so recordings of the simulation repeat byte for byte.
-        1_700_000_000.0
+        EPOCH_S
     }
 }

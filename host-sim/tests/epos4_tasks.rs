@@ -9,22 +9,21 @@ use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
 use host_sim::canbus::{CanBus, RandomFaults};
 use host_sim::epos4_sim::Epos4Sim;
+use host_sim::sim_ecu::{epos4_ecu, route_to_ecu};
 use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
-use steering_ecu::can::Frame;
 use steering_ecu::canopen::cia402::State;
-use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale, od};
+use steering_ecu::canopen::epos4::{PositionScale, od};
 use steering_ecu::canopen::{NodeId, ObjectAddress};
 use steering_ecu::controller::ControllerKind;
-use steering_ecu::ecu::Ecu;
 use steering_ecu::faults::Fault;
 use steering_ecu::gearing::Gearing;
 use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
 use steering_ecu::sensors::ColumnEncoder;
 use steering_ecu::steering::{DriveDemand, EcuState};
-use steering_ecu::tasks::{self, FrameQueue, Route, SharedEcu};
+use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
 use steering_ecu::units::SteeringDeg;
 
 static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
@@ -96,19 +95,6 @@ async fn keep_awake() {
     }
 }
 
-/// The firmware's routing (`main.rs`): the vehicle's reference to the reference task, the
-/// EPOS4's EMCY, TPDOs, SDO answers and heartbeat to the drive task.
-struct Routes;
-impl Route for Routes {
-    fn route(&self, frame: &Frame) -> Option<usize> {
-        match frame.id().raw() {
-            tasks::VEHICLE_REFERENCE_ID => Some(0),
-            0x081..=0x0FF | 0x181..=0x4FF | 0x581..=0x5FF | 0x701..=0x77F => Some(1),
-            _ => None,
-        }
-    }
-}
-
 /// What happens in one 10 ms period.
 #[derive(Clone, Copy, Debug)]
 enum Event {
@@ -161,15 +147,8 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
         .lock()
         .map(|c| *c)
         .unwrap_or(ControllerKind::Paper);
-    let mut config = Epos4Config::paper(node());
-    if kind == ControllerKind::Ecu {
-        config.gains = Ecu::ecu_mode_epos4_gains();
-    }
-    let link = Epos4Link::new(config, 0).unwrap();
-    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(match kind {
-        ControllerKind::Paper => Ecu::paper_epos4(link).unwrap(),
-        ControllerKind::Ecu => Ecu::ecu_epos4(link).unwrap(),
-    }))));
+    let (ecu, config) = epos4_ecu(kind, 0).unwrap();
+    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(ecu))));
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
     let mut bus = CanBus::new(seed, 130);
@@ -259,14 +238,7 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
                         bus.send(drive_port, r, now_us);
                     }
                 } else if to == ecu_port {
-                    let queue = match Routes.route(&f) {
-                        Some(0) => Some(&REFERENCE_FRAMES),
-                        Some(_) => Some(&DRIVE_FRAMES),
-                        None => None,
-                    };
-                    if let Some(q) = queue {
-                        let _ = q.try_send(f);
-                    }
+                    route_to_ecu(f, &REFERENCE_FRAMES, &DRIVE_FRAMES);
                 } else if to == vehicle
                     && let Ok(status) = protocol.decode_status(&f)
                 {

@@ -94,7 +94,7 @@ pub fn ready_check(
     if status.faults != 0 {
         return Err(BringupError::EcuNotReady {
             reason: format!(
-                "latched faults: {} — remove the cause, then `steer-can send --clear-faults`",
+                "latched faults: {} — remove the cause, then `steer-can send clear-faults`",
                 faults_in_words(status.faults)
             ),
         });

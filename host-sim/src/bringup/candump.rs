@@ -105,6 +105,15 @@ fn parse_line(line: &str) -> Result<Line, String> {
     Ok(Line::Frame { t_s, frame })
 }
 
+/// One candump line read as a classic 11-bit data frame and its time stamp, s; `Ok(None)` for
+/// a valid line that is not such a frame (CAN FD, remote, extended ID).
+pub fn parse_frame_line(line: &str) -> Result<Option<(f64, Frame)>, String> {
+    Ok(match parse_line(line)? {
+        Line::Frame { t_s, frame } => Some((t_s, frame)),
+        Line::NotOurs => None,
+    })
+}
+
 /// Reads a candump log, plain or gzip-compressed (recognised by content, so `.candump.gz`
 /// works); blank lines are skipped, anything else malformed is an error naming the file and
 /// the line.

@@ -1,7 +1,9 @@
 //! The `steer-can` command line: argument parsing, the confirmation prompt, Ctrl-C, progress
-//! on stderr, results on stdout. `--iface sim` runs every command against the simulated ECU
-//! (`crate::sim_ecu`) in virtual time: the tests use it, and a team can rehearse the bring-up
-//! on a laptop before the car is there.
+//! on stderr, results on stdout. `--iface sim` runs every command against the simulated car
+//! (`crate::sim_ecu`, the default firmware unless `--drive direct`), held to the wall clock
+//! unless `--fast`: the tests use it, and a team can rehearse the bring-up on a laptop before
+//! the car is there (`rehearse`, `sim-car`). Each command returns what it found
+//! ([`Outcome`]) besides printing it, so `rehearse` judges values, not text.
 
 use super::campaign::{self, Campaign, Live};
 use super::decode::{Decoder, faults_in_words};
@@ -11,7 +13,7 @@ use super::profile::{self, Profile, ReferenceSender, parse_as_state};
 use super::{BringupError, Transport, candump, epos, pump};
 use crate::scenario::Sweep;
 use crate::sim::Controller;
-use crate::sim_ecu::{Injection, SimEcu};
+use crate::sim_ecu::{Injection, SimCar, SimDrive, SimEcu};
 use clap::{Args, Parser, Subcommand};
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
@@ -32,7 +34,8 @@ use steering_ecu::protocol::PERIOD_US;
              profiles, the test campaign, recording"
 )]
 pub struct Cli {
-    /// SocketCAN interface (`can0`), or `sim` for the simulated ECU in virtual time.
+    /// SocketCAN interface (`can0`); `sim` for a simulated car of this call alone; `sim:PATH`
+    /// for the car `steer-can sim-car --socket PATH` serves to every call.
     #[arg(long, global = true, default_value = "can0")]
     pub iface: String,
     /// The EPOS4's CANopen node ID.
@@ -59,8 +62,20 @@ pub struct Cli {
     /// cascade) or `ecu` (the ECU's own, README "ECU mode").
     #[arg(long, global = true, value_enum, default_value_t = Controller::Paper)]
     pub controller: Controller,
+    /// With `--iface sim`: the firmware build the simulated car runs, `epos4` (the default
+    /// build: the ECU's EPOS4 link, CSP, SYNC, heartbeats, PDOs) or `direct` (the ECU's own
+    /// bridge, `--features drive-direct`).
+    #[arg(long, global = true, value_enum, default_value_t = DriveArg::Epos4)]
+    pub drive: DriveArg,
     #[command(subcommand)]
     pub command: Command,
+}
+
+/// `--drive`: which firmware build the simulated car runs.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DriveArg {
+    Epos4,
+    Direct,
 }
 
 #[derive(Subcommand, Debug)]
@@ -109,6 +124,22 @@ pub enum Command {
         /// Stop after this long, s (default: until Ctrl-C).
         #[arg(long, value_name = "S")]
         duration_s: Option<f64>,
+    },
+    /// The README's first day on the simulated car, in one session: each `steer-can` step the
+    /// README's bring-up list names, its result beside what the README expects, pass or fail
+    /// (exit 1 if any step fails). `--iface sim` only; `--fast` to run it at CPU speed.
+    Rehearse {
+        /// Where the steps' files go (sweep.csv.gz, track.csv.gz, profile.csv, bus.candump,
+        /// log.csv).
+        #[arg(long, default_value = "rehearsal", value_name = "DIR")]
+        dir: PathBuf,
+    },
+    /// Run one simulated car (as `--iface sim` builds it) for many calls: serve its bus on a
+    /// Unix socket until Ctrl-C; attach with `--iface sim:PATH`.
+    SimCar {
+        /// The socket file to serve on.
+        #[arg(long, value_name = "PATH")]
+        socket: PathBuf,
     },
     /// Convert a candump log to the project's log format (for `host-sim gap`).
     Convert {
@@ -227,6 +258,7 @@ macro_rules! say {
         crate::out::stdout_line("steer-can", format_args!($($arg)*))
     };
 }
+pub(crate) use say;
 
 /// Exit code of a campaign that stopped on a fault or Ctrl-C (the log is still written).
 pub const EXIT_ABORTED: u8 = 3;
@@ -243,28 +275,83 @@ pub fn main() -> ExitCode {
     }
 }
 
+/// The vehicle computer of the simulated car while `record` listens: 0.3 s in AS Ready, a
+/// 5 deg, 1 Hz sine for 2 s in AS Driving, 0.2 s of AS Finished and 0.2 s of AS Off, then
+/// silence. On the car someone else steers while `record` listens; without this the recording
+/// would hold no reference frame and `convert` would have no log to build.
+fn record_vehicle_script() -> Result<Vec<(AsState, f64)>, BringupError> {
+    let sine = profile::sine(5.0, 1.0, 2.0)?;
+    let mut script = vec![(AsState::Ready, 0.0); 30];
+    script.extend(sine.samples.iter().map(|&deg| (AsState::Driving, deg)));
+    let last = sine.samples.last().copied().unwrap_or(0.0);
+    script.extend([(AsState::Finished, last); 20]);
+    script.extend([(AsState::Off, last); 20]);
+    Ok(script)
+}
+
+/// The simulated car the global options describe (`--drive`, `--controller`,
+/// `--sim-column-deg`, `--sim-inject`), at t = 0.
+pub(crate) fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
+    let kind = match cli.controller {
+        Controller::Paper => ControllerKind::Paper,
+        Controller::Ecu => ControllerKind::Ecu,
+    };
+    let mut sim = SimEcu::new(SimCar {
+        column_deg: cli.sim_column_deg,
+        controller: kind,
+        drive: match cli.drive {
+            DriveArg::Epos4 => SimDrive::Epos4,
+            DriveArg::Direct => SimDrive::Direct,
+        },
+    });
+    if let Some(spec) = &cli.sim_inject {
+        let bad = || BringupError::Usage {
+            reason: format!(
+                "--sim-inject `{spec}`: expected KIND@SECONDS, KIND one of encoder, overcurrent, epos"
+            ),
+        };
+        let (kind, at) = spec.split_once('@').ok_or_else(bad)?;
+        let injection = Injection::parse(kind).ok_or_else(bad)?;
+        if !sim.can_inject(injection) {
+            return Err(BringupError::Usage {
+                reason: format!(
+                    "--sim-inject `{spec}`: the EPOS4 senses its own current; a current-sense \
+                     fault exists in direct drive only (--drive direct)"
+                ),
+            });
+        }
+        let at_s: f64 = at.parse().map_err(|_| bad())?;
+        sim.inject_at((at_s * 1e6) as u64, injection);
+    }
+    Ok(sim)
+}
+
+/// Let the simulated vehicle computer steer while `record` listens ([`record_vehicle_script`]).
+pub(crate) fn vehicle_for_record(sim: &mut SimEcu) -> Result<(), BringupError> {
+    eprintln!(
+        "sim: a simulated vehicle computer steers while this records (0.3 s AS Ready, a 5 deg \
+         1 Hz sine for 2 s in AS Driving, AS Finished, AS Off)"
+    );
+    sim.script_vehicle(record_vehicle_script()?);
+    Ok(())
+}
+
 fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     if cli.iface == "sim" {
-        let kind = match cli.controller {
-            Controller::Paper => ControllerKind::Paper,
-            Controller::Ecu => ControllerKind::Ecu,
-        };
-        let mut sim = SimEcu::at(cli.sim_column_deg, kind);
-        if let Some(spec) = &cli.sim_inject {
-            let bad = || BringupError::Profile {
-                reason: format!(
-                    "--sim-inject `{spec}`: expected KIND@SECONDS, KIND one of encoder, overcurrent, epos"
-                ),
-            };
-            let (kind, at) = spec.split_once('@').ok_or_else(bad)?;
-            let injection = Injection::parse(kind).ok_or_else(bad)?;
-            let at_s: f64 = at.parse().map_err(|_| bad())?;
-            sim.inject_at((at_s * 1e6) as u64, injection);
+        let mut sim = sim_car(cli)?;
+        if matches!(cli.command, Command::Record { .. }) {
+            vehicle_for_record(&mut sim)?;
         }
         if cli.fast {
             return Ok(Box::new(sim));
         }
         return Ok(Box::new(super::WallPaced::new(sim)));
+    }
+    #[cfg(unix)]
+    if let Some(path) = cli.iface.strip_prefix("sim:") {
+        return Ok(Box::new(super::simsock::SimSocket::connect(Path::new(
+            path,
+        ))?));
     }
     #[cfg(target_os = "linux")]
     {
@@ -279,7 +366,7 @@ fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     }
 }
 
-fn decoder(node: NodeId) -> Result<Decoder, BringupError> {
+pub(crate) fn decoder(node: NodeId) -> Result<Decoder, BringupError> {
     let counts = Epos4Config::paper(node).counts_per_rev;
     let scale = PositionScale::new(counts).ok_or_else(|| BringupError::Epos {
         reason: format!("{counts} position increments per revolution"),
@@ -287,12 +374,61 @@ fn decoder(node: NodeId) -> Result<Decoder, BringupError> {
     Ok(Decoder::new(node, scale))
 }
 
-fn stop_flag() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    let f = flag.clone();
-    // A second handler (tests calling twice) is refused; the first one stays, which is fine.
-    let _ = ctrlc::set_handler(move || f.store(true, Ordering::SeqCst));
-    flag
+/// The process's Ctrl-C flag: the handler is installed once and every command (all the steps
+/// of `rehearse` too) watches the same flag.
+pub(crate) fn stop_flag() -> Arc<AtomicBool> {
+    static FLAG: std::sync::OnceLock<Arc<AtomicBool>> = std::sync::OnceLock::new();
+    FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let f = flag.clone();
+        // Refused only if something else installed a handler; then Ctrl-C ends the process.
+        let _ = ctrlc::set_handler(move || f.store(true, Ordering::SeqCst));
+        flag
+    })
+    .clone()
+}
+
+/// What a command found, for the exit code and for `rehearse`'s comparison with the README.
+#[derive(Debug)]
+pub enum Outcome {
+    Monitor(Monitor),
+    Epos(epos::EposReport),
+    /// `send`: what the tool saw on the bus, its own frames included.
+    Send(Monitor),
+    Campaign(CampaignOutcome),
+    Record {
+        frames: u64,
+        monitor: Monitor,
+    },
+    Convert(logbuild::Built),
+    /// `rehearse`: every step matched the README.
+    Rehearsed {
+        all_passed: bool,
+    },
+    /// `sim-car` stopped (Ctrl-C).
+    Served,
+}
+
+impl Outcome {
+    fn exit_code(&self) -> ExitCode {
+        match self {
+            Outcome::Campaign(c) if c.aborted.is_some() => ExitCode::from(EXIT_ABORTED),
+            Outcome::Rehearsed { all_passed: false } => ExitCode::FAILURE,
+            _ => ExitCode::SUCCESS,
+        }
+    }
+}
+
+/// What a campaign ended with.
+#[derive(Debug)]
+pub struct CampaignOutcome {
+    pub aborted: Option<campaign::AbortReason>,
+    pub profile_samples: usize,
+    pub profile_samples_sent: usize,
+    pub rate_limited: usize,
+    pub final_status: Option<steering_ecu::protocol::Status>,
+    pub log_rows: usize,
+    pub recording: PathBuf,
 }
 
 fn run(cli: Cli) -> Result<ExitCode, BringupError> {
@@ -300,45 +436,76 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
         reason: format!("--node {}: a CANopen node ID is 1 to 127", cli.node),
     })?;
     let dec = decoder(node)?;
-    match &cli.command {
+    let outcome = match &cli.command {
         Command::Convert {
             candump: path,
             out,
             all_rows,
-        } => {
-            convert(path, out, &dec, *all_rows)?;
-            Ok(ExitCode::SUCCESS)
+        } => Outcome::Convert(convert(path, out, &dec, *all_rows)?),
+        Command::Rehearse { dir } => {
+            if cli.iface != "sim" {
+                return Err(BringupError::Usage {
+                    reason: format!(
+                        "rehearse runs on the simulated car only (--iface sim), not on {}",
+                        cli.iface
+                    ),
+                });
+            }
+            super::rehearse::rehearse(&cli, dir)?
         }
+        #[cfg(unix)]
+        Command::SimCar { socket } => {
+            super::simsock::serve(sim_car(&cli)?, socket, &stop_flag())?;
+            Outcome::Served
+        }
+        command => {
+            let mut t = open(&cli)?;
+            execute(command, node, &dec, t.as_mut())?
+        }
+    };
+    Ok(outcome.exit_code())
+}
+
+/// Runs one command that needs the bus on `t` (every command but `convert` and `rehearse`).
+pub(crate) fn execute(
+    command: &Command,
+    node: NodeId,
+    dec: &Decoder,
+    t: &mut dyn Transport,
+) -> Result<Outcome, BringupError> {
+    match command {
         Command::Monitor {
             duration_s,
             each,
             refresh_s,
-        } => {
-            let mut t = open(&cli)?;
-            monitor(t.as_mut(), &dec, *duration_s, *each, *refresh_s)?;
-            Ok(ExitCode::SUCCESS)
-        }
+        } => Ok(Outcome::Monitor(monitor(
+            t,
+            dec,
+            *duration_s,
+            *each,
+            *refresh_s,
+        )?)),
         Command::Epos {
             what: EposCommand::Check,
         } => {
-            let mut t = open(&cli)?;
-            let report = epos::check(t.as_mut(), node)?;
+            let report = epos::check(t, node)?;
             say!("{}", report.text().trim_end());
-            Ok(ExitCode::SUCCESS)
+            Ok(Outcome::Epos(report))
         }
         Command::Send {
             as_state,
             no_finish,
             profile,
-        } => {
-            let mut t = open(&cli)?;
-            send(t.as_mut(), &dec, *as_state, !*no_finish, profile)?;
-            Ok(ExitCode::SUCCESS)
-        }
+        } => Ok(Outcome::Send(send(
+            t,
+            dec,
+            *as_state,
+            !*no_finish,
+            profile,
+        )?)),
         Command::Record { out, duration_s } => {
-            let mut t = open(&cli)?;
-            record(t.as_mut(), &dec, out, *duration_s)?;
-            Ok(ExitCode::SUCCESS)
+            let (frames, monitor) = record(t, dec, out, *duration_s)?;
+            Ok(Outcome::Record { frames, monitor })
         }
         Command::Campaign { kind } => {
             let (profile, common) = match kind {
@@ -347,8 +514,12 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
                     (profile::track(track.csv.as_deref())?, common)
                 }
             };
-            let mut t = open(&cli)?;
-            campaign_cmd(t.as_mut(), &dec, profile, common)
+            Ok(Outcome::Campaign(campaign_cmd(t, dec, profile, common)?))
+        }
+        Command::Convert { .. } | Command::Rehearse { .. } | Command::SimCar { .. } => {
+            Err(BringupError::Usage {
+                reason: "convert, rehearse and sim-car do not run on a bus".into(),
+            })
         }
     }
 }
@@ -362,7 +533,12 @@ fn to_sweep(a: &SweepArgs) -> Sweep {
     }
 }
 
-fn convert(path: &Path, out: &Path, dec: &Decoder, all_rows: bool) -> Result<(), BringupError> {
+pub(crate) fn convert(
+    path: &Path,
+    out: &Path,
+    dec: &Decoder,
+    all_rows: bool,
+) -> Result<logbuild::Built, BringupError> {
     let file = candump::read(path)?;
     if file.dropped_backwards > 0 {
         eprintln!(
@@ -400,7 +576,7 @@ fn convert(path: &Path, out: &Path, dec: &Decoder, all_rows: bool) -> Result<(),
         built.log.len(),
         built.log.t.last().copied().unwrap_or(0.0)
     );
-    Ok(())
+    Ok(built)
 }
 
 fn monitor(
@@ -409,7 +585,7 @@ fn monitor(
     duration_s: Option<f64>,
     each: bool,
     refresh_s: f64,
-) -> Result<(), BringupError> {
+) -> Result<Monitor, BringupError> {
     let stop = stop_flag();
     let mut m = Monitor::new(*dec);
     let start = t.now_us();
@@ -453,7 +629,7 @@ fn monitor(
             waited_ms: (t.now_us() - start) / 1000,
         });
     }
-    Ok(())
+    Ok(m)
 }
 
 fn record(
@@ -461,7 +637,7 @@ fn record(
     dec: &Decoder,
     out: &Path,
     duration_s: Option<f64>,
-) -> Result<(), BringupError> {
+) -> Result<(u64, Monitor), BringupError> {
     let stop = stop_flag();
     let io = |source| BringupError::Io {
         context: format!("cannot write {}", out.display()),
@@ -502,7 +678,7 @@ fn record(
     crate::out::progress_end();
     say!("{n} frames written to {}", out.display());
     say!("{}", m.summary().trim_end());
-    Ok(())
+    Ok((n, m))
 }
 
 /// The progress line on stderr, at most 10 times a second of the run.
@@ -556,7 +732,7 @@ fn campaign_cmd(
     dec: &Decoder,
     profile: Profile,
     args: &CampaignArgs,
-) -> Result<ExitCode, BringupError> {
+) -> Result<CampaignOutcome, BringupError> {
     let ready = campaign::ready_check(t, dec)?;
     let plan = format!(
         "campaign on {}: {}\n  AS state claimed: Ready for the lead-in, {} for the profile, \
@@ -624,22 +800,25 @@ fn campaign_cmd(
         })
         .unwrap_or_else(|| "no status frame at the end".into());
     match run.aborted {
-        Some(reason) => {
-            say!(
-                "ABORTED: {reason}; {} of {} profile samples sent; AS Finished sent; {fin}",
-                run.profile_samples_sent,
-                c.profile.samples.len()
-            );
-            Ok(ExitCode::from(EXIT_ABORTED))
-        }
-        None => {
-            say!(
-                "completed: {} profile samples sent; AS Finished sent; {fin}",
-                run.profile_samples_sent
-            );
-            Ok(ExitCode::SUCCESS)
-        }
+        Some(reason) => say!(
+            "ABORTED: {reason}; {} of {} profile samples sent; AS Finished sent; {fin}",
+            run.profile_samples_sent,
+            c.profile.samples.len()
+        ),
+        None => say!(
+            "completed: {} profile samples sent; AS Finished sent; {fin}",
+            run.profile_samples_sent
+        ),
     }
+    Ok(CampaignOutcome {
+        aborted: run.aborted,
+        profile_samples: c.profile.samples.len(),
+        profile_samples_sent: run.profile_samples_sent,
+        rate_limited: c.profile.rate_limited,
+        final_status: run.final_status,
+        log_rows: built.log.len(),
+        recording: record_path,
+    })
 }
 
 fn send(
@@ -648,7 +827,7 @@ fn send(
     as_state: Option<AsState>,
     finish: bool,
     which: &SendProfile,
-) -> Result<(), BringupError> {
+) -> Result<Monitor, BringupError> {
     let stop = stop_flag();
     let (profile, as_state, clear) = match which {
         SendProfile::ClearFaults => (
@@ -745,7 +924,7 @@ fn send(
             waited_ms: (profile.duration_s() * 1000.0) as u64,
         });
     }
-    Ok(())
+    Ok(m)
 }
 
 #[cfg(test)]

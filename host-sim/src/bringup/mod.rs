@@ -6,13 +6,14 @@
 //! Theory of operation:
 //!
 //! ```text
-//!   steer-can <command> --iface can0|sim
+//!   steer-can <command> --iface can0|sim|sim:PATH
 //!        |
 //!        v
 //!   Transport (send a frame, receive until a deadline, now_us)   <- the only I/O
 //!        |-- SocketCan (Linux, wall clock; thin)                  `socketcan.rs`
-//!        '-- SimEcu (the firmware's tasks + plant + EPOS4 sim,     `crate::sim_ecu`
-//!                    in-memory bus, virtual time)
+//!        |-- SimEcu (the firmware's tasks + plant + EPOS4 sim,     `crate::sim_ecu`
+//!        |           in-memory bus, virtual time; WallPaced holds it to the wall clock)
+//!        '-- SimSocket (a SimEcu that `sim-car` serves to many calls) `simsock.rs`
 //!   decode   frame -> Decoded (reference, status, motor, EPOS4 PDO/SDO/EMCY/heartbeat, NMT)
 //!   monitor  Decoded stream -> counters, CRC errors, counter gaps, last values
 //!   profile  step / sine / sweep / track samples at 100 Hz, limited to the ECU's 400 deg/s
@@ -20,10 +21,12 @@
 //!            aborts on a fault bit, an EMCY, a silent ECU or Ctrl-C, always ending in AS Off
 //!   record   every frame with its time -> candump `-l` file        `candump.rs`
 //!   logbuild reference + status + motor frames -> log rows (t, ref_sw_deg, sw_deg, ...)
+//!   rehearse the README's first-day list, read from the README, on one SimEcu   `rehearse.rs`
 //! ```
 //!
 //! Every command takes its time from the transport, so a campaign against the simulated ECU
-//! runs in virtual time, as fast as the simulation goes, and one on the car in wall-clock time.
+//! runs in virtual time (held to the wall clock unless `--fast`), and one on the car in
+//! wall-clock time.
 
 pub mod campaign;
 pub mod candump;
@@ -33,6 +36,9 @@ pub mod epos;
 pub mod logbuild;
 pub mod monitor;
 pub mod profile;
+pub mod rehearse;
+#[cfg(unix)]
+pub mod simsock;
 #[cfg(target_os = "linux")]
 pub mod socketcan;
 
@@ -95,6 +101,8 @@ pub enum BringupError {
     Log { reason: String },
     /// The operator said no at the confirmation prompt.
     NotConfirmed,
+    /// A command line the tool cannot act on (an option that does not fit, a bad value).
+    Usage { reason: String },
 }
 
 impl fmt::Display for BringupError {
@@ -121,6 +129,7 @@ impl fmt::Display for BringupError {
             BringupError::Profile { reason } => write!(f, "profile: {reason}"),
             BringupError::Epos { reason } => write!(f, "EPOS4: {reason}"),
             BringupError::Log { reason } => write!(f, "log: {reason}"),
+            BringupError::Usage { reason } => write!(f, "{reason}"),
             BringupError::NotConfirmed => write!(
                 f,
                 "not confirmed; nothing was sent (answer `yes`, or pass --yes in a script)"
@@ -173,6 +182,11 @@ impl<T: Transport> WallPaced<T> {
             inner,
             opened: std::time::Instant::now(),
         }
+    }
+
+    /// The paced transport itself (to script the simulated car between commands).
+    pub fn inner_mut(&mut self) -> &mut T {
+        &mut self.inner
     }
 
     fn wall_us(&self) -> u64 {

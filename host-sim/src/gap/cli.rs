@@ -9,10 +9,14 @@ use std::time::Instant;
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
 #[derive(Args, Debug)]
+#[command(disable_help_flag = true)]
 pub struct GapArgs {
     /// The log (rig's CSV columns, .csv or .csv.gz, any rate); or `selftest`, or `bench`.
-    #[arg(value_name = "LOG")]
-    pub log: PathBuf,
+    #[arg(value_name = "LOG", required_unless_present = "help")]
+    pub log: Option<PathBuf>,
+    /// Print help (`gap selftest --help`: the selftest's own options).
+    #[arg(short, long)]
+    pub help: bool,
     /// A second log, checked with the parameters fitted on LOG only.
     #[arg(long, value_name = "LOG2")]
     pub validate: Option<PathBuf>,
@@ -107,8 +111,46 @@ fn options(args: &GapArgs, rig: &Rig) -> Result<Options> {
     Ok(opts)
 }
 
+/// The help of `gap`, or with LOG `selftest` the selftest's options alone (clap cannot tell a
+/// positional value from a subcommand, so `gap selftest --help` is answered here).
+fn print_help(selftest: bool) -> Result<()> {
+    let own = [
+        "cases",
+        "seed",
+        "duration_s",
+        "model_world",
+        "threads",
+        "json",
+        "help",
+    ];
+    let mut cmd = GapArgs::augment_args(clap::Command::new("host-sim gap"))
+        .about(
+            "Sim-to-real gap of a log: where it lies, which unmodelled effect causes it, how far \
+             it shrinks. `gap selftest` checks the diagnosis on logs with a withheld effect \
+             (`gap selftest --help`); `gap bench` times a 120 s log",
+        )
+        .override_usage("host-sim gap [OPTIONS] <LOG>");
+    if selftest {
+        cmd = cmd
+            .name("host-sim gap selftest")
+            .about(
+                "The diagnosis checked on logs with a withheld effect; prints the confusion table",
+            )
+            .mut_args(|a| {
+                let theirs = !own.contains(&a.get_id().as_str());
+                a.hide(theirs)
+            })
+            .override_usage("host-sim gap selftest [OPTIONS]");
+    }
+    print!("{}", cmd.render_help());
+    Ok(())
+}
+
 pub fn gap(args: &GapArgs) -> Result<()> {
-    match args.log.to_str() {
+    let Some(log) = args.log.as_deref().filter(|_| !args.help) else {
+        return print_help(args.log.as_deref() == Some(Path::new("selftest")));
+    };
+    match log.to_str() {
         Some("selftest") => return selftest_cmd(args),
         Some("bench") => return bench_cmd(args),
         _ => {}
@@ -117,7 +159,7 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         Some(p) => Rig::load(p)?,
         None => Rig::paper(),
     };
-    let rec = load_log(&rig, &args.log)?;
+    let rec = load_log(&rig, log)?;
     let val = match &args.validate {
         Some(p) => Some(load_log(&rig, p)?),
         None => None,
