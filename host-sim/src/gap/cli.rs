@@ -32,7 +32,7 @@ pub struct GapArgs {
     /// Write the pictures (SVG) into this directory.
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
-    /// Candidate effects, comma-separated (default: the four core ones).
+    /// Candidate effects, comma-separated (default: every candidate of the rig).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     pub effects: Vec<String>,
     /// Worker threads (default: all cores).
