@@ -86,7 +86,7 @@
 //! | `EposFault` | statusword fault bit or an EMCY from the EPOS4 | the firmware reports the EPOS4 fault reset done |
 //! | `HeartbeatLost` | the CANopen consumer-heartbeat time of the EPOS4 elapsed | a heartbeat arrives |
 //! | `BusOff` | the CAN controller reports bus-off | bus recovered, or a valid frame arrives |
-//! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s; or (runaway) the current pushing toward the reference at 18 A or more for 50 ms while the column still moves away at 20 deg/s or more | a sample within the window, or the drive off |
+//! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s; or (runaway) the current pushing toward the reference at 18 A or more for 50 ms while the column still moves away at 20 deg/s or more, no slower than when the push began | a sample within the window, or the drive off |
 //!
 //! The plausibility checks (jump, disagreement, current) run in every AS state: a broken
 //! sensor is found in AS Off, before the car is handed to the autonomous system.
@@ -185,6 +185,10 @@ pub const RUNAWAY_PERSIST_US: u32 = 50_000;
 pub const RUNAWAY_AWAY_DPS: f32 = 20.0;
 /// The speed of [`RUNAWAY_AWAY_DPS`] is measured over at least this, µs (5 encoder samples).
 pub const RUNAWAY_SPEED_WINDOW_US: u32 = 10_000;
+/// A runaway's motion away does not slow under the push; this much slower than when the push
+/// began still counts as not slowing, deg/s: one 12-bit encoder count (0.088 deg) per
+/// [`RUNAWAY_SPEED_WINDOW_US`], the speed measurement's resolution.
+pub const RUNAWAY_SLOWING_SLACK_DPS: f32 = 360.0 / 4096.0 / (RUNAWAY_SPEED_WINDOW_US as f32 * 1e-6);
 
 /// What the drive must do from this call on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -482,6 +486,10 @@ pub struct SteeringStateMachine {
     /// A column sample for the speed away: (time, deg), and the last speed away, deg/s.
     runaway_probe: Option<(u64, f32)>,
     away_dps: f32,
+    /// The column's speed away from the reference when the saturated push began, deg/s.
+    away_at_push_dps: f32,
+    /// The sign of the error the push began on (+1 toward positive angles).
+    push_direction: f32,
     overcurrent_count: u16,
     /// When the current over-current run began.
     overcurrent_since_us: Option<u64>,
@@ -526,6 +534,8 @@ impl SteeringStateMachine {
             runaway_since: None,
             runaway_probe: None,
             away_dps: 0.0,
+            away_at_push_dps: 0.0,
+            push_direction: 0.0,
             overcurrent_count: 0,
             overcurrent_since_us: None,
             latched: FaultSet::EMPTY,
@@ -694,7 +704,8 @@ impl SteeringStateMachine {
     /// what pushes the motor (direct: the position loop's set-point; EPOS4: the drive's
     /// measured current), positive toward positive angles. When it pushes toward the reference
     /// at [`RUNAWAY_CURRENT`] or more for [`RUNAWAY_PERSIST_US`] and the column still moves away
-    /// at [`RUNAWAY_AWAY_DPS`] or more, the drive has lost control of the current's direction
+    /// at [`RUNAWAY_AWAY_DPS`] or more, no slower than when the push began (a push the right
+    /// way slows it), the drive has lost control of the current's direction
     /// (a sign-flipped current sense, an offset the loop regulates against, swapped motor
     /// phases): `TrackingError` latches, the detail the error in centi-degrees. Non-finite
     /// values push nothing and move nothing: the check rests (the encoder and over-current
@@ -724,9 +735,23 @@ impl SteeringStateMachine {
             self.runaway_since = None;
             return self.output();
         }
-        let since = *self.runaway_since.get_or_insert(now);
+        // One push is one direction: a saturated loop on a fast reference flips its current
+        // with the error, and each flip starts a new push.
+        if self.runaway_since.is_none() || error.signum() != self.push_direction {
+            self.runaway_since = Some(now);
+            self.away_at_push_dps = self.away_dps;
+            self.push_direction = error.signum();
+        }
+        let since = self.runaway_since.unwrap_or(now);
+        // A loop that lags a fast reference (a 10 Hz sweep: the error's sign holds for 50 ms,
+        // and the soft belt delays the column by as much) also sees the column move away
+        // under a saturated push, but the push slows it. A drive pushing the wrong way does
+        // not: the motion away is at least as fast as when the push began (one encoder count
+        // per speed window of slack for the quantisation).
+        let not_slowing = self.away_dps >= self.away_at_push_dps - RUNAWAY_SLOWING_SLACK_DPS;
         if now.saturating_sub(since) >= u64::from(RUNAWAY_PERSIST_US)
             && self.away_dps >= RUNAWAY_AWAY_DPS
+            && not_slowing
         {
             self.raise(now, Fault::TrackingError, centideg_detail(error));
         }
@@ -1458,6 +1483,30 @@ mod tests {
             let _ = sm.on_encoder(t, SteeringDeg(column), motor_at(column));
             let out = sm.on_drive_effort(t, SteeringDeg(-5.0), SteeringDeg(column), Amps(-20.0));
             assert!(out.faults.is_empty(), "at {} ms", (t - t0) / MS);
+        }
+    }
+
+    #[test]
+    fn a_saturated_loop_lagging_a_10_hz_reference_is_no_runaway() {
+        // The paper's sweep ends at 10 Hz, where a saturated loop lags by most of a half
+        // period: the current flips with the error every 50 ms and the column, behind the soft
+        // belt, is still moving away when each push begins. Reference 9 deg, column 3 deg
+        // lagging 150 deg, current at the limit toward the reference.
+        let (mut sm, t0) = tracking();
+        let w = std::f32::consts::TAU * 10.0;
+        let mut t = t0;
+        while t < t0 + 2000 * MS {
+            t += 2 * MS;
+            let s = (t - t0) as f32 * 1e-6;
+            let reference = 9.0 * (w * s).sin();
+            let column = 3.0 * (w * s - 2.6).sin();
+            if (t - t0).is_multiple_of(10 * MS) {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            let _ = sm.on_encoder(t, SteeringDeg(column), motor_at(column));
+            let push = Amps(20.0 * (reference - column).signum());
+            let out = sm.on_drive_effort(t, SteeringDeg(reference), SteeringDeg(column), push);
+            assert!(out.faults.is_empty(), "latched at {} ms", (t - t0) / MS);
         }
     }
 
