@@ -103,6 +103,24 @@ pub fn link_fault_code(error: LinkError) -> u16 {
     }
 }
 
+/// The name of a link failure's own code ([`link_fault_code`]'s 0xFF01..=0xFF09), for tools
+/// that show the diagnostic frame's fault records; `None` for a code the drive gave (an EMCY
+/// error code or a statusword).
+pub fn link_fault_name(code: u16) -> Option<&'static str> {
+    Some(match code {
+        0xFF01 => "CiA 402 state machine stuck",
+        0xFF02 => "SDO timeout",
+        0xFF03 => "SDO aborted",
+        0xFF04 => "unexpected SDO response",
+        0xFF05 => "a limit or gain read back differs from the one written",
+        0xFF06 => "node did not start",
+        0xFF07 => "node left operational",
+        0xFF08 => "heartbeat lost",
+        0xFF09 => "PDO timeout",
+        _ => return None,
+    })
+}
+
 #[derive(Debug, Clone)]
 pub struct Ecu {
     protocol: ProtocolConfig,
@@ -1055,6 +1073,19 @@ mod tests {
         let k = handed_over_at.expect("the ramp handed over to the reference");
         // 20 deg at 100 deg/s to the sine's centre, then within one of its periods.
         assert!(k <= 50, "handed over after {k}0 ms");
+    }
+
+    #[test]
+    fn every_link_failure_code_has_its_own_name_and_drive_codes_have_none() {
+        let names: Vec<_> = (0xFF01..=0xFF09).map(link_fault_name).collect();
+        assert!(names.iter().all(Option::is_some), "{names:?}");
+        let mut distinct = names.clone();
+        distinct.sort();
+        distinct.dedup();
+        assert_eq!(distinct.len(), names.len(), "{names:?}");
+        for drive_code in [0, 0x8611, 0x3210, 0xFF00, 0xFF0A] {
+            assert_eq!(link_fault_name(drive_code), None, "0x{drive_code:04X}");
+        }
     }
 
     #[test]

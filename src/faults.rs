@@ -1,7 +1,8 @@
 //! The steering ECU's faults: what can go wrong ([`Fault`]), the latched set as it goes into the
 //! CAN status frame ([`FaultSet`]), and a fixed-size ring of fault records ([`FaultLog`]) that
-//! keeps the detail of each (the code, the value that tripped it) for the defmt log and the
-//! debugger; it is not sent over CAN yet (the status frame carries the bits only).
+//! keeps the detail of each (the code, the value that tripped it) for the defmt log, the
+//! debugger and the diagnostic frame 0x103, which carries the four newest records
+//! ([`crate::protocol::Diagnostic`]).
 //!
 //! Detection, latching and clearing live in [`crate::steering`]; this module only names the
 //! faults and stores them. The bit positions below are the wire format of the status frame's

@@ -6,6 +6,7 @@
 
 use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
+use host_sim::bringup::Stamped;
 use host_sim::plant::{Actuator, LinearPlant, PlantParams};
 use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period_sensed};
 use std::cell::RefCell;
@@ -141,6 +142,16 @@ fn run_from(
     script: &[Send],
     at_period: impl Fn(usize, &mut Ecu, u64),
 ) -> Vec<Sample> {
+    run_logged(column_deg, script, at_period).0
+}
+
+/// [`run_from`], also returning every frame the ECU's tasks put on the bus, stamped with the
+/// period boundary at which the harness took it off the transmit queue.
+fn run_logged(
+    column_deg: f64,
+    script: &[Send],
+    at_period: impl Fn(usize, &mut Ecu, u64),
+) -> (Vec<Sample>, Vec<Stamped>) {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     MockDriver::get().reset();
     while REFERENCE_FRAMES.try_receive().is_ok() {}
@@ -165,6 +176,7 @@ fn run_from(
     }
     let mut counter = AliveCounter::wrapping(0);
     let mut samples = Vec::new();
+    let mut sent = Vec::new();
     let mut fast = FastLoop::new(0, Volts(SUPPLY_V as f32));
     let mut tick: u64 = 0; // 50 us steps
     let end = script.len() as u64 * 200;
@@ -218,7 +230,12 @@ fn run_from(
                     };
                     let _ = REFERENCE_FRAMES.try_send(f);
                 }
-                while TX_FRAMES.try_receive().is_ok() {}
+                while let Ok(frame) = TX_FRAMES.try_receive() {
+                    sent.push(Stamped {
+                        t_us: now_us,
+                        frame,
+                    });
+                }
             }
             // The fast loop, as the firmware's ADC interrupt runs it.
             let injected = inject();
@@ -235,7 +252,7 @@ fn run_from(
             tick >= end
         },
     );
-    samples
+    (samples, sent)
 }
 
 #[test]
@@ -510,4 +527,87 @@ fn bus_off_ends_reception_and_latches_the_fault_in() {
         record.map(|r| (r.fault, r.detail)),
         Some((Fault::BusOff, 248))
     );
+}
+
+/// Issue 12 defect 12: the counters and the fault ring leave the ECU on 0x103, one page per
+/// status period, and `steer-can monitor`'s decoding shows them by name.
+#[test]
+fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() {
+    use host_sim::bringup::decode::Decoder;
+    use host_sim::bringup::monitor::Monitor;
+    use steering_ecu::canopen::NodeId;
+    use steering_ecu::canopen::epos4::PositionScale;
+
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Ok(mut c) = CONTROLLER.lock() {
+        *c = ControllerKind::Paper;
+    }
+    // 0-9 AS Off; 10-29 AS Driving 0 deg; 30-44 nothing (hold, then the timeout latches);
+    // 45-49 AS Off, a clear at 50, AS Off to 59; 60-69 Driving; 70-75 six corrupted CRCs (the
+    // fifth latches the invalid-frame fault); 76-99 AS Off, long enough for every page.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 20]);
+    script.extend(vec![Send::Nothing; 15]);
+    script.extend(vec![Send::Ref(AsState::Off, 0.0); 5]);
+    script.push(Send::Clear(AsState::Off, 0.0));
+    script.extend(vec![Send::Ref(AsState::Off, 0.0); 9]);
+    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 10]);
+    script.extend(vec![Send::CorruptCrc(AsState::Driving, 0.0); 6]);
+    script.extend(vec![Send::Ref(AsState::Off, 0.0); 24]);
+    let (s, sent) = run_logged(0.0, &script, |_, _, _| {});
+    assert!(s[44].faults & (1 << Fault::ReferenceTimeout.bit()) != 0);
+    assert_eq!(s[59].faults, 0, "cleared in AS Off");
+    assert!(s[76].faults & (1 << Fault::InvalidFrames.bit()) != 0);
+
+    let node = NodeId::new(1).unwrap();
+    let scale = PositionScale::new(4096).unwrap();
+    let mut monitor = Monitor::new(Decoder::new(node, scale));
+    for frame in &sent {
+        let _ = monitor.on_frame(frame);
+    }
+    let pages = monitor
+        .counts
+        .get("diagnostics 0x103")
+        .copied()
+        .unwrap_or(0);
+    // One page per 10 ms status period, as the status and motor frames.
+    let status = monitor.counts.get("status 0x101").copied().unwrap_or(0);
+    assert!(
+        pages + 1 >= status && status >= 90,
+        "{pages} pages, {status} status frames"
+    );
+    assert_eq!(monitor.diagnostic_counter.lost, 0, "no page skipped");
+    assert!(monitor.crc_errors.is_empty() && monitor.other_errors.is_empty());
+    let d = &monitor.diagnostics;
+    assert_eq!(d.counter("dropped: CRC"), Some(6), "six corrupted frames");
+    // The first good frame after them: its counter is seven past the last CRC-good one.
+    assert_eq!(d.counter("dropped: counter jump"), Some(1));
+    assert_eq!(d.counter("bus-off events"), Some(0));
+    // The silence and the corrupted run each held the position 30 ms after the last good frame.
+    assert_eq!(d.counter("hold entries"), Some(2));
+    use host_sim::bringup::monitor::RecordPage;
+    let records = d.records();
+    // The score that latched it.
+    assert_eq!(records[0], RecordPage::Fault(Ok(Fault::InvalidFrames), 5));
+    let RecordPage::Fault(older, age_ms) = records[1] else {
+        panic!("{records:?}")
+    };
+    assert_eq!(older, Ok(Fault::ReferenceTimeout));
+    assert!((130..=140).contains(&age_ms), "{age_ms} ms");
+    assert_eq!(records[2], RecordPage::Empty, "two faults, two records");
+    let text = monitor.summary();
+    eprintln!("{text}");
+    for words in [
+        "dropped: CRC 6",
+        "hold entries 2",
+        "bus-off events 0",
+        "fault record 1 (newest): invalid reference frames: invalid-frame score 5",
+        "fault record 2: reference timeout: no valid reference for 1",
+        "fault record 3: none",
+    ] {
+        assert!(
+            text.contains(words),
+            "monitor summary lacks {words:?}:\n{text}"
+        );
+    }
 }
