@@ -138,6 +138,8 @@ pub struct Ecu {
     clear_bit: bool,
     /// When a task (the supervisor) last called in: see [`Ecu::supervisor_seen_us`].
     supervisor_us: Option<u64>,
+    /// Progress counts for the watchdog's feed gate ([`crate::watchdog`]).
+    progress: crate::watchdog::Progress,
     /// Bus-off events (saturating).
     bus_offs: u16,
     diagnostic_counter: AliveCounter,
@@ -204,6 +206,10 @@ impl Ecu {
             clear_refusals: 0,
             clear_bit: false,
             supervisor_us: None,
+            progress: crate::watchdog::Progress {
+                supervisor: 0,
+                fast: 0,
+            },
             bus_offs: 0,
             diagnostic_counter: AliveCounter::wrapping(0),
             diagnostic_page: 0,
@@ -531,7 +537,20 @@ impl Ecu {
         }
     }
 
+    /// How far the supervisor tasks and the fast loop have come (wrapping counts): the
+    /// watchdog feeds only when both moved ([`crate::watchdog::FeedGate`]).
+    pub fn progress(&self) -> crate::watchdog::Progress {
+        self.progress
+    }
+
+    /// The fast loop ran one period (direct drive: [`crate::direct::FastLoop::step`] calls
+    /// this first, whatever the period then does; EPOS4: each [`Ecu::drive_poll`]).
+    pub fn fast_loop_ran(&mut self) {
+        self.progress.fast = self.progress.fast.wrapping_add(1);
+    }
+
     fn supervisor_called(&mut self, now_us: u64) {
+        self.progress.supervisor = self.progress.supervisor.wrapping_add(1);
         self.supervisor_us = Some(self.supervisor_us.map_or(now_us, |t| t.max(now_us)));
     }
 
@@ -699,6 +718,7 @@ impl Ecu {
     /// heartbeat and TPDO supervision, the automatic reset of a failed link in AS Off. Returns
     /// the frames to send, the pending demand-change frames first. Empty in direct mode.
     pub fn drive_poll(&mut self, now_us: u64) -> DriveFrames {
+        self.fast_loop_ran();
         let as_off = self.machine.as_state() == Some(AsState::Off);
         let reset_due = self
             .last_link_reset_us

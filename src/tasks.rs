@@ -147,6 +147,26 @@ pub async fn drive_task(frames: FrameReceiver<'_>, tx: FrameSender<'_>, ecu: &Sh
     }
 }
 
+/// How often [`watchdog_task`] asks the feed gate ([`crate::watchdog::FEED_PERIOD_US`]).
+pub const WATCHDOG_FEED_PERIOD: Duration =
+    Duration::from_micros(crate::watchdog::FEED_PERIOD_US as u64);
+
+/// The watchdog feeder: every [`WATCHDOG_FEED_PERIOD`] it reads the ECU's progress counts and
+/// calls `feed` (the firmware: `IndependentWatchdog::pet`) only when the feed gate says both
+/// the supervisor tasks and the fast loop ran since the last feed. It runs on the supervisor's
+/// executor, so a stalled executor stops the feeding too.
+pub async fn watchdog_task(ecu: &SharedEcu, mut feed: impl FnMut()) -> ! {
+    let mut gate = crate::watchdog::FeedGate::new();
+    let mut ticker = Ticker::every(WATCHDOG_FEED_PERIOD);
+    loop {
+        ticker.next().await;
+        let progress = ecu.lock(|e| e.borrow().progress());
+        if gate.check(progress) {
+            feed();
+        }
+    }
+}
+
 /// Which consumer a received frame belongs to.
 pub trait Route {
     /// `Some(i)` for the i-th consumer, `None` to drop the frame (not ours).

@@ -66,6 +66,8 @@ enum Inject {
     /// The current sense reads the winding's current with the wrong sign (swapped shunt
     /// wires).
     CurrentSignFlipped,
+    /// The fast-loop interrupt stops (the ADC trigger lost, the interrupt masked).
+    FastLoopStopped,
 }
 
 fn inject() -> Inject {
@@ -99,6 +101,19 @@ async fn status(ecu: &'static SharedEcu) {
 #[embassy_executor::task(pool_size = RUNS)]
 async fn encoder(ecu: &'static SharedEcu) {
     tasks::encoder_task(&mut SimEncoder, ColumnEncoder { zero_raw: 0 }, ecu).await
+}
+
+/// When the watchdog was fed, us (the harness's stand-in for `IndependentWatchdog::pet`).
+static FEEDS: StdMutex<Vec<u64>> = StdMutex::new(Vec::new());
+
+#[embassy_executor::task(pool_size = RUNS)]
+async fn watchdog(ecu: &'static SharedEcu) {
+    tasks::watchdog_task(ecu, || {
+        if let Ok(mut f) = FEEDS.lock() {
+            f.push(embassy_time::Instant::now().as_micros());
+        }
+    })
+    .await
 }
 
 #[embassy_executor::task(pool_size = RUNS)]
@@ -159,6 +174,9 @@ fn run_logged(
     if let Ok(mut i) = INJECT.lock() {
         *i = Inject::None;
     }
+    if let Ok(mut f) = FEEDS.lock() {
+        f.clear();
+    }
     let kind = CONTROLLER
         .lock()
         .map(|c| *c)
@@ -186,6 +204,7 @@ fn run_logged(
             spawner.spawn(reference(ecu).unwrap());
             spawner.spawn(status(ecu).unwrap());
             spawner.spawn(encoder(ecu).unwrap());
+            spawner.spawn(watchdog(ecu).unwrap());
             spawner.spawn(keep_awake().unwrap());
         },
         || {
@@ -239,11 +258,19 @@ fn run_logged(
             }
             // The fast loop, as the firmware's ADC interrupt runs it.
             let injected = inject();
-            direct_drive_period_sensed(&mut plant, &mut fast, ecu, now_us, |i| match injected {
-                Inject::CurrentBiasA(a) => i + f64::from(a),
-                Inject::CurrentSignFlipped => -i,
-                _ => i,
-            });
+            if injected != Inject::FastLoopStopped {
+                direct_drive_period_sensed(
+                    &mut plant,
+                    &mut fast,
+                    ecu,
+                    now_us,
+                    |i| match injected {
+                        Inject::CurrentBiasA(a) => i + f64::from(a),
+                        Inject::CurrentSignFlipped => -i,
+                        _ => i,
+                    },
+                );
+            }
             if let Ok(mut c) = COLUMN_RAD.lock() {
                 *c = plant.column_rad();
             }
@@ -610,4 +637,58 @@ fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() 
             "monitor summary lacks {words:?}:\n{text}"
         );
     }
+}
+
+/// Issue 12 defect 10: the watchdog is fed every feed period while the tasks and the fast loop
+/// run, and not once while the fast loop is stopped, so the IWDG resets the MCU.
+#[test]
+fn the_watchdog_is_fed_only_while_the_fast_loop_and_the_tasks_run() {
+    in_both_modes(|_| the_watchdog_is_fed_only_while_both_run());
+}
+
+fn the_watchdog_is_fed_only_while_both_run() {
+    use steering_ecu::watchdog::{FEED_PERIOD_US, WATCHDOG_TIMEOUT_US};
+    // 0-9 AS Off, 10-59 AS Driving 5 deg; the fast loop stops for periods 20-34.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 5.0); 50]);
+    let _ = run(&script, |period, _, _| {
+        if let Ok(mut i) = INJECT.lock() {
+            *i = if (20..35).contains(&period) {
+                Inject::FastLoopStopped
+            } else {
+                Inject::None
+            };
+        }
+    });
+    let feeds = FEEDS.lock().map(|f| f.clone()).unwrap_or_default();
+    let ms = |p: u64| p * 10_000;
+    let running = |from: u64, to: u64| {
+        feeds
+            .iter()
+            .filter(|&&t| t > ms(from) && t <= ms(to))
+            .count()
+    };
+    // Every feed period while both run (the first check sees both halves already moving).
+    assert!(running(0, 20) >= 19, "{feeds:?}");
+    assert_eq!(
+        running(21, 35),
+        0,
+        "fed with the fast loop stopped: {feeds:?}"
+    );
+    let gap = feeds
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .max()
+        .unwrap_or(u64::MAX);
+    assert!(
+        gap > u64::from(WATCHDOG_TIMEOUT_US),
+        "the stop ({gap} us without a feed) outlasts the IWDG's timeout"
+    );
+    assert!(running(36, 60) >= 23, "fed again once it runs: {feeds:?}");
+    assert!(
+        feeds
+            .windows(2)
+            .all(|w| w[1] - w[0] >= u64::from(FEED_PERIOD_US)),
+        "at most one feed per period"
+    );
 }
