@@ -10,10 +10,12 @@
 #   FILES=src/faults.rs .ci/mutation.sh -j 1 one file, results in target/mutants/faults
 #   .ci/mutation.sh --list                   the mutants only
 #
-# Extra arguments go to cargo-mutants (`-j 1`, `--list`, `--re REGEX`). Results:
-# <output>/mutants.out/{caught,missed,timeout,unviable}.txt. cargo-mutants builds a copy of the
-# tree in its own target directory, so CARGO_TARGET_DIR is not passed on (a shared one would
-# rebuild the real tree's library after every mutant).
+# Extra arguments go to cargo-mutants (`-j 1`, `--list`, `--re REGEX`, `--in-place` in a copy
+# of the tree made for the run). Results: <output>/mutants.out/{caught,missed,timeout,
+# unviable}.txt. Only the library is built and tested (`--lib` to every cargo call: the binary
+# is a host stub, building it too doubles each mutant's build). cargo-mutants builds a copy of
+# the tree in its own target directory, so CARGO_TARGET_DIR is not passed on (a shared one
+# would rebuild the real tree's library after every mutant).
 set -eu
 cd "$(dirname "$0")/.."
 FILES=${FILES:-"src/protocol/e2e.rs src/steering.rs src/faults.rs src/ecu.rs"}
@@ -32,4 +34,5 @@ mkdir -p "$OUT"
 exec cargo mutants --package steering-ecu $FILE_ARGS \
     --timeout 120 \
     --output "$OUT" \
-    "$@" -- --lib
+    --cargo-arg=--lib \
+    "$@"

@@ -340,6 +340,15 @@ impl Ecu {
         self.aligned_counts().map(|c| self.motor_from_counts(c))
     }
 
+    /// The motor origin, also to the EPOS4 link: the drive's software position limits are
+    /// written around it at each enable.
+    fn set_origin(&mut self, origin: Option<i32>) {
+        self.origin_counts = origin;
+        if let Drive::Epos4(link) = &mut self.drive {
+            link.set_position_origin(origin);
+        }
+    }
+
     /// Takes the motor origin from the last column sample: the motor count now, less the
     /// count the column's angle reads as through the gearing. Nothing changes while the
     /// column or the motor position is unknown.
@@ -350,7 +359,7 @@ impl Ecu {
         if let (Some(counts), Some(column_counts)) =
             (self.motor_counts(), self.counts_from_motor(motor_at_column))
         {
-            self.origin_counts = Some(counts.saturating_sub(column_counts));
+            self.set_origin(Some(counts.saturating_sub(column_counts)));
         }
     }
 
@@ -607,7 +616,7 @@ impl Ecu {
         self.column = column;
         if self.motor_counts().is_none() {
             // The EPOS4 restarted (a new origin of its own) or has not reported yet.
-            self.origin_counts = None;
+            self.set_origin(None);
         }
         if self.origin_counts.is_none() && column.is_finite() {
             self.align_origin();
