@@ -313,3 +313,31 @@ mod tests {
         assert_eq!(log.dropped(), 0);
     }
 }
+
+// Tests for what `.ci/mutation.sh` found missed in this file (issue 12).
+#[cfg(test)]
+mod mutation_tests {
+    use super::*;
+
+    #[test]
+    fn a_union_keeps_the_faults_both_sets_share() {
+        let both = FaultSet::from(Fault::BusOff).union(Fault::Encoder.into());
+        let u = both.union(Fault::BusOff.into());
+        assert!(u.contains(Fault::BusOff) && u.contains(Fault::Encoder));
+        assert_eq!(u, both);
+    }
+
+    #[test]
+    fn a_log_with_a_record_is_not_empty() {
+        let mut log = FaultLog::new();
+        assert!(log.is_empty());
+        log.push(FaultRecord {
+            fault: Fault::BusOff,
+            at_us: 1,
+            detail: 0,
+        });
+        assert!(!log.is_empty());
+        log.clear();
+        assert!(log.is_empty());
+    }
+}
