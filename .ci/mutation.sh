@@ -4,16 +4,35 @@
 # be listed in the README with the reason it is equivalent.
 #
 # Needs cargo-mutants (`cargo install cargo-mutants`). Not in CI: each mutant rebuilds and runs
-# the library's tests (tens of seconds on two cores), and these files give a few hundred.
-# Extra arguments go to cargo-mutants, e.g. `.ci/mutation.sh --list` to see the mutants,
-# `-j 2` for two at a time. Results: target/mutants/mutants.out/{caught,missed,timeout}.txt.
+# the library's tests (about 16 s on two cores), and these files give about 480.
+#
+#   .ci/mutation.sh                          all four files, results in target/mutants
+#   FILES=src/faults.rs .ci/mutation.sh -j 1 one file, results in target/mutants/faults
+#   .ci/mutation.sh --list                   the mutants only
+#
+# Extra arguments go to cargo-mutants (`-j 1`, `--list`, `--re REGEX`, `--in-place` in a copy
+# of the tree made for the run). Results: <output>/mutants.out/{caught,missed,timeout,
+# unviable}.txt. Only the library is built and tested (`--lib` to every cargo call: the binary
+# is a host stub, building it too doubles each mutant's build). cargo-mutants builds a copy of
+# the tree in its own target directory, so CARGO_TARGET_DIR is not passed on (a shared one
+# would rebuild the real tree's library after every mutant).
 set -eu
 cd "$(dirname "$0")/.."
-exec cargo mutants --package steering-ecu \
-    --file src/protocol/e2e.rs \
-    --file src/steering.rs \
-    --file src/faults.rs \
-    --file src/ecu.rs \
+FILES=${FILES:-"src/protocol/e2e.rs src/steering.rs src/faults.rs src/ecu.rs"}
+OUT=target/mutants
+FILE_ARGS=""
+for f in $FILES; do
+    FILE_ARGS="$FILE_ARGS --file $f"
+done
+case "$FILES" in
+    *" "*) ;;
+    *) OUT="$OUT/$(basename "$FILES" .rs)" ;;
+esac
+unset CARGO_TARGET_DIR
+# shellcheck disable=SC2086 # FILE_ARGS is a list of words
+mkdir -p "$OUT"
+exec cargo mutants --package steering-ecu $FILE_ARGS \
     --timeout 120 \
-    --output target/mutants \
-    "$@" -- --lib
+    --output "$OUT" \
+    --cargo-arg=--lib \
+    "$@"

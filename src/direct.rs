@@ -116,6 +116,9 @@ impl FastLoop {
         hall_code: u8,
         phases: [Amps; 3],
     ) -> BridgeCommand {
+        // Progress for the watchdog first: a period that ends early (a Hall error, a stalled
+        // supervisor) is still the fast loop running, and those have their own outcomes.
+        ecu.fast_loop_ran();
         let position_tick = self.tick.is_multiple_of(CURRENT_TICKS_PER_POSITION_TICK);
         self.tick = self.tick.wrapping_add(1);
         if let Err(e) = self.hall.update(hall_code) {

@@ -103,6 +103,24 @@ pub fn link_fault_code(error: LinkError) -> u16 {
     }
 }
 
+/// The name of a link failure's own code ([`link_fault_code`]'s 0xFF01..=0xFF09), for tools
+/// that show the diagnostic frame's fault records; `None` for a code the drive gave (an EMCY
+/// error code or a statusword).
+pub fn link_fault_name(code: u16) -> Option<&'static str> {
+    Some(match code {
+        0xFF01 => "CiA 402 state machine stuck",
+        0xFF02 => "SDO timeout",
+        0xFF03 => "SDO aborted",
+        0xFF04 => "unexpected SDO response",
+        0xFF05 => "a limit or gain read back differs from the one written",
+        0xFF06 => "node did not start",
+        0xFF07 => "node left operational",
+        0xFF08 => "heartbeat lost",
+        0xFF09 => "PDO timeout",
+        _ => return None,
+    })
+}
+
 #[derive(Debug, Clone)]
 pub struct Ecu {
     protocol: ProtocolConfig,
@@ -120,6 +138,8 @@ pub struct Ecu {
     clear_bit: bool,
     /// When a task (the supervisor) last called in: see [`Ecu::supervisor_seen_us`].
     supervisor_us: Option<u64>,
+    /// Progress counts for the watchdog's feed gate ([`crate::watchdog`]).
+    progress: crate::watchdog::Progress,
     /// Bus-off events (saturating).
     bus_offs: u16,
     diagnostic_counter: AliveCounter,
@@ -186,6 +206,10 @@ impl Ecu {
             clear_refusals: 0,
             clear_bit: false,
             supervisor_us: None,
+            progress: crate::watchdog::Progress {
+                supervisor: 0,
+                fast: 0,
+            },
             bus_offs: 0,
             diagnostic_counter: AliveCounter::wrapping(0),
             diagnostic_page: 0,
@@ -316,6 +340,15 @@ impl Ecu {
         self.aligned_counts().map(|c| self.motor_from_counts(c))
     }
 
+    /// The motor origin, also to the EPOS4 link: the drive's software position limits are
+    /// written around it at each enable.
+    fn set_origin(&mut self, origin: Option<i32>) {
+        self.origin_counts = origin;
+        if let Drive::Epos4(link) = &mut self.drive {
+            link.set_position_origin(origin);
+        }
+    }
+
     /// Takes the motor origin from the last column sample: the motor count now, less the
     /// count the column's angle reads as through the gearing. Nothing changes while the
     /// column or the motor position is unknown.
@@ -326,7 +359,7 @@ impl Ecu {
         if let (Some(counts), Some(column_counts)) =
             (self.motor_counts(), self.counts_from_motor(motor_at_column))
         {
-            self.origin_counts = Some(counts.saturating_sub(column_counts));
+            self.set_origin(Some(counts.saturating_sub(column_counts)));
         }
     }
 
@@ -513,7 +546,20 @@ impl Ecu {
         }
     }
 
+    /// How far the supervisor tasks and the fast loop have come (wrapping counts): the
+    /// watchdog feeds only when both moved ([`crate::watchdog::FeedGate`]).
+    pub fn progress(&self) -> crate::watchdog::Progress {
+        self.progress
+    }
+
+    /// The fast loop ran one period (direct drive: [`crate::direct::FastLoop::step`] calls
+    /// this first, whatever the period then does; EPOS4: each [`Ecu::drive_poll`]).
+    pub fn fast_loop_ran(&mut self) {
+        self.progress.fast = self.progress.fast.wrapping_add(1);
+    }
+
     fn supervisor_called(&mut self, now_us: u64) {
+        self.progress.supervisor = self.progress.supervisor.wrapping_add(1);
         self.supervisor_us = Some(self.supervisor_us.map_or(now_us, |t| t.max(now_us)));
     }
 
@@ -570,7 +616,7 @@ impl Ecu {
         self.column = column;
         if self.motor_counts().is_none() {
             // The EPOS4 restarted (a new origin of its own) or has not reported yet.
-            self.origin_counts = None;
+            self.set_origin(None);
         }
         if self.origin_counts.is_none() && column.is_finite() {
             self.align_origin();
@@ -681,6 +727,7 @@ impl Ecu {
     /// heartbeat and TPDO supervision, the automatic reset of a failed link in AS Off. Returns
     /// the frames to send, the pending demand-change frames first. Empty in direct mode.
     pub fn drive_poll(&mut self, now_us: u64) -> DriveFrames {
+        self.fast_loop_ran();
         let as_off = self.machine.as_state() == Some(AsState::Off);
         let reset_due = self
             .last_link_reset_us
@@ -1055,6 +1102,19 @@ mod tests {
         let k = handed_over_at.expect("the ramp handed over to the reference");
         // 20 deg at 100 deg/s to the sine's centre, then within one of its periods.
         assert!(k <= 50, "handed over after {k}0 ms");
+    }
+
+    #[test]
+    fn every_link_failure_code_has_its_own_name_and_drive_codes_have_none() {
+        let names: Vec<_> = (0xFF01..=0xFF09).map(link_fault_name).collect();
+        assert!(names.iter().all(Option::is_some), "{names:?}");
+        let mut distinct = names.clone();
+        distinct.sort();
+        distinct.dedup();
+        assert_eq!(distinct.len(), names.len(), "{names:?}");
+        for drive_code in [0, 0x8611, 0x3210, 0xFF00, 0xFF0A] {
+            assert_eq!(link_fault_name(drive_code), None, "0x{drive_code:04X}");
+        }
     }
 
     #[test]

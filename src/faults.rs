@@ -1,7 +1,8 @@
 //! The steering ECU's faults: what can go wrong ([`Fault`]), the latched set as it goes into the
 //! CAN status frame ([`FaultSet`]), and a fixed-size ring of fault records ([`FaultLog`]) that
-//! keeps the detail of each (the code, the value that tripped it) for the defmt log and the
-//! debugger; it is not sent over CAN yet (the status frame carries the bits only).
+//! keeps the detail of each (the code, the value that tripped it) for the defmt log, the
+//! debugger and the diagnostic frame 0x103, which carries the four newest records
+//! ([`crate::protocol::Diagnostic`]).
 //!
 //! Detection, latching and clearing live in [`crate::steering`]; this module only names the
 //! faults and stores them. The bit positions below are the wire format of the status frame's
@@ -310,5 +311,33 @@ mod tests {
         log.clear();
         assert!(log.is_empty());
         assert_eq!(log.dropped(), 0);
+    }
+}
+
+// Tests for what `.ci/mutation.sh` found missed in this file (issue 12).
+#[cfg(test)]
+mod mutation_tests {
+    use super::*;
+
+    #[test]
+    fn a_union_keeps_the_faults_both_sets_share() {
+        let both = FaultSet::from(Fault::BusOff).union(Fault::Encoder.into());
+        let u = both.union(Fault::BusOff.into());
+        assert!(u.contains(Fault::BusOff) && u.contains(Fault::Encoder));
+        assert_eq!(u, both);
+    }
+
+    #[test]
+    fn a_log_with_a_record_is_not_empty() {
+        let mut log = FaultLog::new();
+        assert!(log.is_empty());
+        log.push(FaultRecord {
+            fault: Fault::BusOff,
+            at_us: 1,
+            detail: 0,
+        });
+        assert!(!log.is_empty());
+        log.clear();
+        assert!(log.is_empty());
     }
 }

@@ -36,3 +36,4 @@ pub mod sensors;
 pub mod steering;
 pub mod tasks;
 pub mod units;
+pub mod watchdog;

@@ -42,6 +42,7 @@ mod firmware {
     use embassy_stm32::peripherals::CAN1;
     use embassy_stm32::spi::{self, Spi};
     use embassy_stm32::time::Hertz;
+    use embassy_stm32::wdg::IndependentWatchdog;
     use embassy_time::{Duration, Ticker, Timer};
     use static_cell::StaticCell;
     use steering_ecu::amt20;
@@ -176,6 +177,19 @@ mod firmware {
     #[embassy_executor::task]
     async fn drive_task(ecu: &'static SharedEcu) {
         tasks::drive_task(DRIVE_FRAMES.receiver(), TX_FRAMES.sender(), ecu).await
+    }
+
+    /// The chip's independent watchdog, started here and fed only through the library's feed
+    /// gate (`steering_ecu::watchdog`): when the supervisor tasks or the fast loop stop, the
+    /// feeding stops and the IWDG resets the MCU within 68..188 ms (the LSI's spread), which
+    /// comes up with the drive off.
+    #[embassy_executor::task]
+    async fn watchdog_task(
+        mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+        ecu: &'static SharedEcu,
+    ) {
+        wdg.unleash();
+        tasks::watchdog_task(ecu, || wdg.pet()).await
     }
 
     #[embassy_executor::task]
@@ -322,6 +336,17 @@ mod firmware {
         );
         let cs = Output::new(peripherals.PB6, Level::High, Speed::VeryHigh);
         spawner.spawn(defmt::unwrap!(encoder_task(Amt20Port { spi, cs }, ecu)));
+
+        // Last, once every half the gate watches has been started.
+        let wdg = IndependentWatchdog::new(
+            peripherals.IWDG,
+            steering_ecu::watchdog::WATCHDOG_TIMEOUT_US,
+        );
+        spawner.spawn(defmt::unwrap!(watchdog_task(wdg, ecu)));
+        defmt::info!(
+            "IWDG: {=u32} us nominal, fed when the supervisor and the fast loop both ran",
+            steering_ecu::watchdog::WATCHDOG_TIMEOUT_US
+        );
 
         // CAN1 on PA11 (RX) / PA12 (TX): the Nucleo's morpho pins to the transceiver.
         let mut can = Can::new(

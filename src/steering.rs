@@ -1818,3 +1818,77 @@ mod property_tests {
         }
     }
 }
+
+// Tests for what `.ci/mutation.sh` found missed in this file (issue 12).
+#[cfg(test)]
+mod mutation_tests {
+    use super::*;
+
+    /// Every setter sets its value and keeps the others; every accessor reads its own (values
+    /// unlike the defaults and unlike 0 and 1).
+    #[test]
+    fn a_configuration_keeps_every_value_it_was_given() {
+        let gearing = Gearing::new(2.0, 0.01, 0.03).unwrap();
+        let config = Config::DEFAULT
+            .with_reference_timeout_us(50_000)
+            .unwrap()
+            .with_hold_us(70_000)
+            .with_encoder_timeout_us(40_000)
+            .unwrap()
+            .with_encoder_jump(2.5, 800.0)
+            .unwrap()
+            .with_tracking(SteeringDeg(12.0), 90_000, 7.0)
+            .unwrap()
+            .with_actuation(Actuation::DrivingOnly)
+            .with_gearing(gearing);
+        assert_eq!(config.reference_timeout_us(), 50_000);
+        assert_eq!(config.hold_us(), 70_000);
+        assert_eq!(config.encoder_timeout_us(), 40_000);
+        assert_eq!(config.encoder_jump(), (2.5, 800.0));
+        assert_eq!(
+            (
+                config.tracking_deg,
+                config.tracking_persist_us,
+                config.tracking_progress_dps
+            ),
+            (12.0, 90_000, 7.0)
+        );
+        assert_eq!(config.actuation(), Actuation::DrivingOnly);
+        assert_eq!(config.gearing().ratio(), gearing.ratio());
+        assert_eq!(
+            Config::DEFAULT.with_hold_us(0).hold_us(),
+            0,
+            "0: disable at once"
+        );
+        let sm = SteeringStateMachine::new(config);
+        assert_eq!(sm.config().hold_us(), 70_000);
+    }
+
+    /// The accessors of the machine read its state: the AS state last received, the log it
+    /// keeps (a read-out through `fault_log_mut` empties the one `fault_log` shows), and how
+    /// often it went from Track to Hold.
+    #[test]
+    fn the_machine_reports_its_as_state_log_and_hold_count() {
+        const MS: u64 = 1_000;
+        let mut sm = SteeringStateMachine::default();
+        assert_eq!(sm.as_state(), None);
+        // References every 10 ms except in 50..100 ms and 150..200 ms (two gaps beyond the
+        // 30 ms timeout but within the hold), the column sampled every 2 ms.
+        let mut demands = Vec::new();
+        for t in (0..=250 * MS).step_by(2_000) {
+            let _ = sm.on_column(t, SteeringDeg(0.0));
+            let gap = (51 * MS..100 * MS).contains(&t) || (151 * MS..200 * MS).contains(&t);
+            if t % (10 * MS) == 0 && !gap {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            demands.push(sm.tick(t).demand);
+        }
+        assert_eq!(sm.as_state(), Some(AsState::Driving));
+        assert!(demands.contains(&DriveDemand::Hold), "{demands:?}");
+        assert_eq!(sm.hold_entries(), 2);
+        let _ = sm.on_bus_off(300 * MS, 7);
+        assert!(!sm.fault_log().is_empty());
+        sm.fault_log_mut().clear();
+        assert!(sm.fault_log().is_empty());
+    }
+}

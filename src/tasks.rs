@@ -56,9 +56,17 @@ pub async fn reference_task(frames: FrameReceiver<'_>, ecu: &SharedEcu) -> ! {
     }
 }
 
-/// The 100 Hz status sender: the status frame, then the motor frame. A full transmit queue
-/// drops this period's frame (the counter shows the gap to the vehicle computer) rather than
-/// delaying the next one.
+/// The diagnostic page goes out only while at least this many transmit slots are free, so it
+/// never takes the room the EPOS4 link's SYNC, RPDO or disable needs in the same period.
+pub const DIAGNOSTIC_FREE_SLOTS: usize = QUEUE_DEPTH / 2;
+
+/// The 100 Hz status sender: the status frame, then the motor frame, then one page of the
+/// diagnostic frame (0x103, [`Ecu::diagnostic_frame`]), so a reader has every counter and the
+/// four newest fault records within 8 periods (80 ms) without asking: a request frame would be
+/// one more input to check, and a logger started after the fault still sees it. A full transmit
+/// queue drops this period's frame (the counter shows the gap to the vehicle computer) rather
+/// than delaying the next one; the diagnostic page, the least urgent, waits for a period with
+/// [`DIAGNOSTIC_FREE_SLOTS`] free (its page is not used up, so no page is skipped).
 pub async fn status_task(tx: FrameSender<'_>, ecu: &SharedEcu) -> ! {
     let mut ticker = Ticker::every(REFERENCE_PERIOD);
     loop {
@@ -67,6 +75,10 @@ pub async fn status_task(tx: FrameSender<'_>, ecu: &SharedEcu) -> ! {
         let _ = tx.try_send(frame);
         let motor = ecu.lock(|e| e.borrow_mut().motor_frame());
         let _ = tx.try_send(motor);
+        if tx.free_capacity() >= DIAGNOSTIC_FREE_SLOTS {
+            let diagnostic = ecu.lock(|e| e.borrow_mut().diagnostic_frame());
+            let _ = tx.try_send(diagnostic);
+        }
     }
 }
 
@@ -131,6 +143,26 @@ pub async fn drive_task(frames: FrameReceiver<'_>, tx: FrameSender<'_>, ecu: &Sh
         }
         for f in out {
             let _ = tx.try_send(f);
+        }
+    }
+}
+
+/// How often [`watchdog_task`] asks the feed gate ([`crate::watchdog::FEED_PERIOD_US`]).
+pub const WATCHDOG_FEED_PERIOD: Duration =
+    Duration::from_micros(crate::watchdog::FEED_PERIOD_US as u64);
+
+/// The watchdog feeder: every [`WATCHDOG_FEED_PERIOD`] it reads the ECU's progress counts and
+/// calls `feed` (the firmware: `IndependentWatchdog::pet`) only when the feed gate says both
+/// the supervisor tasks and the fast loop ran since the last feed. It runs on the supervisor's
+/// executor, so a stalled executor stops the feeding too.
+pub async fn watchdog_task(ecu: &SharedEcu, mut feed: impl FnMut()) -> ! {
+    let mut gate = crate::watchdog::FeedGate::new();
+    let mut ticker = Ticker::every(WATCHDOG_FEED_PERIOD);
+    loop {
+        ticker.next().await;
+        let progress = ecu.lock(|e| e.borrow().progress());
+        if gate.check(progress) {
+            feed();
         }
     }
 }

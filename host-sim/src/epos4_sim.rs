@@ -105,6 +105,7 @@ pub struct Epos4Sim {
     gain_limit: Option<(ObjectAddress, u32)>,
     quick_stop_until_us: u64,
     rejected_targets: u64,
+    limited_targets: u64,
     pdo_length_errors: u64,
     current_avg_ma: f64,
     out: Vec<Frame>,
@@ -148,6 +149,7 @@ impl Epos4Sim {
             gain_limit: None,
             quick_stop_until_us: 0,
             rejected_targets: 0,
+            limited_targets: 0,
             pdo_length_errors: 0,
             current_avg_ma: 0.0,
             out: Vec::new(),
@@ -237,6 +239,10 @@ impl Epos4Sim {
         e(0x3001, 2, U32, Rw, 5_000);
         e(0x6065, 0, U32, Rw, 2_000);
         e(0x607F, 0, U32, Rw, 25_000);
+        // Software position limits (INTEGER32, inc): the widest range, as if never set.
+        e(0x607D, 0, U8, Ro, 2);
+        e(0x607D, 1, U32, Rw, i32::MIN as u32);
+        e(0x607D, 2, U32, Rw, i32::MAX as u32);
         e(0x6060, 0, U8, Rw, 1);
         e(0x6061, 0, U8, Ro, 1);
         e(0x6064, 0, U32, Ro, 0);
@@ -313,6 +319,12 @@ impl Epos4Sim {
     /// RPDO targets the cascade refused (beyond +-90 deg at the wheel or not finite).
     pub fn rejected_targets(&self) -> u64 {
         self.rejected_targets
+    }
+
+    /// Targets beyond the software position limits (0x607D), held at the limit as CiA 402
+    /// has the drive do.
+    pub fn limited_targets(&self) -> u64 {
+        self.limited_targets
     }
 
     pub fn pdo_length_errors(&self) -> u64 {
@@ -663,6 +675,21 @@ impl Epos4Sim {
     }
 
     fn push_target(&mut self, inc: i32) {
+        // The software position limits hold the target within them (min above max: as the
+        // drive would, the limits are refused and the target is held at the actual position).
+        let (min, max) = (
+            self.get_raw(0x607D, 1) as i32,
+            self.get_raw(0x607D, 2) as i32,
+        );
+        let inc = if min > max {
+            self.limited_targets += 1;
+            self.get_raw(0x6064, 0) as i32
+        } else if !(min..=max).contains(&inc) {
+            self.limited_targets += 1;
+            inc.clamp(min, max)
+        } else {
+            inc
+        };
         // The cascade runs on the plant's true angle: the drive's increments count from the
         // power-up position.
         let motor = MotorRad(self.scale.motor_from_inc(inc).0 + self.origin_rad as f32);
@@ -822,6 +849,9 @@ mod tests {
             };
             // The tests here want the power stage on (the ECU's state machine decides that).
             let _ = rig.link.set_power(true, 0);
+            // The plant powers up at column 0, so straight ahead is the drive's 0 inc (the
+            // ECU takes this from the column encoder); the limits are written around it.
+            rig.link.set_position_origin(Some(0));
             // Drive boots first; the ECU starts once it saw the boot-up.
             rig.step();
             let out = rig.link.start(rig.now);
@@ -1022,6 +1052,81 @@ mod tests {
             })
         );
         assert_eq!(rig.sim.cia402_state(), State::SwitchOnDisabled);
+    }
+
+    #[test]
+    fn the_enable_walk_writes_the_software_position_limits_around_the_origin() {
+        let mut rig = Rig::new(3);
+        rig.link.set_position_origin(Some(-250));
+        rig.bring_up();
+        let span = Epos4Config::paper(node()).limits.position_limit_inc as i32;
+        let limits = [od::MIN_POSITION_LIMIT, od::MAX_POSITION_LIMIT]
+            .map(|o| rig.sim.object(o).map(|v| v as i32));
+        assert_eq!(limits, [Some(-250 - span), Some(-250 + span)]);
+        assert_eq!(
+            rig.link.verified_position_limits(),
+            Some((-250 - span, -250 + span))
+        );
+        assert!(rig.sim.refusals().is_empty(), "{:?}", rig.sim.refusals());
+    }
+
+    #[test]
+    fn a_differing_position_limit_read_back_refuses_the_enable() {
+        let mut rig = Rig::new(4);
+        // The drive keeps at most 1000 inc in the max limit (ours is about 2200).
+        rig.sim.limit_gain(od::MAX_POSITION_LIMIT, 1_000);
+        rig.run_until(2_000_000, |r| r.link.error().is_some());
+        let span = Epos4Config::paper(node()).limits.position_limit_inc;
+        assert_eq!(
+            rig.link.error(),
+            Some(LinkError::ReadBackMismatch {
+                object: od::MAX_POSITION_LIMIT,
+                wrote: span,
+                read: 1_000
+            })
+        );
+        assert_ne!(rig.sim.cia402_state(), State::OperationEnabled);
+        assert_eq!(rig.link.verified_position_limits(), None);
+    }
+
+    #[test]
+    fn without_an_origin_the_drive_is_never_enabled() {
+        let mut rig = Rig::new(5);
+        rig.link.set_position_origin(None);
+        let enabled = rig.run_until(2_000_000, |r| {
+            r.sim.cia402_state() == State::OperationEnabled
+        });
+        assert!(!enabled, "enabled without software position limits");
+        assert_eq!(
+            rig.sim.object(od::MAX_POSITION_LIMIT),
+            Some(i32::MAX as u32)
+        );
+        // The wait is bounded: the walk gives up rather than poll for ever.
+        assert!(
+            matches!(rig.link.error(), Some(LinkError::Cia402Stuck { .. })),
+            "{:?}",
+            rig.link.phase()
+        );
+    }
+
+    #[test]
+    fn the_drive_holds_a_target_beyond_its_limits_at_the_limit() {
+        let mut rig = Rig::new(6);
+        // An origin that puts the max limit about 40 deg from where the plant stands (within
+        // the simulated cascade's +-90 deg).
+        let span = Epos4Config::paper(node()).limits.position_limit_inc as i32;
+        rig.link.set_position_origin(Some(800 - span));
+        rig.bring_up();
+        let max = rig.sim.object(od::MAX_POSITION_LIMIT).unwrap() as i32;
+        assert_eq!(max, 800);
+        rig.link.set_target_inc(max + 500);
+        rig.run_for(3_000_000);
+        assert!(rig.sim.limited_targets() > 0);
+        let position = rig.link.feedback().position_inc;
+        assert!(
+            position <= max + 10 && position > max - 100,
+            "at {position}, limit {max}"
+        );
     }
 
     fn write_cw(sim: &mut Epos4Sim, cw: u16) -> Vec<Frame> {

@@ -126,6 +126,10 @@ struct Run {
     samples: Vec<Sample>,
     /// The simulated drive's (0x3001 sub 2, 0x6065, 0x607F) after the run.
     limits: [Option<u32>; 3],
+    /// The simulated drive's software position limits (0x607D sub 1, sub 2) after the run.
+    position_limits: [Option<i32>; 2],
+    /// Targets the drive held at its software position limits.
+    limited_targets: u64,
     refusals: usize,
     dropped: u64,
     corrupted: u64,
@@ -260,9 +264,13 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
         ObjectAddress::new(0x607F, 0),
     ]
     .map(|o| sim.object(o));
+    let position_limits =
+        [od::MIN_POSITION_LIMIT, od::MAX_POSITION_LIMIT].map(|o| sim.object(o).map(|v| v as i32));
     Run {
         samples,
         limits,
+        position_limits,
+        limited_targets: sim.limited_targets(),
         refusals: sim.refusals().len(),
         dropped: stats.dropped,
         corrupted: stats.corrupted,
@@ -539,4 +547,69 @@ fn the_bring_up_writes_the_drive_limits_in() {
     };
     assert_eq!(following_inc, expected_following, "following error window");
     assert_eq!(velocity_rpm, Some(5_400), "max profile velocity");
+}
+
+/// Issue 12 defect 11: every enable writes the drive's software position limits (0x607D)
+/// around the origin the ECU took from the column, +-(90 + 20) deg at the wheel in the drive's
+/// increments, and reads them back before enabling; the drive holds every target within them
+/// and full lock stays reachable.
+#[test]
+fn the_epos4_software_position_limits_follow_the_column_derived_origin() {
+    in_both_modes(the_epos4_software_position_limits_follow_the_origin_in);
+}
+
+fn the_epos4_software_position_limits_follow_the_origin_in(kind: ControllerKind) {
+    use AsState::*;
+    use steering_ecu::canopen::epos4::POSITION_LIMIT_DEG;
+    let scale = PositionScale::new(Epos4Config::paper(node()).counts_per_rev).unwrap();
+    let inc_at_wheel = |deg: f32| {
+        scale.inc_from_motor(Gearing::PAPER.motor_from_steering(SteeringDeg(deg).into()))
+    };
+    let span = inc_at_wheel(POSITION_LIMIT_DEG).unwrap();
+    assert_eq!(POSITION_LIMIT_DEG, 110.0, "+-90 deg and a 20 deg margin");
+    let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
+    script.extend(repeat(Event::Ref(Driving, 0.0), 40)); // 60-99: to straight ahead
+    // 100-199: to full lock at the rate the protocol allows, and held there.
+    script.extend((1..=100).map(|k| Event::Ref(Driving, (3.0 * k as f32).min(90.0))));
+    for column_deg in [-30.0, 0.0, 20.0] {
+        let r = run_from(column_deg, &script, RandomFaults::default(), 8);
+        let s = &r.samples;
+        assert!(s.iter().all(|x| x.faults == 0), "{column_deg}: a fault");
+        assert_eq!(s[199].drive, State::OperationEnabled, "{column_deg}");
+        // The drive counts from where it powered up: straight ahead is at -column there (to
+        // one increment: the origin comes through the 12-bit column encoder).
+        let origin = -inc_at_wheel(column_deg as f32).unwrap();
+        let [Some(min), Some(max)] = r.position_limits else {
+            panic!("{column_deg}: {:?}", r.position_limits)
+        };
+        assert_eq!(max - min, 2 * span, "{column_deg}: +-{span} inc");
+        assert!(
+            ((min + max) / 2 - origin).abs() <= 1,
+            "{column_deg}: limits {min}..{max} around {origin}"
+        );
+        let limit_deg = f64::from(POSITION_LIMIT_DEG);
+        assert!(
+            s.iter().all(|x| x.column_deg.abs() <= limit_deg),
+            "{column_deg}: the column went beyond the limits"
+        );
+        // Within the steady-state lag the tyre's load leaves at full lock (2.3 deg in paper
+        // mode), so the limits do not take travel the ECU asks for.
+        assert!(
+            (s[199].column_deg - 90.0).abs() < 3.0,
+            "{column_deg}: full lock reached: {:.2} deg",
+            s[199].column_deg
+        );
+        eprintln!(
+            "{kind:?} mode, power-up at {column_deg} deg: {} targets held at the limit",
+            r.limited_targets
+        );
+        // Paper mode asks for the reference itself; ECU mode adds the belt's lead and the
+        // column feedback, which on this full-speed slew ask beyond 110 deg for a while.
+        if kind == ControllerKind::Paper {
+            assert_eq!(
+                r.limited_targets, 0,
+                "{column_deg}: paper mode within the limits"
+            );
+        }
+    }
 }

@@ -6,6 +6,7 @@
 
 use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
+use host_sim::bringup::Stamped;
 use host_sim::plant::{Actuator, LinearPlant, PlantParams};
 use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period_sensed};
 use std::cell::RefCell;
@@ -65,6 +66,8 @@ enum Inject {
     /// The current sense reads the winding's current with the wrong sign (swapped shunt
     /// wires).
     CurrentSignFlipped,
+    /// The fast-loop interrupt stops (the ADC trigger lost, the interrupt masked).
+    FastLoopStopped,
 }
 
 fn inject() -> Inject {
@@ -98,6 +101,19 @@ async fn status(ecu: &'static SharedEcu) {
 #[embassy_executor::task(pool_size = RUNS)]
 async fn encoder(ecu: &'static SharedEcu) {
     tasks::encoder_task(&mut SimEncoder, ColumnEncoder { zero_raw: 0 }, ecu).await
+}
+
+/// When the watchdog was fed, us (the harness's stand-in for `IndependentWatchdog::pet`).
+static FEEDS: StdMutex<Vec<u64>> = StdMutex::new(Vec::new());
+
+#[embassy_executor::task(pool_size = RUNS)]
+async fn watchdog(ecu: &'static SharedEcu) {
+    tasks::watchdog_task(ecu, || {
+        if let Ok(mut f) = FEEDS.lock() {
+            f.push(embassy_time::Instant::now().as_micros());
+        }
+    })
+    .await
 }
 
 #[embassy_executor::task(pool_size = RUNS)]
@@ -141,12 +157,25 @@ fn run_from(
     script: &[Send],
     at_period: impl Fn(usize, &mut Ecu, u64),
 ) -> Vec<Sample> {
+    run_logged(column_deg, script, at_period).0
+}
+
+/// [`run_from`], also returning every frame the ECU's tasks put on the bus, stamped with the
+/// period boundary at which the harness took it off the transmit queue.
+fn run_logged(
+    column_deg: f64,
+    script: &[Send],
+    at_period: impl Fn(usize, &mut Ecu, u64),
+) -> (Vec<Sample>, Vec<Stamped>) {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     MockDriver::get().reset();
     while REFERENCE_FRAMES.try_receive().is_ok() {}
     while TX_FRAMES.try_receive().is_ok() {}
     if let Ok(mut i) = INJECT.lock() {
         *i = Inject::None;
+    }
+    if let Ok(mut f) = FEEDS.lock() {
+        f.clear();
     }
     let kind = CONTROLLER
         .lock()
@@ -165,6 +194,7 @@ fn run_from(
     }
     let mut counter = AliveCounter::wrapping(0);
     let mut samples = Vec::new();
+    let mut sent = Vec::new();
     let mut fast = FastLoop::new(0, Volts(SUPPLY_V as f32));
     let mut tick: u64 = 0; // 50 us steps
     let end = script.len() as u64 * 200;
@@ -174,6 +204,7 @@ fn run_from(
             spawner.spawn(reference(ecu).unwrap());
             spawner.spawn(status(ecu).unwrap());
             spawner.spawn(encoder(ecu).unwrap());
+            spawner.spawn(watchdog(ecu).unwrap());
             spawner.spawn(keep_awake().unwrap());
         },
         || {
@@ -218,15 +249,28 @@ fn run_from(
                     };
                     let _ = REFERENCE_FRAMES.try_send(f);
                 }
-                while TX_FRAMES.try_receive().is_ok() {}
+                while let Ok(frame) = TX_FRAMES.try_receive() {
+                    sent.push(Stamped {
+                        t_us: now_us,
+                        frame,
+                    });
+                }
             }
             // The fast loop, as the firmware's ADC interrupt runs it.
             let injected = inject();
-            direct_drive_period_sensed(&mut plant, &mut fast, ecu, now_us, |i| match injected {
-                Inject::CurrentBiasA(a) => i + f64::from(a),
-                Inject::CurrentSignFlipped => -i,
-                _ => i,
-            });
+            if injected != Inject::FastLoopStopped {
+                direct_drive_period_sensed(
+                    &mut plant,
+                    &mut fast,
+                    ecu,
+                    now_us,
+                    |i| match injected {
+                        Inject::CurrentBiasA(a) => i + f64::from(a),
+                        Inject::CurrentSignFlipped => -i,
+                        _ => i,
+                    },
+                );
+            }
             if let Ok(mut c) = COLUMN_RAD.lock() {
                 *c = plant.column_rad();
             }
@@ -235,7 +279,7 @@ fn run_from(
             tick >= end
         },
     );
-    samples
+    (samples, sent)
 }
 
 #[test]
@@ -509,5 +553,142 @@ fn bus_off_ends_reception_and_latches_the_fault_in() {
     assert_eq!(
         record.map(|r| (r.fault, r.detail)),
         Some((Fault::BusOff, 248))
+    );
+}
+
+/// Issue 12 defect 12: the counters and the fault ring leave the ECU on 0x103, one page per
+/// status period, and `steer-can monitor`'s decoding shows them by name.
+#[test]
+fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() {
+    use host_sim::bringup::decode::Decoder;
+    use host_sim::bringup::monitor::Monitor;
+    use steering_ecu::canopen::NodeId;
+    use steering_ecu::canopen::epos4::PositionScale;
+
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Ok(mut c) = CONTROLLER.lock() {
+        *c = ControllerKind::Paper;
+    }
+    // 0-9 AS Off; 10-29 AS Driving 0 deg; 30-44 nothing (hold, then the timeout latches);
+    // 45-49 AS Off, a clear at 50, AS Off to 59; 60-69 Driving; 70-75 six corrupted CRCs (the
+    // fifth latches the invalid-frame fault); 76-99 AS Off, long enough for every page.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 20]);
+    script.extend(vec![Send::Nothing; 15]);
+    script.extend(vec![Send::Ref(AsState::Off, 0.0); 5]);
+    script.push(Send::Clear(AsState::Off, 0.0));
+    script.extend(vec![Send::Ref(AsState::Off, 0.0); 9]);
+    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 10]);
+    script.extend(vec![Send::CorruptCrc(AsState::Driving, 0.0); 6]);
+    script.extend(vec![Send::Ref(AsState::Off, 0.0); 24]);
+    let (s, sent) = run_logged(0.0, &script, |_, _, _| {});
+    assert!(s[44].faults & (1 << Fault::ReferenceTimeout.bit()) != 0);
+    assert_eq!(s[59].faults, 0, "cleared in AS Off");
+    assert!(s[76].faults & (1 << Fault::InvalidFrames.bit()) != 0);
+
+    let node = NodeId::new(1).unwrap();
+    let scale = PositionScale::new(4096).unwrap();
+    let mut monitor = Monitor::new(Decoder::new(node, scale));
+    for frame in &sent {
+        let _ = monitor.on_frame(frame);
+    }
+    let pages = monitor
+        .counts
+        .get("diagnostics 0x103")
+        .copied()
+        .unwrap_or(0);
+    // One page per 10 ms status period, as the status and motor frames.
+    let status = monitor.counts.get("status 0x101").copied().unwrap_or(0);
+    assert!(
+        pages + 1 >= status && status >= 90,
+        "{pages} pages, {status} status frames"
+    );
+    assert_eq!(monitor.diagnostic_counter.lost, 0, "no page skipped");
+    assert!(monitor.crc_errors.is_empty() && monitor.other_errors.is_empty());
+    let d = &monitor.diagnostics;
+    assert_eq!(d.counter("dropped: CRC"), Some(6), "six corrupted frames");
+    // The first good frame after them: its counter is seven past the last CRC-good one.
+    assert_eq!(d.counter("dropped: counter jump"), Some(1));
+    assert_eq!(d.counter("bus-off events"), Some(0));
+    // The silence and the corrupted run each held the position 30 ms after the last good frame.
+    assert_eq!(d.counter("hold entries"), Some(2));
+    use host_sim::bringup::monitor::RecordPage;
+    let records = d.records();
+    // The score that latched it.
+    assert_eq!(records[0], RecordPage::Fault(Ok(Fault::InvalidFrames), 5));
+    let RecordPage::Fault(older, age_ms) = records[1] else {
+        panic!("{records:?}")
+    };
+    assert_eq!(older, Ok(Fault::ReferenceTimeout));
+    assert!((130..=140).contains(&age_ms), "{age_ms} ms");
+    assert_eq!(records[2], RecordPage::Empty, "two faults, two records");
+    let text = monitor.summary();
+    eprintln!("{text}");
+    for words in [
+        "dropped: CRC 6",
+        "hold entries 2",
+        "bus-off events 0",
+        "fault record 1 (newest): invalid reference frames: invalid-frame score 5",
+        "fault record 2: reference timeout: no valid reference for 1",
+        "fault record 3: none",
+    ] {
+        assert!(
+            text.contains(words),
+            "monitor summary lacks {words:?}:\n{text}"
+        );
+    }
+}
+
+/// Issue 12 defect 10: the watchdog is fed every feed period while the tasks and the fast loop
+/// run, and not once while the fast loop is stopped, so the IWDG resets the MCU.
+#[test]
+fn the_watchdog_is_fed_only_while_the_fast_loop_and_the_tasks_run() {
+    in_both_modes(|_| the_watchdog_is_fed_only_while_both_run());
+}
+
+fn the_watchdog_is_fed_only_while_both_run() {
+    use steering_ecu::watchdog::{FEED_PERIOD_US, WATCHDOG_TIMEOUT_US};
+    // 0-9 AS Off, 10-59 AS Driving 5 deg; the fast loop stops for periods 20-34.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 5.0); 50]);
+    let _ = run(&script, |period, _, _| {
+        if let Ok(mut i) = INJECT.lock() {
+            *i = if (20..35).contains(&period) {
+                Inject::FastLoopStopped
+            } else {
+                Inject::None
+            };
+        }
+    });
+    let feeds = FEEDS.lock().map(|f| f.clone()).unwrap_or_default();
+    let ms = |p: u64| p * 10_000;
+    let running = |from: u64, to: u64| {
+        feeds
+            .iter()
+            .filter(|&&t| t > ms(from) && t <= ms(to))
+            .count()
+    };
+    // Every feed period while both run (the first check sees both halves already moving).
+    assert!(running(0, 20) >= 19, "{feeds:?}");
+    assert_eq!(
+        running(21, 35),
+        0,
+        "fed with the fast loop stopped: {feeds:?}"
+    );
+    let gap = feeds
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .max()
+        .unwrap_or(u64::MAX);
+    assert!(
+        gap > u64::from(WATCHDOG_TIMEOUT_US),
+        "the stop ({gap} us without a feed) outlasts the IWDG's timeout"
+    );
+    assert!(running(36, 60) >= 23, "fed again once it runs: {feeds:?}");
+    assert!(
+        feeds
+            .windows(2)
+            .all(|w| w[1] - w[0] >= u64::from(FEED_PERIOD_US)),
+        "at most one feed per period"
     );
 }

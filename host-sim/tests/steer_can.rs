@@ -257,6 +257,47 @@ fn epos_check_reads_the_simulated_drive_and_compares_the_gains() {
     assert!(report.text().contains("0x3210"));
 }
 
+/// Issue 12 defect 11: `epos check` shows the drive's limits beside ours, the software
+/// position limits as their span around the origin the ECU wrote them at.
+#[test]
+fn epos_check_shows_the_drive_limits_beside_ours() {
+    use steering_ecu::canopen::epos4::{Epos4Config, od};
+    let mut sim = SimEcu::paper();
+    let report = epos::check(&mut sim, node()).unwrap();
+    println!("{}", report.text());
+    assert_eq!(report.limit_mismatches(), 3, "the drive's power-up values");
+    assert!(report.position_limits.unwritten());
+    assert!(report.text().contains("not written"));
+    assert!(!report.is_ok());
+
+    let ours = Epos4Config::paper(node()).limits;
+    for (object, word) in gain_words(&EposGains::PAPER).unwrap().into_iter().chain([
+        (od::OUTPUT_CURRENT_LIMIT, ours.current_ma),
+        (od::FOLLOWING_ERROR_WINDOW, ours.following_error_inc),
+        (od::MAX_PROFILE_VELOCITY, ours.max_velocity_rpm),
+    ]) {
+        sdo_write(&mut sim, object, word);
+    }
+    let span = ours.position_limit_inc as i32;
+    // Written around an origin 300 inc from the drive's power-up position.
+    sdo_write(&mut sim, od::MIN_POSITION_LIMIT, (300 - span) as u32);
+    sdo_write(&mut sim, od::MAX_POSITION_LIMIT, (300 + span) as u32);
+    let report = epos::check(&mut sim, node()).unwrap();
+    let text = report.text();
+    println!("{text}");
+    assert_eq!(report.limit_mismatches(), 0);
+    assert!(report.position_limits.matches());
+    assert!(text.contains(&format!("+-{span} around 300  ok")), "{text}");
+    assert!(report.is_ok());
+
+    // A span other than ours is named.
+    sdo_write(&mut sim, od::MAX_POSITION_LIMIT, (300 + span / 2) as u32);
+    let report = epos::check(&mut sim, node()).unwrap();
+    assert!(!report.position_limits.matches());
+    assert!(report.text().contains("DIFFERS"));
+    assert!(!report.is_ok());
+}
+
 #[test]
 fn monitor_counts_frames_crc_errors_and_lost_frames() {
     let mut sim = SimEcu::paper();

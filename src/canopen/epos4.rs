@@ -115,6 +115,10 @@ pub mod od {
     /// [607F] Max profile velocity, UNSIGNED32, rpm (CiA 402; the EPOS4's default velocity
     /// unit).
     pub const MAX_PROFILE_VELOCITY: ObjectAddress = ObjectAddress::new(0x607F, 0);
+    /// [607Dsub1] Software position limit: min position limit, INTEGER32, inc (CiA 402).
+    pub const MIN_POSITION_LIMIT: ObjectAddress = ObjectAddress::new(0x607D, 1);
+    /// [607Dsub2] Software position limit: max position limit, INTEGER32, inc (CiA 402).
+    pub const MAX_POSITION_LIMIT: ObjectAddress = ObjectAddress::new(0x607D, 2);
 
     /// 0x6060 value of cyclic synchronous position mode (CiA 402).
     pub const MODE_CSP: i8 = 8;
@@ -248,8 +252,10 @@ pub struct Epos4Config {
 }
 
 /// Limits the drive enforces by itself, so a wrong target or a confused ECU cannot ask for more.
-/// Software position limits (0x607D) are not written: the drive counts from its power-up
-/// position, so they would have to follow the ECU's column-derived origin (issue 12, open).
+/// The three above are written once in the configuration script; the software position limits
+/// (0x607D) are written by every enable walk, around the origin the ECU last took from the
+/// column ([`Epos4Link::set_position_origin`]), because the drive counts from its power-up
+/// position: see [`Epos4Link::position_limits`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DriveLimits {
@@ -259,7 +265,19 @@ pub struct DriveLimits {
     pub following_error_inc: u32,
     /// Max profile velocity, rpm (0x607F).
     pub max_velocity_rpm: u32,
+    /// Software position limits (0x607D), inc either side of the column-derived origin.
+    pub position_limit_inc: u32,
 }
+
+/// The steering's travel the drive allows either side of straight ahead, deg at the wheel:
+/// the reference's +-90 deg (the E2E rule) plus [`POSITION_LIMIT_MARGIN_DEG`].
+pub const POSITION_LIMIT_DEG: f32 = 90.0 + POSITION_LIMIT_MARGIN_DEG;
+/// Margin of the drive's software position limits beyond +-90 deg, deg at the wheel. The
+/// drive limits the motor's position, which under load runs ahead of the column by the belt's
+/// stretch: up to 9.7 deg at the 20 A limit (Tables 1 and 4, `ecu_mode::EcuTuning::max_lead_rad`),
+/// and ECU mode's target leads by as much. 10 deg more covers a position step's overshoot, so
+/// the limits never take travel the ECU asks for at full lock.
+pub const POSITION_LIMIT_MARGIN_DEG: f32 = 20.0;
 
 /// Following error window at the wheel, deg: above the 20 deg the ECU's tracking check allows
 /// (a 400 deg/s reference slew against the motor's 306 deg/s lags up to about 21 deg over the
@@ -272,16 +290,20 @@ pub const MAX_VELOCITY_RPM: u32 = 5_400;
 impl DriveLimits {
     /// The paper's car: the 20 A loop limit (section 3.3), [`FOLLOWING_ERROR_DEG`] through the
     /// paper's gears at `counts_per_rev`, [`MAX_VELOCITY_RPM`].
+    /// [`POSITION_LIMIT_DEG`] likewise.
     pub fn paper(counts_per_rev: u32) -> Self {
-        let motor = crate::gearing::Gearing::PAPER
-            .motor_from_steering(crate::units::SteeringDeg(FOLLOWING_ERROR_DEG).into());
-        let following_error_inc = PositionScale::new(counts_per_rev)
-            .and_then(|s| s.inc_from_motor(motor))
-            .map_or(0, |i| i.unsigned_abs());
+        let inc_at_wheel = |deg: f32| {
+            let motor = crate::gearing::Gearing::PAPER
+                .motor_from_steering(crate::units::SteeringDeg(deg).into());
+            PositionScale::new(counts_per_rev)
+                .and_then(|s| s.inc_from_motor(motor))
+                .map_or(0, |i| i.unsigned_abs())
+        };
         DriveLimits {
             current_ma: (crate::paper_mode::CURRENT_LIMIT.0 * 1000.0) as u32,
-            following_error_inc,
+            following_error_inc: inc_at_wheel(FOLLOWING_ERROR_DEG),
             max_velocity_rpm: MAX_VELOCITY_RPM,
+            position_limit_inc: inc_at_wheel(POSITION_LIMIT_DEG),
         }
     }
 }
@@ -457,10 +479,29 @@ enum EnableStep {
     WriteCommand(Command),
     ReadPosition,
     WriteTarget,
+    /// 0x607D sub 1 (min) or sub 2 (max), written or read back.
+    WriteLimit(LimitSide),
+    ReadLimit(LimitSide),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LimitSide {
+    Min,
+    Max,
+}
+
+impl LimitSide {
+    fn object(self) -> ObjectAddress {
+        match self {
+            LimitSide::Min => od::MIN_POSITION_LIMIT,
+            LimitSide::Max => od::MAX_POSITION_LIMIT,
+        }
+    }
 }
 
 /// CiA 402 steps allowed before [`LinkError::Cia402Stuck`]: a full walk with a fault reset
-/// takes about 12.
+/// takes about 16 (with the four software-limit transfers); the rest bounds the wait for the
+/// origin the limits need.
 const MAX_ENABLE_STEPS: u8 = 40;
 /// NMT start attempts (one per heartbeat timeout) before [`LinkError::NodeDidNotStart`].
 const MAX_START_ATTEMPTS: u8 = 3;
@@ -478,7 +519,9 @@ const MAX_START_ATTEMPTS: u8 = 3;
 ///      |
 ///      v
 ///  Enabling (SDO: read 0x6041 -> next controlword; before "enable operation" the target
-///      |      0x607A is set to the actual position 0x6064, so enabling never jumps)
+///      |      0x607A is set to the actual position 0x6064, so enabling never jumps, and the
+///      |      software position limits 0x607D are written around the ECU's origin and read
+///      |      back: no origin, no enable; a differing read-back fails the link)
 ///      |  power wanted                     power not wanted
 ///      v                                        v
 ///  Cyclic: each cycle RPDO1 (0x607A)       Standby: power stage off (Switch on disabled),
@@ -530,6 +573,10 @@ pub struct Epos4Link {
     next_ecu_heartbeat_us: u64,
     /// See [`Epos4Link::position_known`].
     position_known: bool,
+    /// The column-derived origin in the drive's increments ([`Epos4Link::set_position_origin`]).
+    position_origin_inc: Option<i32>,
+    /// This enable walk wrote the software position limits and read them back equal.
+    limits_verified: bool,
 }
 
 impl Epos4Link {
@@ -592,6 +639,8 @@ impl Epos4Link {
             failsafe_sent: false,
             next_ecu_heartbeat_us: now_us,
             position_known: false,
+            position_origin_inc: None,
+            limits_verified: false,
         })
     }
 
@@ -736,6 +785,36 @@ impl Epos4Link {
     /// the bring-up forgets the position.
     pub fn position_known(&self) -> bool {
         self.position_known
+    }
+
+    /// Where straight ahead is in the drive's increments, as the ECU took it from the column
+    /// encoder (`None`: not known). The software position limits are written around it.
+    pub fn set_position_origin(&mut self, origin_inc: Option<i32>) {
+        self.position_origin_inc = origin_inc;
+    }
+
+    /// The software position limits (min, max) the next enable walk writes: the origin plus
+    /// and minus [`DriveLimits::position_limit_inc`], saturated at the `i32` range; `None`
+    /// while the origin is not known (the walk then waits in Switched on, never enabling
+    /// without them).
+    pub fn position_limits(&self) -> Option<(i32, i32)> {
+        let origin = self.position_origin_inc?;
+        let span = i32::try_from(self.config.limits.position_limit_inc).unwrap_or(i32::MAX);
+        Some((origin.saturating_sub(span), origin.saturating_add(span)))
+    }
+
+    /// The limits this enable walk wrote and read back equal; `None` before that.
+    pub fn verified_position_limits(&self) -> Option<(i32, i32)> {
+        self.limits_verified
+            .then(|| self.position_limits())
+            .flatten()
+    }
+
+    fn limit_value(&self, side: LimitSide) -> Option<i32> {
+        self.position_limits().map(|(min, max)| match side {
+            LimitSide::Min => min,
+            LimitSide::Max => max,
+        })
     }
 
     /// The motor angle the drive last reported.
@@ -887,6 +966,7 @@ impl Epos4Link {
     fn enter_enabling(&mut self, reset: bool, now_us: u64, out: &mut Outbox) {
         self.phase = Phase::Enabling;
         self.started = true;
+        self.limits_verified = false;
         self.reset_pending = reset;
         self.enable_count = 0;
         self.enable_step = EnableStep::ReadStatus;
@@ -916,6 +996,19 @@ impl Epos4Link {
                 value: self.target_inc as u32,
                 width: Width::U32,
             }),
+            EnableStep::WriteLimit(side) => match self.limit_value(side) {
+                Some(value) => SdoRequest::Download(SdoWrite {
+                    object: side.object(),
+                    value: value as u32,
+                    width: Width::U32,
+                }),
+                // The origin was forgotten since the walk checked it: read the state again.
+                None => {
+                    self.enable_step = EnableStep::ReadStatus;
+                    SdoRequest::Upload(od::STATUSWORD)
+                }
+            },
+            EnableStep::ReadLimit(side) => SdoRequest::Upload(side.object()),
         };
         self.send(req, now_us, out);
     }
@@ -1161,6 +1254,13 @@ impl Epos4Link {
                     return;
                 }
                 match state {
+                    // Enabled by something other than this walk (the drive kept its state
+                    // through a link restart): back to Switched on, to write the limits.
+                    Some(State::OperationEnabled) if !self.limits_verified => self.enable_issue(
+                        EnableStep::WriteCommand(Command::DisableOperation),
+                        now_us,
+                        out,
+                    ),
                     Some(State::OperationEnabled) => {
                         self.phase = Phase::Cyclic;
                         self.missed_tpdos = 0;
@@ -1194,11 +1294,46 @@ impl Epos4Link {
                 self.target_inc = value as i32;
                 self.enable_issue(EnableStep::WriteTarget, now_us, out);
             }
-            (EnableStep::WriteTarget, SdoOutcome::Written { .. }) => self.enable_issue(
-                EnableStep::WriteCommand(Command::EnableOperation),
-                now_us,
-                out,
-            ),
+            // The software position limits follow the origin: without one the walk waits
+            // (re-reading the position, bounded by MAX_ENABLE_STEPS) rather than enable.
+            (EnableStep::WriteTarget, SdoOutcome::Written { .. }) => {
+                let next = if self.position_limits().is_some() {
+                    EnableStep::WriteLimit(LimitSide::Min)
+                } else {
+                    EnableStep::ReadPosition
+                };
+                self.enable_issue(next, now_us, out)
+            }
+            (EnableStep::WriteLimit(LimitSide::Min), SdoOutcome::Written { .. }) => {
+                self.enable_issue(EnableStep::WriteLimit(LimitSide::Max), now_us, out)
+            }
+            (EnableStep::WriteLimit(LimitSide::Max), SdoOutcome::Written { .. }) => {
+                self.enable_issue(EnableStep::ReadLimit(LimitSide::Min), now_us, out)
+            }
+            (EnableStep::ReadLimit(side), SdoOutcome::Read { value, .. }) => {
+                let expected = self.limit_value(side).map(|v| v as u32);
+                if expected != Some(value) {
+                    self.fail(LinkError::ReadBackMismatch {
+                        object: side.object(),
+                        wrote: expected.unwrap_or(0),
+                        read: value,
+                    });
+                    return;
+                }
+                match side {
+                    LimitSide::Min => {
+                        self.enable_issue(EnableStep::ReadLimit(LimitSide::Max), now_us, out)
+                    }
+                    LimitSide::Max => {
+                        self.limits_verified = true;
+                        self.enable_issue(
+                            EnableStep::WriteCommand(Command::EnableOperation),
+                            now_us,
+                            out,
+                        )
+                    }
+                }
+            }
             (EnableStep::WriteCommand(Command::DisableVoltage), SdoOutcome::Written { .. })
                 if self.reset_pending =>
             {

@@ -7,10 +7,14 @@
 //! - EPOS4: the controlword "disable voltage" SDO request is written straight into a free
 //!   bxCAN transmit mailbox (the async driver may be what failed) and given up to 1 ms to go.
 //!
-//! The MCU is not reset: a panic is a bug, and a reset would power the actuator again as soon
-//! as the vehicle's reference frames come back. The status frames stop, which the vehicle
-//! computer treats as a lost steering ECU (AS Emergency). Both handlers need no state and no
-//! lock, so they work whatever was held when the fault hit.
+//! The handlers do not reset the MCU: a panic is a bug, and a reset would power the actuator
+//! again as soon as the vehicle's reference frames come back. The status frames stop, which
+//! the vehicle computer treats as a lost steering ECU (AS Emergency). The independent watchdog
+//! (`steering_ecu::watchdog`, started in `main.rs`) cannot be stopped once running, so with no
+//! more feeds it does reset the MCU 68..188 ms later; the firmware then starts as at power-up,
+//! drive off, in Idle until the vehicle computer's frames allow power (the fault log, in RAM,
+//! is lost). Both handlers need no state and no lock, so they work whatever was held when the
+//! fault hit.
 
 #[cfg(feature = "drive-epos4")]
 use steering_ecu::canopen::NodeId;

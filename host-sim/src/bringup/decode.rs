@@ -1,5 +1,5 @@
-//! What one frame on the car's bus is, per the DBC (reference 0x100, status 0x101, motor 0x102)
-//! and CANopen's predefined connection set for the EPOS4 node (TPDO1/2, RPDO1, SDO, EMCY,
+//! What one frame on the car's bus is, per the DBC (reference 0x100, status 0x101, motor 0x102,
+//! diagnostics 0x103) and CANopen's predefined connection set for the EPOS4 node (TPDO1/2, RPDO1, SDO, EMCY,
 //! heartbeat) plus NMT and SYNC; and the fault bits and state codes in words.
 
 use steering_ecu::as_state::AsState;
@@ -7,9 +7,11 @@ use steering_ecu::can::Frame;
 use steering_ecu::canopen::epos4::{PositionScale, amps_from_ma};
 use steering_ecu::canopen::nmt::{self, NmtState};
 use steering_ecu::canopen::{NodeId, emcy, function, node_of};
-use steering_ecu::faults::{Fault, FaultSet};
+use steering_ecu::ecu::link_fault_name;
+use steering_ecu::faults::{EncoderFaultDetail, Fault, FaultSet};
 use steering_ecu::protocol::{
-    FrameError, MOTOR_ID, MotorStatus, ProtocolConfig, REFERENCE_ID, Reference, STATUS_ID, Status,
+    DIAGNOSTIC_ID, Diagnostic, FrameError, MOTOR_ID, MotorStatus, ProtocolConfig, REFERENCE_ID,
+    Reference, STATUS_ID, Status,
 };
 use steering_ecu::steering::EcuState;
 
@@ -19,6 +21,8 @@ pub enum Decoded {
     Reference(Result<Reference, FrameError>),
     Status(Result<Status, FrameError>),
     Motor(Result<MotorStatus, FrameError>),
+    /// One page of the ECU's diagnostic frame.
+    Diagnostic(Result<Diagnostic, FrameError>),
     /// EPOS4 TPDO1 (0x6041 statusword, 0x6064 position actual), position in rad at the motor.
     EposTpdo1 {
         statusword: u16,
@@ -56,6 +60,7 @@ impl Decoded {
             Decoded::Reference(_) => "reference 0x100",
             Decoded::Status(_) => "status 0x101",
             Decoded::Motor(_) => "motor 0x102",
+            Decoded::Diagnostic(_) => "diagnostics 0x103",
             Decoded::EposTpdo1 { .. } => "EPOS4 TPDO1",
             Decoded::EposTpdo2 { .. } => "EPOS4 TPDO2",
             Decoded::EposRpdo1 { .. } => "EPOS4 RPDO1",
@@ -99,6 +104,9 @@ impl Decoder {
         }
         if id == MOTOR_ID {
             return Decoded::Motor(self.protocol.decode_motor(frame));
+        }
+        if id == DIAGNOSTIC_ID {
+            return Decoded::Diagnostic(self.protocol.decode_diagnostic(frame));
         }
         if nmt::is_sync(frame) {
             return Decoded::Sync;
@@ -177,6 +185,51 @@ pub fn fault_words(fault: Fault) -> &'static str {
         Fault::HeartbeatLost => "EPOS4 heartbeat lost",
         Fault::BusOff => "CAN bus-off",
         Fault::TrackingError => "tracking error",
+    }
+}
+
+/// A fault record's detail in words, per the units each [`Fault`] documents for it.
+pub fn fault_detail_words(fault: Fault, detail: i32) -> String {
+    let centideg = |d: i32| f64::from(d) / 100.0;
+    match fault {
+        Fault::ReferenceTimeout => format!("no valid reference for {detail} ms"),
+        Fault::InvalidFrames => format!("invalid-frame score {detail}"),
+        Fault::Encoder => encoder_detail_words(detail),
+        Fault::EncoderJump => format!("jumped {:+.2} deg", centideg(detail)),
+        Fault::EncoderMotorDisagreement => {
+            format!("encoder and motor {:+.2} deg apart", centideg(detail))
+        }
+        Fault::OverCurrent if detail == i32::MIN => "current not a number".into(),
+        Fault::OverCurrent => format!("{:+.3} A", f64::from(detail) / 1000.0),
+        Fault::EposFault => epos_code_words(detail),
+        Fault::HeartbeatLost => "no heartbeat within the consumer time".into(),
+        Fault::BusOff => format!("transmit error counter {detail}"),
+        Fault::TrackingError => format!("{:+.2} deg from the reference", centideg(detail)),
+    }
+}
+
+fn encoder_detail_words(detail: i32) -> String {
+    const SENSOR: i32 = EncoderFaultDetail::SensorReported as i32;
+    match detail {
+        d if d == EncoderFaultDetail::ColumnNotFinite as i32 => {
+            "column reading not a number".into()
+        }
+        d if d == EncoderFaultDetail::MotorNotFinite as i32 => "motor angle not a number".into(),
+        d if d == EncoderFaultDetail::Stale as i32 => "no sample within the timeout".into(),
+        // The codes the firmware's encoder task reports (`tasks::encoder_task`).
+        d if d == SENSOR + 1 => "sensor did not answer".into(),
+        d if d == SENSOR + 2 => "sensor gave an invalid reading".into(),
+        d if d > SENSOR => format!("sensor error {}", d - SENSOR),
+        d => format!("unknown encoder detail {d}"),
+    }
+}
+
+/// An EPOS4 fault's code: the link's own failures by name, else the drive's EMCY error code
+/// or statusword as the drive gave it.
+fn epos_code_words(detail: i32) -> String {
+    match u16::try_from(detail).ok().and_then(link_fault_name) {
+        Some(name) => format!("link: {name}"),
+        None => format!("drive error code/statusword 0x{detail:04X}"),
     }
 }
 

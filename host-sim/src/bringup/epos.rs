@@ -1,12 +1,13 @@
 //! `epos check`: what the EPOS4 says about itself, by SDO reads only (nothing is written):
 //! NMT state (heartbeat), CiA 402 state, mode of operation, the gains in 0x30A0/0x30A1 against
-//! ours (Table 3 as `gain_words` writes them), the error register, the error code and the
-//! error history.
+//! ours (Table 3 as `gain_words` writes them), the drive's limits against ours (current,
+//! following error window, max velocity, and the software position limits' span around the
+//! origin the ECU wrote them at), the error register, the error code and the error history.
 
 use super::decode::nmt_words;
 use super::{BringupError, Transport, pump};
 use steering_ecu::canopen::cia402::State;
-use steering_ecu::canopen::epos4::{gain_words, od};
+use steering_ecu::canopen::epos4::{DriveLimits, Epos4Config, gain_words, od};
 use steering_ecu::canopen::nmt::{self, NmtState};
 use steering_ecu::canopen::sdo::{SdoClient, SdoOutcome, SdoRequest};
 use steering_ecu::canopen::{NodeId, ObjectAddress};
@@ -31,6 +32,31 @@ pub struct GainCheck {
     pub drive: u32,
 }
 
+/// The software position limits (0x607D) as the drive holds them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PositionLimitsCheck {
+    /// Ours: inc either side of the origin ([`DriveLimits::position_limit_inc`]).
+    pub ours_span: u32,
+    pub drive_min: i32,
+    pub drive_max: i32,
+}
+
+impl PositionLimitsCheck {
+    /// The drive still has the widest range: no enable has written them since it powered up.
+    pub fn unwritten(&self) -> bool {
+        self.drive_min == i32::MIN && self.drive_max == i32::MAX
+    }
+
+    /// Half the drive's range, as ours is given (the origin is the ECU's, from the column).
+    pub fn drive_span(&self) -> i64 {
+        (i64::from(self.drive_max) - i64::from(self.drive_min)) / 2
+    }
+
+    pub fn matches(&self) -> bool {
+        !self.unwritten() && self.drive_span() == i64::from(self.ours_span)
+    }
+}
+
 /// Everything `epos check` found.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EposReport {
@@ -41,6 +67,9 @@ pub struct EposReport {
     pub statusword: u16,
     pub mode: i8,
     pub gains: Vec<GainCheck>,
+    /// Current limit, following error window, max velocity: ours beside the drive's.
+    pub limits: Vec<GainCheck>,
+    pub position_limits: PositionLimitsCheck,
     pub error_register: u8,
     pub error_code: u16,
     /// Newest first.
@@ -52,9 +81,19 @@ impl EposReport {
         self.gains.iter().filter(|g| g.ours != g.drive).count()
     }
 
-    /// Fine for a campaign on the EPOS4: no error, gains as ours, CSP.
+    pub fn limit_mismatches(&self) -> usize {
+        self.limits.iter().filter(|g| g.ours != g.drive).count()
+    }
+
+    /// Fine for a campaign on the EPOS4: no error, gains and limits as ours, CSP. The software
+    /// position limits are written at each enable, so a drive not enabled since power-up is
+    /// not refused for lacking them (the text says so); written ones must have our span.
     pub fn is_ok(&self) -> bool {
-        self.gain_mismatches() == 0 && self.error_register == 0 && self.error_code == 0
+        self.gain_mismatches() == 0
+            && self.limit_mismatches() == 0
+            && (self.position_limits.unwritten() || self.position_limits.matches())
+            && self.error_register == 0
+            && self.error_code == 0
     }
 
     pub fn text(&self) -> String {
@@ -80,17 +119,39 @@ impl EposReport {
             self.mode,
             mode_words(self.mode)
         ));
-        out.push_str("  gains            object    ours        drive\n");
-        for g in &self.gains {
+        for (title, rows) in [("gains ", &self.gains), ("limits", &self.limits)] {
             out.push_str(&format!(
-                "    {:<26} {}  {:>10}  {:>10}  {}\n",
-                g.name,
-                g.object,
-                g.ours,
-                g.drive,
-                if g.ours == g.drive { "ok" } else { "DIFFERS" }
+                "  {title}           object    ours        drive\n"
             ));
+            for g in rows {
+                out.push_str(&format!(
+                    "    {:<26} {}  {:>10}  {:>10}  {}\n",
+                    g.name,
+                    g.object,
+                    g.ours,
+                    g.drive,
+                    if g.ours == g.drive { "ok" } else { "DIFFERS" }
+                ));
+            }
         }
+        let p = &self.position_limits;
+        out.push_str(&format!(
+            "    {:<26} 0x607D    +-{:>8}  {}\n",
+            "software position, inc",
+            p.ours_span,
+            if p.unwritten() {
+                "not written (the ECU writes them at each enable)".to_string()
+            } else {
+                format!(
+                    "{}..{} = +-{} around {}  {}",
+                    p.drive_min,
+                    p.drive_max,
+                    p.drive_span(),
+                    (i64::from(p.drive_min) + i64::from(p.drive_max)) / 2,
+                    if p.matches() { "ok" } else { "DIFFERS" }
+                )
+            }
+        ));
         out.push_str(&format!(
             "  error register   0x{:02X}{}\n",
             self.error_register,
@@ -119,8 +180,9 @@ impl EposReport {
                 "ok".to_string()
             } else {
                 format!(
-                    "{} gain(s) differ from ours, error register 0x{:02X}",
+                    "{} gain(s) and {} limit(s) differ from ours, error register 0x{:02X}",
                     self.gain_mismatches(),
+                    self.limit_mismatches() + usize::from(!p.unwritten() && !p.matches()),
                     self.error_register
                 )
             }
@@ -223,6 +285,37 @@ pub fn check(transport: &mut dyn Transport, node: NodeId) -> Result<EposReport, 
             drive: read(transport, node, object)?,
         });
     }
+    let ours: DriveLimits = Epos4Config::paper(node).limits;
+    let mut limits = Vec::with_capacity(3);
+    for (object, name, word) in [
+        (
+            od::OUTPUT_CURRENT_LIMIT,
+            "current limit, mA",
+            ours.current_ma,
+        ),
+        (
+            od::FOLLOWING_ERROR_WINDOW,
+            "following error window, inc",
+            ours.following_error_inc,
+        ),
+        (
+            od::MAX_PROFILE_VELOCITY,
+            "max profile velocity, rpm",
+            ours.max_velocity_rpm,
+        ),
+    ] {
+        limits.push(GainCheck {
+            object,
+            name,
+            ours: word,
+            drive: read(transport, node, object)?,
+        });
+    }
+    let position_limits = PositionLimitsCheck {
+        ours_span: ours.position_limit_inc,
+        drive_min: read(transport, node, od::MIN_POSITION_LIMIT)? as i32,
+        drive_max: read(transport, node, od::MAX_POSITION_LIMIT)? as i32,
+    };
     let error_register = read(transport, node, ERROR_REGISTER)? as u8;
     let error_code = read(transport, node, ERROR_CODE)? as u16;
     let n = read(transport, node, ERROR_HISTORY_COUNT)?.min(8) as u8;
@@ -237,6 +330,8 @@ pub fn check(transport: &mut dyn Transport, node: NodeId) -> Result<EposReport, 
         statusword,
         mode,
         gains,
+        limits,
+        position_limits,
         error_register,
         error_code,
         error_history,

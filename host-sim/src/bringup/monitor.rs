@@ -1,14 +1,141 @@
 //! Live decode of the bus: counts per frame kind, CRC and length errors, alive-counter gaps of
-//! the ECU's frames, and the last value of everything, as a block of text for the terminal.
+//! the ECU's frames, the last value of everything and the ECU's own diagnostics (0x103: drop
+//! counters per reason, bus-offs, the newest fault records), as a block of text for the
+//! terminal.
 
 use super::Stamped;
 use super::decode::{
-    Decoded, Decoder, as_state_words, ecu_state_words, faults_in_words, frame_error_words,
-    nmt_words,
+    Decoded, Decoder, as_state_words, ecu_state_words, fault_detail_words, fault_words,
+    faults_in_words, frame_error_words, nmt_words,
 };
 use std::collections::BTreeMap;
 use steering_ecu::canopen::nmt::NmtState;
-use steering_ecu::protocol::{AliveCounter, FrameError, MotorStatus, Reference, Status};
+use steering_ecu::faults::Fault;
+use steering_ecu::protocol::{
+    AliveCounter, DIAGNOSTIC_PAGES, Diagnostic, FIRST_RECORD_PAGE, FrameError, MotorStatus,
+    Reference, Status,
+};
+
+/// The names of the diagnostic frame's counters, page by page (pages 0..=3, three each), as
+/// `Ecu::diagnostic_frame` fills them and the DBC names them.
+pub const DIAGNOSTIC_COUNTERS: [[&str; 3]; 4] = [
+    [
+        "dropped: wrong length",
+        "dropped: CRC",
+        "dropped: stale counter",
+    ],
+    [
+        "dropped: counter jump",
+        "dropped: unknown AS state",
+        "dropped: angle out of range",
+    ],
+    ["dropped: rate too high", "early frames", "bus-off events"],
+    [
+        "refused clear requests",
+        "hold entries",
+        "lost drive-demand frames",
+    ],
+];
+
+/// One fault-record page of the diagnostic frame as last received.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RecordPage {
+    /// The page has not come yet.
+    NotSeen,
+    /// The ECU has fewer records than this page's place.
+    Empty,
+    /// The fault (`Err`: a bit no fault has) and its detail.
+    Fault(Result<Fault, u8>, i32),
+}
+
+/// The newest page of each number the ECU's diagnostic frame has sent.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Diagnostics {
+    pages: [Option<Diagnostic>; DIAGNOSTIC_PAGES as usize],
+}
+
+impl Diagnostics {
+    /// Keeps a page; a page number beyond the layout is ignored.
+    pub fn on(&mut self, d: Diagnostic) {
+        if let Some(slot) = self.pages.get_mut(usize::from(d.page)) {
+            *slot = Some(d);
+        }
+    }
+
+    /// A counter by its name in [`DIAGNOSTIC_COUNTERS`]; `None` until its page has come.
+    pub fn counter(&self, name: &str) -> Option<u16> {
+        DIAGNOSTIC_COUNTERS
+            .iter()
+            .enumerate()
+            .find_map(|(page, names)| {
+                let i = names.iter().position(|n| *n == name)?;
+                self.pages.get(page)?.as_ref()?.words.get(i).copied()
+            })
+    }
+
+    /// The fault records received, newest first.
+    pub fn records(&self) -> Vec<RecordPage> {
+        self.pages
+            .iter()
+            .skip(usize::from(FIRST_RECORD_PAGE))
+            .map(|p| match p.map(|d| d.record()) {
+                None => RecordPage::NotSeen,
+                Some(None) => RecordPage::Empty,
+                Some(Some((bit, detail))) => {
+                    RecordPage::Fault(Fault::from_bit(bit).ok_or(bit), detail)
+                }
+            })
+            .collect()
+    }
+
+    /// The block of text `summary` shows; empty if no page came.
+    pub fn summary(&self) -> String {
+        if self.pages.iter().all(Option::is_none) {
+            return String::new();
+        }
+        let mut out = String::from(
+            "  diagnostics (0x103):
+",
+        );
+        for (page, names) in DIAGNOSTIC_COUNTERS.iter().enumerate() {
+            let words = self.pages.get(page).copied().flatten().map(|d| d.words);
+            let line: Vec<String> = names
+                .iter()
+                .enumerate()
+                .map(|(i, name)| match words.and_then(|w| w.get(i).copied()) {
+                    Some(n) => format!("{name} {n}"),
+                    None => format!("{name} (not seen yet)"),
+                })
+                .collect();
+            out.push_str(&format!(
+                "    {}
+",
+                line.join(", ")
+            ));
+        }
+        for (n, record) in self.records().iter().enumerate() {
+            let text = match record {
+                RecordPage::NotSeen => "not seen yet".to_string(),
+                RecordPage::Empty => "none".to_string(),
+                RecordPage::Fault(Ok(fault), detail) => format!(
+                    "{}: {}",
+                    fault_words(*fault),
+                    fault_detail_words(*fault, *detail)
+                ),
+                RecordPage::Fault(Err(bit), detail) => {
+                    format!("unknown fault bit {bit}: detail {detail}")
+                }
+            };
+            let age = if n == 0 { " (newest)" } else { "" };
+            out.push_str(&format!(
+                "    fault record {}{age}: {text}
+",
+                n + 1
+            ));
+        }
+        out
+    }
+}
 
 /// Alive-counter bookkeeping of one frame stream.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -47,6 +174,9 @@ pub struct Monitor {
     pub reference_counter: CounterCheck,
     pub status_counter: CounterCheck,
     pub motor_counter: CounterCheck,
+    pub diagnostic_counter: CounterCheck,
+    /// The newest page of each number of the ECU's diagnostic frame.
+    pub diagnostics: Diagnostics,
     pub last_reference: Option<(u64, Reference)>,
     pub last_status: Option<(u64, Status)>,
     pub last_motor: Option<(u64, MotorStatus)>,
@@ -71,6 +201,8 @@ impl Monitor {
             reference_counter: CounterCheck::default(),
             status_counter: CounterCheck::default(),
             motor_counter: CounterCheck::default(),
+            diagnostic_counter: CounterCheck::default(),
+            diagnostics: Diagnostics::default(),
             last_reference: None,
             last_status: None,
             last_motor: None,
@@ -117,9 +249,14 @@ impl Monitor {
                 self.motor_counter.on(m.counter);
                 self.last_motor = Some((t, *m));
             }
-            Decoded::Reference(Err(e)) | Decoded::Status(Err(e)) | Decoded::Motor(Err(e)) => {
-                error(e, d.kind())
+            Decoded::Diagnostic(Ok(p)) => {
+                self.diagnostic_counter.on(p.counter);
+                self.diagnostics.on(*p);
             }
+            Decoded::Reference(Err(e))
+            | Decoded::Status(Err(e))
+            | Decoded::Motor(Err(e))
+            | Decoded::Diagnostic(Err(e)) => error(e, d.kind()),
             Decoded::EposTpdo1 {
                 statusword,
                 motor_rad,
@@ -160,9 +297,11 @@ impl Monitor {
                 m.current_mean.0,
                 m.counter.raw()
             ),
-            Decoded::Reference(Err(e)) | Decoded::Status(Err(e)) | Decoded::Motor(Err(e)) => {
-                frame_error_words(e)
-            }
+            Decoded::Diagnostic(Ok(p)) => diagnostic_line(p),
+            Decoded::Reference(Err(e))
+            | Decoded::Status(Err(e))
+            | Decoded::Motor(Err(e))
+            | Decoded::Diagnostic(Err(e)) => frame_error_words(e),
             Decoded::EposTpdo1 {
                 statusword,
                 motor_rad,
@@ -212,6 +351,7 @@ impl Monitor {
             ("reference", &self.reference_counter),
             ("status", &self.status_counter),
             ("motor", &self.motor_counter),
+            ("diagnostics", &self.diagnostic_counter),
         ] {
             if c.last.is_some() {
                 out.push_str(&format!(
@@ -266,8 +406,29 @@ impl Monitor {
                 faults_in_words(self.faults_seen)
             ));
         }
+        out.push_str(&self.diagnostics.summary());
         out
     }
+}
+
+/// One diagnostic page in words (the `--each` view).
+fn diagnostic_line(p: &Diagnostic) -> String {
+    let body = match DIAGNOSTIC_COUNTERS.get(usize::from(p.page)) {
+        Some(names) => names
+            .iter()
+            .zip(p.words)
+            .map(|(name, n)| format!("{name} {n}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        None => match p.record() {
+            None => "no fault record".into(),
+            Some((bit, detail)) => match Fault::from_bit(bit) {
+                Some(f) => format!("{}: {}", fault_words(f), fault_detail_words(f, detail)),
+                None => format!("unknown fault bit {bit}: detail {detail}"),
+            },
+        },
+    };
+    format!("page {}  {body}  counter {:2}", p.page, p.counter.raw())
 }
 
 fn hex(data: &[u8]) -> String {

@@ -456,3 +456,114 @@ proptest! {
         }
     }
 }
+
+// The tests below kill what `.ci/mutation.sh` found missed in e2e.rs (issue 12).
+
+/// The accessors say what the checker holds.
+#[test]
+fn the_invalid_total_sums_every_reason_but_foreign_ids() {
+    let d = DropCounters {
+        wrong_id: 1000,
+        wrong_length: 1,
+        crc: 2,
+        stale: 4,
+        counter_jump: 8,
+        unknown_as_state: 16,
+        angle_out_of_range: 32,
+        rate_too_high: u16::MAX,
+    };
+    assert_eq!(d.invalid_total(), 63 + u32::from(u16::MAX));
+}
+
+#[test]
+fn the_checker_keeps_the_configuration_it_was_given() {
+    let config = ProtocolConfig {
+        max_invalid_in_row: 9,
+        max_rate_deg_per_s: 250.0,
+        ..ProtocolConfig::DEFAULT
+    };
+    let c = E2eChecker::new(config).unwrap();
+    assert_eq!(c.config().max_invalid_in_row, 9);
+    assert_eq!(c.config().max_rate_deg_per_s, 250.0);
+}
+
+#[test]
+fn a_frame_is_early_only_when_it_comes_within_half_a_period() {
+    let mut c = checker();
+    // Gaps after the first frame, us: half a period is not early, just under it is.
+    let mut t = 0;
+    let mut early = Vec::new();
+    for (n, gap) in [0u64, 4_999, 5_000, 6_000, 10_000, 1]
+        .into_iter()
+        .enumerate()
+    {
+        t += gap;
+        let _ = c.check(&frame(n as u8, DRIVING, 0), t);
+        early.push(c.early_frames());
+    }
+    assert_eq!(early, [0, 1, 1, 1, 1, 2]);
+}
+
+/// The real-time window restarts at the last accepted value once its anchor is 250 ms old, so a
+/// burst after a long quiet stretch is judged against the recent past, not against an anchor
+/// whose age would allow a hundred degrees.
+#[test]
+fn a_burst_right_after_the_window_restarts_is_held_to_the_rate() {
+    let mut c = checker();
+    let mut n = 0u8;
+    for k in 0..=24u64 {
+        assert!(is_valid(c.check(&frame(n, DRIVING, 0), k * T)), "hold {k}");
+        n = n.wrapping_add(1);
+    }
+    // From 250 ms (the anchor at 0 is exactly 250 ms old): +3.9 deg every 1 ms, each step
+    // within the per-frame budget (4 deg for anything up to one period).
+    let mut accepted_deg = 0.0;
+    for k in 0..10u64 {
+        let angle = 390 * (k as i16 + 1);
+        if let E2eVerdict::Valid(r) = c.check(&frame(n, DRIVING, angle), 250_000 + k * 1_000) {
+            accepted_deg = r.angle.0;
+        }
+        n = n.wrapping_add(1);
+    }
+    // Against the anchor at 240 ms: 400 deg/s x (elapsed + one period) allows 8 to 12 deg.
+    assert!(
+        accepted_deg <= 12.0,
+        "the burst reached {accepted_deg} deg within 10 ms"
+    );
+    assert!(accepted_deg >= 3.9, "the first step is within the rate");
+}
+
+#[test]
+fn the_window_allows_exactly_the_rate_times_elapsed_plus_one_period() {
+    let mut c = checker();
+    assert!(is_valid(c.check(&frame(0, DRIVING, 0), 0)));
+    // 1 ms later: 4.00 deg of the 4.40 the window allows.
+    assert!(is_valid(c.check(&frame(1, DRIVING, 400), 1_000)));
+    // 2 ms: 400 deg/s x (2 + 10) ms = 4.80 deg from the anchor, exactly what this frame moved.
+    assert!(is_valid(c.check(&frame(2, DRIVING, 480), 2_000)));
+    // One hundredth of a degree more is refused.
+    assert!(matches!(
+        error(c.check(&frame(3, DRIVING, 521), 3_000)),
+        Some(FrameError::RateTooHigh { .. })
+    ));
+}
+
+/// At exactly 250 ms the window restarts at the last accepted value (the frame at 240 ms), not
+/// at the frame being judged one frame later: the next frames are measured from 240 ms.
+#[test]
+fn the_window_restarts_when_its_anchor_is_exactly_250_ms_old() {
+    let mut c = checker();
+    let mut n = 0u8;
+    let mut send = |c: &mut E2eChecker, angle_raw: i16, t: u64| {
+        let v = c.check(&frame(n, DRIVING, angle_raw), t);
+        n = n.wrapping_add(1);
+        v
+    };
+    for k in 0..=24u64 {
+        assert!(is_valid(send(&mut c, 0, k * T)), "hold {k}");
+    }
+    assert!(is_valid(send(&mut c, -400, 250_000)), "4 deg down");
+    assert!(is_valid(send(&mut c, 0, 251_000)), "back");
+    // 4 deg from 0 deg at 240 ms, 12 ms ago: 400 deg/s x 22 ms allows 8.8.
+    assert!(is_valid(send(&mut c, 400, 252_000)), "4 deg up");
+}
