@@ -96,6 +96,15 @@ impl PlantEffects {
         tire_dahl: false,
     };
 
+    /// Issue 14's plant with effects (`backlash_deg=1.5,coulomb_n=200`): 1.5 deg of play in
+    /// the belt/nut at the wheel and 200 N of Coulomb friction at the rack. ECU mode's track
+    /// target is measured on it, and the firmware's task tests run ECU mode against it.
+    pub const PLAY_AND_FRICTION: PlantEffects = PlantEffects {
+        belt_play_deg: 1.5,
+        rack_coulomb_n: 200.0,
+        ..PlantEffects::NONE
+    };
+
     /// The keys of `--plant-effects`, with what each sets.
     pub const KEYS: [(&'static str, &'static str); 9] = [
         (
@@ -466,6 +475,10 @@ impl Actuator for EffectPlant {
 
     fn motor_rad(&self) -> f64 {
         self.x[state::THETA_ROT]
+    }
+
+    fn motor_speed_rad_s(&self) -> f64 {
+        self.x[state::W_ROT]
     }
 
     fn column_rad(&self) -> f64 {

@@ -2,7 +2,7 @@
 //! uses (index, sub-index, type and access as in maxon's EDS, see
 //! `steering_ecu::canopen::epos4`), NMT (PDOs only when Operational), heartbeat producer,
 //! EMCY on injected faults, a CiA 402 state machine that refuses illegal transitions, and in
-//! Operation enabled + CSP the paper-mode cascade driving the linear plant.
+//! Operation enabled + CSP the paper-mode cascade driving the paper plant (with effects if asked).
 //!
 //! Stricter than the drive where that helps tests: read-only objects refuse writes with the
 //! CiA 301 abort code, writes of the wrong size are aborted, PDO mappings can only change
@@ -16,7 +16,8 @@
 
 use std::collections::BTreeMap;
 
-use crate::plant::{Actuator, LinearPlant, PlantError, PlantParams};
+use crate::effect_plant::{EffectPlant, PlantEffects};
+use crate::plant::{Actuator, PlantError, PlantParams};
 use steering_ecu::can::Frame;
 use steering_ecu::canopen::cia402::{State, status};
 use steering_ecu::canopen::emcy::Emcy;
@@ -95,7 +96,7 @@ pub struct Epos4Sim {
     last_controlword: u16,
     refusals: Vec<Refusal>,
     cascade: Cascade,
-    plant: LinearPlant,
+    plant: EffectPlant,
     scale: PositionScale,
     now_us: u64,
     tick: u64,
@@ -128,7 +129,17 @@ impl Epos4Sim {
     /// drive's Hall/incremental position does: 0 inc is not column 0 unless the car was
     /// powered up straight.
     pub fn new_at(node: NodeId, scale: PositionScale, column_rad: f64) -> Result<Self, PlantError> {
-        let mut plant = LinearPlant::new(PlantParams::PAPER, 1.0 / CURRENT_LOOP_HZ as f64)?;
+        Self::new_at_with(node, scale, column_rad, PlantEffects::NONE)
+    }
+
+    /// [`Epos4Sim::new_at`] driving the paper's plant with `effects` (play, friction, tyre).
+    pub fn new_at_with(
+        node: NodeId,
+        scale: PositionScale,
+        column_rad: f64,
+        effects: PlantEffects,
+    ) -> Result<Self, PlantError> {
+        let mut plant = EffectPlant::new(PlantParams::PAPER, effects, 1.0 / CURRENT_LOOP_HZ as f64)?;
         plant.set_at_rest(column_rad);
         let origin_rad = plant.motor_rad();
         let mut sim = Epos4Sim {

@@ -240,6 +240,8 @@ pub trait Actuator {
     fn current_a(&self) -> f64;
     /// Motor shaft angle, rad.
     fn motor_rad(&self) -> f64;
+    /// Motor shaft speed, rad/s (the back-EMF of an open bridge).
+    fn motor_speed_rad_s(&self) -> f64;
     /// Angle at the column encoder (pinion end, delta_P of section 3.2), rad.
     fn column_rad(&self) -> f64;
     /// Put the actuator at rest at a column angle: no current, no speed, nothing loaded.
@@ -386,6 +388,10 @@ impl Actuator for LinearPlant {
 
     fn motor_rad(&self) -> f64 {
         self.x[state::THETA_ROT]
+    }
+
+    fn motor_speed_rad_s(&self) -> f64 {
+        self.x[state::W_ROT]
     }
 
     fn column_rad(&self) -> f64 {

@@ -39,7 +39,7 @@ use crate::bringup::profile::ReferenceSender;
 use crate::bringup::{BringupError, Clock, Stamped, Transport};
 use crate::canbus::{CanBus, Port};
 use crate::epos4_sim::Epos4Sim;
-use crate::plant::{Actuator, LinearPlant, PlantParams, state};
+use crate::plant::{Actuator, LinearPlant, PlantParams};
 use embassy_time::{Duration, MockDriver};
 use std::cell::Cell;
 use std::collections::VecDeque;
@@ -208,7 +208,7 @@ impl Bridge for SimBridge {
 /// terminal voltage for one plant step. With the bridge off the winding is left to its
 /// back-EMF and the current dies out.
 pub fn direct_drive_period(
-    plant: &mut LinearPlant,
+    plant: &mut impl Actuator,
     fast: &mut FastLoop,
     ecu: &SharedEcu,
     now_us: u64,
@@ -220,7 +220,7 @@ pub fn direct_drive_period(
 /// [`direct_drive_period`] with any current-sense error: `sense` maps the winding's true
 /// current to what the phase-current ADC reads (an offset, a flipped sign, a wrong gain).
 pub fn direct_drive_period_sensed(
-    plant: &mut LinearPlant,
+    plant: &mut impl Actuator,
     fast: &mut FastLoop,
     ecu: &SharedEcu,
     now_us: u64,
@@ -247,7 +247,7 @@ pub fn direct_drive_period_sensed(
     });
     let v = match truth.terminal_voltage(&bridge.0, SUPPLY_V as f32) {
         Some(v) => f64::from(v),
-        None => PlantParams::PAPER.ke * plant.state()[state::W_ROT],
+        None => PlantParams::PAPER.ke * plant.motor_speed_rad_s(),
     };
     plant.step(v);
 }

@@ -8,13 +8,14 @@
 use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
 use host_sim::canbus::{CanBus, RandomFaults};
+use host_sim::effect_plant::PlantEffects;
 use host_sim::epos4_sim::Epos4Sim;
 use host_sim::sim_ecu::{epos4_ecu, route_to_ecu};
 use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::canopen::cia402::State;
-use steering_ecu::canopen::epos4::{PositionScale, od};
+use steering_ecu::canopen::epos4::{Epos4Config, PositionScale, od};
 use steering_ecu::canopen::{NodeId, ObjectAddress};
 use steering_ecu::controller::ControllerKind;
 use steering_ecu::faults::Fault;
@@ -41,6 +42,23 @@ const RUNS: usize = 48;
 static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Paper);
 /// Held by each test for its whole run, so no scenario starts with another test's choice.
 static SCENARIOS: StdMutex<()> = StdMutex::new(());
+
+/// How far from a resting reference the column may settle, deg: `lag` on the paper's linear
+/// plant (paper mode), plus, for ECU mode on the plant with play and friction, half the belt
+/// play (0.75 deg) and the belt stretch the rack friction holds (200 N through tau_BS and
+/// k_B: 0.30 deg). Over the EPOS4, ECU mode's column feedback is proportional (gain 0.5) while
+/// the error exceeds the 1 deg its integral waits for, so it settles about 1.3 deg short of a
+/// step on that plant (README, ECU mode).
+fn settle_tolerance_deg(lag: f64) -> f64 {
+    let kind = CONTROLLER
+        .lock()
+        .map(|c| *c)
+        .unwrap_or(ControllerKind::Paper);
+    match kind {
+        ControllerKind::Paper => lag,
+        ControllerKind::Ecu => lag + 0.75 + 0.30,
+    }
+}
 
 /// Runs `scenario` once with each controller, holding [`SCENARIOS`] throughout so no other
 /// test's scenario starts with this one's choice.
@@ -160,10 +178,17 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
     let ecu_port = bus.attach();
     let drive_port = bus.attach();
     bus.set_random_faults(faults);
-    let mut sim = Epos4Sim::new_at(
+    // ECU mode drives the plant with issue 14's play and friction, as a car has them; paper
+    // mode the paper's linear plant.
+    let effects = match kind {
+        ControllerKind::Paper => PlantEffects::NONE,
+        ControllerKind::Ecu => PlantEffects::PLAY_AND_FRICTION,
+    };
+    let mut sim = Epos4Sim::new_at_with(
         node(),
         PositionScale::new(config.counts_per_rev).unwrap(),
         column_deg.to_radians(),
+        effects,
     )
     .unwrap();
     if let Ok(mut c) = COLUMN_RAD.lock() {
@@ -313,7 +338,7 @@ fn the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference_i
     assert_eq!(s[100].demand, DriveDemand::Track);
     assert_eq!(s[100].drive, State::OperationEnabled);
     assert!(
-        (s[159].column_deg - 10.0).abs() < 0.5,
+        (s[159].column_deg - 10.0).abs() < settle_tolerance_deg(0.5),
         "column at {:.2} deg",
         s[159].column_deg
     );
@@ -327,7 +352,7 @@ fn the_epos4_is_powered_only_in_as_ready_and_driving_and_follows_the_reference_i
     assert_eq!(s[179].state, EcuState::Idle);
     assert_eq!(s[200].drive, State::OperationEnabled);
     assert!(
-        (s[249].column_deg + 5.0).abs() < 0.5,
+        (s[249].column_deg + 5.0).abs() < settle_tolerance_deg(0.5),
         "column at {:.2} deg",
         s[249].column_deg
     );
@@ -378,7 +403,7 @@ fn a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered_in()
     assert_eq!(s[280].demand, DriveDemand::Track);
     assert_eq!(s[280].drive, State::OperationEnabled);
     assert!(
-        s[309].column_deg.abs() < 0.5,
+        s[309].column_deg.abs() < settle_tolerance_deg(0.5),
         "column at {:.2} deg",
         s[309].column_deg
     );
@@ -595,7 +620,7 @@ fn the_epos4_software_position_limits_follow_the_origin_in(kind: ControllerKind)
         // Within the steady-state lag the tyre's load leaves at full lock (2.3 deg in paper
         // mode), so the limits do not take travel the ECU asks for.
         assert!(
-            (s[199].column_deg - 90.0).abs() < 3.0,
+            (s[199].column_deg - 90.0).abs() < settle_tolerance_deg(3.0),
             "{column_deg}: full lock reached: {:.2} deg",
             s[199].column_deg
         );

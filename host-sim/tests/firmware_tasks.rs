@@ -7,7 +7,8 @@
 use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
 use host_sim::bringup::Stamped;
-use host_sim::plant::{Actuator, LinearPlant, PlantParams};
+use host_sim::effect_plant::{EffectPlant, PlantEffects};
+use host_sim::plant::{Actuator, PlantParams};
 use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period_sensed};
 use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
@@ -187,7 +188,13 @@ fn run_logged(
     }))));
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
-    let mut plant = LinearPlant::new(PlantParams::PAPER, 50e-6).unwrap();
+    // ECU mode runs against the plant with issue 14's play and friction, as a car has them;
+    // paper mode against the paper's linear plant, its figures' own.
+    let effects = match kind {
+        ControllerKind::Paper => PlantEffects::NONE,
+        ControllerKind::Ecu => PlantEffects::PLAY_AND_FRICTION,
+    };
+    let mut plant = EffectPlant::new(PlantParams::PAPER, effects, 50e-6).unwrap();
     plant.set_at_rest(column_deg.to_radians());
     if let Ok(mut c) = COLUMN_RAD.lock() {
         *c = plant.column_rad();

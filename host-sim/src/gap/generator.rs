@@ -289,6 +289,9 @@ impl Actuator for RkPlant {
     fn motor_rad(&self) -> f64 {
         self.x[1]
     }
+    fn motor_speed_rad_s(&self) -> f64 {
+        self.x[2]
+    }
     fn column_rad(&self) -> f64 {
         self.x[3] * self.ode.g
     }
