@@ -54,8 +54,10 @@ struct Row {
     name: String,
     value: String,
     unit: String,
-    /// The JSON pointer the value was read from, if it was.
-    pointer: Option<String>,
+    /// The JSON pointer the value was read from.
+    pointer: String,
+    /// A number, aligned right; text reads better aligned left.
+    numeric: bool,
 }
 
 /// A further table (e.g. the diagnosis's ranking), cells already formatted.
@@ -165,7 +167,8 @@ impl HtmlReport {
                 name: n.name.to_string(),
                 value,
                 unit: n.unit.to_string(),
-                pointer: Some(n.pointer.to_string()),
+                pointer: n.pointer.to_string(),
+                numeric: true,
             });
         }
         self
@@ -190,7 +193,8 @@ impl HtmlReport {
             name: name.to_string(),
             value,
             unit: String::new(),
-            pointer: Some(pointer.to_string()),
+            pointer: pointer.to_string(),
+            numeric: false,
         });
         self
     }
@@ -252,13 +256,11 @@ impl HtmlReport {
              <tr><th>quantity</th><th>value</th><th>unit</th></tr>\n",
         );
         for r in &self.rows {
-            let data = r
-                .pointer
-                .as_ref()
-                .map_or(String::new(), |p| format!(" data-json=\"{}\"", escape(p)));
+            let data = format!(" data-json=\"{}\"", escape(&r.pointer));
+            let class = if r.numeric { " class=\"num\"" } else { "" };
             let _ = writeln!(
                 h,
-                "<tr><td>{}</td><td class=\"num\"{data}>{}</td><td>{}</td></tr>",
+                "<tr><td>{}</td><td{class}{data}>{}</td><td>{}</td></tr>",
                 escape(&r.name),
                 escape(&r.value),
                 escape(&r.unit)

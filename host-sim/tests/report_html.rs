@@ -259,11 +259,13 @@ fn gap_report_of_a_step_log_holds_the_verdict_and_gof_of_the_json() {
         dir.path(),
         &["gap", log.to_str().unwrap(), "--threads", "2"],
     );
-    // The step log has no motor angle column: residual and Bode, no segment replay.
+    // A 1.5 s step is too short for the Bode estimate; the log has the motor angle, so the
+    // residual and the segment replay.
     check_page(&html, &plots, 2);
     assert_cell_is(&html, &v, "/baseline_gof", 100.0, 1);
     assert_cell_is(&html, &v, "/verdict/gof_after", 100.0, 1);
     assert_cell_is(&html, &v, "/simulations", 1.0, 0);
+    assert!(html.contains("<figcaption>Segment replay"));
     assert_eq!(
         cell(&html, "/verdict/kind"),
         v["verdict"]["kind"].as_str().unwrap()
