@@ -284,3 +284,18 @@ fn gap_report_of_a_step_log_holds_the_verdict_and_gof_of_the_json() {
     assert!(html.contains(first), "{first}");
     assert!(html.contains("motor-&gt;steering"));
 }
+
+#[test]
+fn gap_selftest_and_bench_refuse_report_instead_of_ignoring_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let page = dir.path().join("x.html");
+    for mode in ["selftest", "bench"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+            .args(["gap", mode, "--report", page.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "gap {mode} --report succeeded");
+        assert!(String::from_utf8_lossy(&out.stderr).contains("--report"));
+        assert!(!page.exists());
+    }
+}

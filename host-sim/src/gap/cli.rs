@@ -156,6 +156,10 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         return print_help(args.log.as_deref() == Some(Path::new("selftest")));
     };
     match log.to_str() {
+        // Neither has a diagnosis of one log to report; refused rather than silently ignored.
+        Some(mode @ ("selftest" | "bench")) if args.report.is_some() => {
+            return Err(format!("--report: `gap {mode}` has no page; it applies to a log").into());
+        }
         Some("selftest") => return selftest_cmd(args),
         Some("bench") => return bench_cmd(args),
         _ => {}
