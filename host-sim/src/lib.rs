@@ -13,6 +13,7 @@ pub mod out;
 pub mod plant;
 pub mod plot;
 pub mod report;
+pub mod report_html;
 pub mod scenario;
 pub mod sim;
 pub mod sim_ecu;

@@ -3,7 +3,8 @@
 //! Subcommands: `poles`, `limits`, `sweep`, `track`, `step`, `bench`, `gap` (sim-to-real gap
 //! diagnosis of a log, `gap selftest`, `gap bench`) and `identify` (Table 4 from a log). Each prints a
 //! readable summary; `--json PATH` writes its figures, `--log PATH` the run's log (CSV,
-//! `.csv.gz` compressed), `--plots DIR` its pictures (SVG).
+//! `.csv.gz` compressed), `--plots DIR` its pictures (SVG), `--report PATH` all of it as one
+//! self-contained HTML page (`sweep`, `track`, `step`, `gap`).
 
 use clap::{Args, Parser, Subcommand};
 use host_sim::analysis::FrequencyResponse;
@@ -13,6 +14,7 @@ use host_sim::logfmt::Log;
 use host_sim::plant::PlantParams;
 use host_sim::plot::{BodePlot, Panel, Style, TimePlot};
 use host_sim::report::{self, SweepReport, TrackReport};
+use host_sim::report_html::{HtmlReport, Num, num};
 use host_sim::scenario::{self, Sweep};
 use host_sim::sim::{Controller, Run, RunConfig};
 use std::path::{Path, PathBuf};
@@ -121,6 +123,10 @@ struct Common {
     /// Write the pictures (SVG) into this directory.
     #[arg(long, value_name = "DIR")]
     plots: Option<PathBuf>,
+    /// Write one self-contained HTML file: the command line, controller and plant, the figures
+    /// as a table and the pictures inline (nothing fetched from the network).
+    #[arg(long, value_name = "HTML")]
+    report: Option<PathBuf>,
     /// Log rate, Hz (a divisor of 2000).
     #[arg(long, default_value_t = 1000, value_name = "HZ")]
     log_rate_hz: u32,
@@ -656,6 +662,7 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
         ..*sweep
     };
     let (small_rep, _) = report::sweep(&small, &cfg)?;
+    let json;
     let small_bound = limit.bandwidth_bound_hz(small.amplitude_deg);
     if let Some(bw) = small_rep.bandwidth_hz {
         say!(
@@ -664,7 +671,7 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
             bound_text(small_bound).trim_start()
         );
     }
-    if let Some(path) = &common.json {
+    {
         let mut v = serde_json::to_value(&rep)?;
         v["small_signal_bandwidth_hz"] = serde_json::json!(small_rep.bandwidth_hz);
         v["paper_bandwidth_hz"] = serde_json::json!(5.0);
@@ -674,26 +681,104 @@ fn sweep_cmd(sweep: &Sweep, common: &Common) -> Result<()> {
         v["saturated_bandwidth_bound_hz"] = serde_json::json!(saturated);
         v["small_signal_bandwidth_bound_hz"] = serde_json::json!(small_bound);
         v["analytic_bandwidth_hz"] = serde_json::json!(analytic.as_ref().and_then(|a| a.1));
-        write_json(path, &v)?;
+        if let Some(path) = &common.json {
+            write_json(path, &v)?;
+        }
+        json = v;
     }
     save_log(&run.log, common)?;
+    if common.plots.is_none() && common.report.is_none() {
+        return Ok(());
+    }
+    let bode = bode_plot(sweep, &rep, &small_rep, analytic.as_ref().map(|a| &a.0));
+    let title = format!(
+        "Sine sweep 0-{} Hz, {} deg at the wheel",
+        sweep.f_end_hz, sweep.amplitude_deg
+    );
+    let time = time_plot(&plot_title(common, &title), &run, common.supply_v);
     if let Some(dir) = &common.plots {
-        let bode = bode_plot(sweep, &rep, &small_rep, analytic.as_ref().map(|a| &a.0));
         save_svg(dir, "sweep_bode.svg", |p| bode.save(p))?;
-        let time = time_plot(
-            &plot_title(
-                common,
-                &format!(
-                    "Sine sweep 0-{} Hz, {} deg at the wheel",
-                    sweep.f_end_hz, sweep.amplitude_deg
-                ),
-            ),
-            &run,
-            common.supply_v,
-        );
         save_svg(dir, "sweep_time.svg", |p| time.save(p))?;
     }
+    if let Some(path) = &common.report {
+        let above = format!("above {} Hz", sweep.f_end_hz);
+        let page = report_setup(HtmlReport::new(&format!("host-sim sweep: {title}")), common)
+            .numbers(
+                &json,
+                &[
+                    num("-3 dB bandwidth", "/bandwidth_hz", "Hz").absent(&above),
+                    num("paper's (suspended)", "/paper_bandwidth_hz", "Hz").decimals(1),
+                    num("physical bound", "/bandwidth_bound_hz", "Hz").absent("none"),
+                    num("bandwidth / bound", "/bandwidth_share_of_bound", "%")
+                        .percent()
+                        .decimals(0),
+                    num("saturated bound", "/saturated_bandwidth_bound_hz", "Hz").absent("none"),
+                    num("linear model", "/analytic_bandwidth_hz", "Hz"),
+                    num("RMS error", "/tracking/rmse", "deg"),
+                    num("bandwidth at 1 deg", "/small_signal_bandwidth_hz", "Hz").absent(&above),
+                    num("bound at 1 deg", "/small_signal_bandwidth_bound_hz", "Hz").absent("none"),
+                ],
+            );
+        summary_rows(page, &json)
+            .figure(
+                "Frequency response (H1 estimate) with coherence",
+                &bode.to_svg(),
+            )
+            .figure("Time traces of the sweep", &time.to_svg())
+            .save(path)?;
+        say!("report written to {}", path.display());
+    }
     Ok(())
+}
+
+/// The report's set-up lines: what ran, on what plant.
+fn report_setup(page: HtmlReport, common: &Common) -> HtmlReport {
+    let plant = match &common.plant {
+        Some(path) => format!("rig file {} (its model.plant)", path.display()),
+        None => "the paper's (Tables 1, 2, 4)".to_string(),
+    };
+    let effects = if common.plant_effects.is_none() {
+        "none (linear plant)".to_string()
+    } else {
+        common.plant_effects.to_string()
+    };
+    page.setup("controller", &sensors_label(common))
+        .setup("plant", &plant)
+        .setup("plant effects", &effects)
+        .setup("supply", &format!("{} V", common.supply_v))
+        .setup(
+            "current guard",
+            if common.no_current_guard { "off" } else { "on" },
+        )
+        .setup(
+            "anti-windup",
+            if common.no_anti_windup { "off" } else { "on" },
+        )
+}
+
+/// The limits every run prints (`print_limits`), from the report's `summary`.
+fn summary_rows(page: HtmlReport, json: &serde_json::Value) -> HtmlReport {
+    // Shares of ticks, 0..1 in the JSON, whole per cent as printed.
+    let share = |n: Num<'static>| n.percent().decimals(0);
+    page.numbers(
+        json,
+        &[
+            num("simulated time", "/duration_s", "s"),
+            num("max |current|", "/max_current_a", "A"),
+            share(num(
+                "at the 20 A limit",
+                "/current_limited_share",
+                "% of position ticks",
+            )),
+            num("max |voltage|", "/max_voltage_v", "V"),
+            share(num(
+                "at the supply limit",
+                "/voltage_limited_share",
+                "% of current ticks",
+            )),
+            num("rejected reference samples", "/rejected_references", "").decimals(0),
+        ],
+    )
 }
 
 /// The controller, its sensors, and the plant's added effects if any.
@@ -822,17 +907,56 @@ fn track_cmd(reference: &[f64], name: &str, common: &Common) -> Result<()> {
         rep.max_error_at_s
     );
     print_limits(&rep.summary, common.supply_v);
+    let json = serde_json::to_value(&rep)?;
     if let Some(path) = &common.json {
-        write_json(path, &serde_json::to_value(&rep)?)?;
+        write_json(path, &json)?;
     }
     save_log(&run.log, common)?;
+    let title = format!("Track run: {name}");
+    time_outputs(
+        common,
+        &run,
+        &title,
+        "track_time.svg",
+        "host-sim track",
+        |page| {
+            page.setup("reference", name).numbers(
+                &json,
+                &[
+                    num("RMSE", "/rmse_deg", "deg"),
+                    num("max |error|", "/max_error_deg", "deg"),
+                    num("max |error| at", "/max_error_at_s", "s"),
+                ],
+            )
+        },
+        &json,
+    )
+}
+
+/// The picture (`--plots`) and report (`--report`) of a run in time: `rows` adds the command's
+/// own figures to the page, then come the limits every run prints.
+fn time_outputs(
+    common: &Common,
+    run: &Run,
+    title: &str,
+    file: &str,
+    command: &str,
+    rows: impl FnOnce(HtmlReport) -> HtmlReport,
+    json: &serde_json::Value,
+) -> Result<()> {
+    if common.plots.is_none() && common.report.is_none() {
+        return Ok(());
+    }
+    let plot = time_plot(&plot_title(common, title), run, common.supply_v);
     if let Some(dir) = &common.plots {
-        let plot = time_plot(
-            &plot_title(common, &format!("Track run: {name}")),
-            &run,
-            common.supply_v,
-        );
-        save_svg(dir, "track_time.svg", |p| plot.save(p))?;
+        save_svg(dir, file, |p| plot.save(p))?;
+    }
+    if let Some(path) = &common.report {
+        let page = report_setup(HtmlReport::new(&format!("{command}: {title}")), common);
+        summary_rows(rows(page), json)
+            .figure(&format!("Time traces: {title}"), &plot.to_svg())
+            .save(path)?;
+        say!("report written to {}", path.display());
     }
     Ok(())
 }
@@ -856,19 +980,33 @@ fn step_cmd(amplitude_deg: f64, duration_s: f64, common: &Common) -> Result<()> 
     );
     say!("  final error        {:6.2} deg", rep.final_error_deg);
     print_limits(&rep.summary, common.supply_v);
+    let json = serde_json::to_value(&rep)?;
     if let Some(path) = &common.json {
-        write_json(path, &serde_json::to_value(&rep)?)?;
+        write_json(path, &json)?;
     }
     save_log(&run.log, common)?;
-    if let Some(dir) = &common.plots {
-        let plot = time_plot(
-            &plot_title(common, &format!("Step of {amplitude_deg} deg at the wheel")),
-            &run,
-            common.supply_v,
-        );
-        save_svg(dir, "step_time.svg", |p| plot.save(p))?;
-    }
-    Ok(())
+    let title = format!("Step of {amplitude_deg} deg at the wheel");
+    time_outputs(
+        common,
+        &run,
+        &title,
+        "step_time.svg",
+        "host-sim step",
+        |page| {
+            page.numbers(
+                &json,
+                &[
+                    num("10-90 % rise time", "/rise_time_s", "s")
+                        .decimals(3)
+                        .absent("not reached"),
+                    num("overshoot", "/overshoot_deg", "deg"),
+                    num("overshoot", "/overshoot_pct", "%").decimals(1),
+                    num("final error", "/final_error_deg", "deg"),
+                ],
+            )
+        },
+        &json,
+    )
 }
 
 fn bench(repeats: u32, json: Option<&Path>) -> Result<()> {

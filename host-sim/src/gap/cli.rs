@@ -2,6 +2,7 @@
 
 use super::rig::Rig;
 use super::{EffectKind, Options, diagnose, selftest};
+use crate::report_html::{HtmlReport, num};
 use clap::Args;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -32,6 +33,10 @@ pub struct GapArgs {
     /// Write the pictures (SVG) into this directory.
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
+    /// Write one self-contained HTML file: the command line, rig and log, the figures as a
+    /// table and the pictures inline (nothing fetched from the network).
+    #[arg(long, value_name = "HTML")]
+    pub report: Option<PathBuf>,
     /// Candidate effects, comma-separated (default: every candidate of the rig).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     pub effects: Vec<String>,
@@ -151,6 +156,10 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         return print_help(args.log.as_deref() == Some(Path::new("selftest")));
     };
     match log.to_str() {
+        // Neither has a diagnosis of one log to report; refused rather than silently ignored.
+        Some(mode @ ("selftest" | "bench")) if args.report.is_some() => {
+            return Err(format!("--report: `gap {mode}` has no page; it applies to a log").into());
+        }
         Some("selftest") => return selftest_cmd(args),
         Some("bench") => return bench_cmd(args),
         _ => {}
@@ -173,9 +182,11 @@ pub fn gap(args: &GapArgs) -> Result<()> {
     }
     let mut d = diagnose(&rig, &rec, val.as_ref(), &opts);
     d.refit_linear = refit;
-    print!("{}", d.summary());
+    let summary = d.summary();
+    print!("{summary}");
+    let json = d.to_json();
     if let Some(path) = &args.json {
-        write_json(path, &d.to_json())?;
+        write_json(path, &json)?;
     }
     if let Some(dir) = &args.plots {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -184,7 +195,94 @@ pub fn gap(args: &GapArgs) -> Result<()> {
             println!("wrote {}", f.display());
         }
     }
+    if let Some(path) = &args.report {
+        report_html(args, log, &rig, &rec, &d, &json, &summary).save(path)?;
+        println!("report written to {}", path.display());
+    }
     Ok(())
+}
+
+/// The diagnosis as one HTML page: the figures of the summary's first and last lines, the
+/// ranking, the printed summary and the pictures.
+fn report_html(
+    args: &GapArgs,
+    log: &Path,
+    rig: &Rig,
+    rec: &super::Record,
+    d: &super::Diagnosis,
+    json: &serde_json::Value,
+    summary: &str,
+) -> HtmlReport {
+    let mut page = HtmlReport::new(&format!(
+        "host-sim gap: {}, rig {}",
+        log.display(),
+        rig.name
+    ))
+    .setup("log", &log.display().to_string())
+    .setup("rig", &rig.name)
+    .setup(
+        "model",
+        if args.refit_linear {
+            "Table 4 refitted to the log first (--refit-linear)"
+        } else {
+            "the rig's nominal model"
+        },
+    );
+    if let Some(v) = &args.validate {
+        page = page.setup("validation log", &v.display().to_string());
+    }
+    let ranking = d
+        .ranking
+        .iter()
+        .map(|c| {
+            vec![
+                c.effect.clone(),
+                format!("{:.1}", 100.0 * c.gof),
+                c.gof_validation
+                    .map_or("-".to_string(), |g| format!("{:.1}", 100.0 * g)),
+                c.params
+                    .iter()
+                    .map(|(k, v)| format!("{k}={v:.4}"))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            ]
+        })
+        .collect();
+    page = page
+        .numbers(
+            json,
+            &[
+                num("log length", "/duration_s", "s").decimals(1),
+                num("simulations", "/simulations", "").decimals(0),
+                num("nominal GoF", "/baseline_gof", "%").percent(),
+                num("nominal GoF, output", "/baseline/gof_output", "%").percent(),
+                num("nominal GoF, effort", "/baseline/gof_effort", "%").percent(),
+                num("nominal cost", "/baseline_cost", "").decimals(3),
+                num("noise-floor cost", "/noise_floor_cost", "").decimals(0),
+            ],
+        )
+        .text("where: segment", json, "/where/segment", "-")
+        .text("where: signal", json, "/where/signal", "-")
+        .text("verdict", json, "/verdict/kind", "-")
+        .text("verdict effects", json, "/verdict/effects", "none")
+        .numbers(
+            json,
+            &[
+                num("GoF with the verdict", "/verdict/gof_after", "%").percent(),
+                num("validation GoF", "/verdict/gof_validation", "%").percent(),
+            ],
+        )
+        .text("why", json, "/verdict/reason", "-")
+        .table(
+            "Candidates, ranked",
+            &["effect", "GoF %", "validation GoF %", "parameters"],
+            ranking,
+        )
+        .printed(summary);
+    for picture in super::plots::pictures(rig, rec, d) {
+        page = page.figure(picture.caption, &picture.svg);
+    }
+    page
 }
 
 fn selftest_cmd(args: &GapArgs) -> Result<()> {

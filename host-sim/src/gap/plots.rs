@@ -41,6 +41,14 @@ fn verdict_effects(rig: &Rig, d: &Diagnosis) -> Effects {
         .map_or(Effects::nominal(), |c| c.effects_on(rig))
 }
 
+/// One of the diagnosis's pictures: its file name under `--plots`, what it shows, the SVG.
+#[derive(Debug)]
+pub struct Picture {
+    pub file: &'static str,
+    pub caption: &'static str,
+    pub svg: String,
+}
+
 /// Write `gap_residual.svg`, `gap_bode.svg` and (with a motor angle) `gap_segments.svg`.
 pub fn write_all(
     rig: &Rig,
@@ -48,6 +56,17 @@ pub fn write_all(
     d: &Diagnosis,
     dir: &Path,
 ) -> Result<Vec<PathBuf>, Box<dyn std::error::Error>> {
+    let mut files = Vec::new();
+    for picture in pictures(rig, rec, d) {
+        let p = dir.join(picture.file);
+        std::fs::write(&p, picture.svg).map_err(|e| format!("{}: {e}", p.display()))?;
+        files.push(p);
+    }
+    Ok(files)
+}
+
+/// The pictures [`write_all`] writes, as SVG text (the HTML report inlines them).
+pub fn pictures(rig: &Rig, rec: &Record, d: &Diagnosis) -> Vec<Picture> {
     let (out_unit, eff_unit) = match rig.model {
         RigModel::Paper(_) => ("deg", "A"),
         RigModel::Emps(_) => ("m", "V"),
@@ -95,10 +114,11 @@ pub fn write_all(
             }
         }
     }
-    let mut files = Vec::new();
-    let p = dir.join("gap_residual.svg");
-    plot.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
-    files.push(p);
+    let mut pictures = vec![Picture {
+        file: "gap_residual.svg",
+        caption: "Residual over time, nominal and with the verdict's effects",
+        svg: plot.to_svg(),
+    }];
 
     let f = &d.where_.frequency;
     if !f.measured.freq_hz.is_empty() {
@@ -123,9 +143,11 @@ pub fn write_all(
                 &f.after.phase_deg,
             )
             .coherence("measured", &f.measured.freq_hz, &f.measured.coherence);
-        let p = dir.join("gap_bode.svg");
-        bode.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
-        files.push(p);
+        pictures.push(Picture {
+            file: "gap_bode.svg",
+            caption: "Reference to output: measured, nominal and with the verdict's effects",
+            svg: bode.to_svg(),
+        });
     }
 
     let downstream = match &rig.model {
@@ -169,9 +191,11 @@ pub fn write_all(
                     ),
             )
             .x_label("time, s");
-        let p = dir.join("gap_segments.svg");
-        seg.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
-        files.push(p);
+        pictures.push(Picture {
+            file: "gap_segments.svg",
+            caption: "Segment replay: where in the chain the residual arises",
+            svg: seg.to_svg(),
+        });
     }
-    Ok(files)
+    pictures
 }
