@@ -139,7 +139,8 @@ impl Epos4Sim {
         column_rad: f64,
         effects: PlantEffects,
     ) -> Result<Self, PlantError> {
-        let mut plant = EffectPlant::new(PlantParams::PAPER, effects, 1.0 / CURRENT_LOOP_HZ as f64)?;
+        let mut plant =
+            EffectPlant::new(PlantParams::PAPER, effects, 1.0 / CURRENT_LOOP_HZ as f64)?;
         plant.set_at_rest(column_rad);
         let origin_rad = plant.motor_rad();
         let mut sim = Epos4Sim {

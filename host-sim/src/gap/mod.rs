@@ -1055,7 +1055,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             // car is) rather than a second effect: refit the table with the first effect in
             // place, and the pair must still remove as much from what that leaves.
             let on_refit = if pair_removes(best.cost, pair.cost) {
-                pair_on_refitted_table(rig, frec, fscorer, &best, &pair, opts, &progress)
+                pair_on_refitted_table(rig, frec, fscorer, best, &pair, opts, &progress)
             } else {
                 None
             };
