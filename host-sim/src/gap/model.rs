@@ -175,6 +175,22 @@ pub fn replay_downstream(m: &PaperModel, rec: &Record, fx: &Effects) -> Option<V
     Some(out)
 }
 
+/// One step `h` of a 1-DOF axis (position `x`, speed `v`, inertia or mass `m`) under the force
+/// `free` besides Coulomb friction of size `level`, stick-aware: at rest the friction holds
+/// whatever it can, and a step that would carry the speed through zero stops there.
+fn stick_slip_step(x: f64, v: f64, free: f64, level: f64, m: f64, h: f64) -> (f64, f64) {
+    if v == 0.0 && free.abs() <= level {
+        return (x, v);
+    }
+    let dir = if v != 0.0 { v.signum() } else { free.signum() };
+    let v_new = v + (free - level * dir) / m * h;
+    if level > 0.0 && v != 0.0 && v_new.signum() != v.signum() {
+        (x + v * h * 0.5, 0.0)
+    } else {
+        (x + 0.5 * (v + v_new) * h, v_new)
+    }
+}
+
 /// The EMPS axis under its P-PD controller (`host-sim/data/emps/README.md`), on the record's
 /// 1 kHz grid: `c(k) = kv (kp (qg(k) - q(k)) - dq(k))`, `vir(k) = sat(c(k-1)) + pulse(k)`,
 /// `M q'' = gtau vir - Fv q' - Fc sign(q') - offset`, integrated with `substeps` per sample.
@@ -229,25 +245,7 @@ pub fn simulate_emps(m: &EmpsModel, rec: &Record, fx: &Effects) -> SimOut {
             let level = fc + fs * (-(v / vs).powi(2)).exp();
             let f_tire = bristle.force(q);
             let f_free = drive - fv * v - f_tire;
-            // Stick-aware Coulomb: at rest, the friction holds whatever it can.
-            if v == 0.0 && f_free.abs() <= level {
-                continue;
-            }
-            let dir = if v != 0.0 {
-                v.signum()
-            } else {
-                f_free.signum()
-            };
-            let a = (f_free - level * dir) / m.mass;
-            let v_new = v + a * h;
-            if level > 0.0 && v != 0.0 && v_new.signum() != v.signum() {
-                // Crossed zero velocity within the step: stop there.
-                q += v * h * 0.5;
-                v = 0.0;
-            } else {
-                q += 0.5 * (v + v_new) * h;
-                v = v_new;
-            }
+            (q, v) = stick_slip_step(q, v, f_free, level, m.mass, h);
         }
     }
     out
@@ -389,20 +387,7 @@ pub fn simulate_bam_with(
             let external = -weight * theta.sin();
             let free = motor + external - kv * w;
             let level = friction.budget(w, motor, external);
-            // At rest, friction holds whatever it can.
-            if w == 0.0 && free.abs() <= level {
-                continue;
-            }
-            let dir = if w != 0.0 { w.signum() } else { free.signum() };
-            let w_new = w + (free - level * dir) / inertia * h;
-            if level > 0.0 && w != 0.0 && w_new.signum() != w.signum() {
-                // Crossed zero velocity within the step: stop there.
-                theta += w * h * 0.5;
-                w = 0.0;
-            } else {
-                theta += 0.5 * (w + w_new) * h;
-                w = w_new;
-            }
+            (theta, w) = stick_slip_step(theta, w, free, level, inertia, h);
         }
     }
     out
