@@ -93,7 +93,8 @@ pub enum Command {
         #[arg(long, default_value_t = 1.0, value_name = "S")]
         refresh_s: f64,
     },
-    /// The EPOS4 by SDO reads: NMT state, mode, the gains against ours, error register and
+    /// The EPOS4 by SDO reads: NMT state, mode, the gains and the drive's limits (current,
+    /// following error, speed, software position limits) against ours, error register and
     /// history.
     Epos {
         #[command(subcommand)]

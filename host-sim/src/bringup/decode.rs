@@ -4,7 +4,7 @@
 
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
-use steering_ecu::canopen::epos4::{PositionScale, amps_from_ma};
+use steering_ecu::canopen::epos4::{EcuHeartbeat, PositionScale, amps_from_ma};
 use steering_ecu::canopen::nmt::{self, NmtState};
 use steering_ecu::canopen::{NodeId, emcy, function, node_of};
 use steering_ecu::ecu::link_fault_name;
@@ -46,6 +46,8 @@ pub enum Decoded {
         error_register: u8,
     },
     Heartbeat(NmtState),
+    /// The ECU's own heartbeat (node [`EcuHeartbeat::DEFAULT`], 127), which the EPOS4 watches.
+    EcuHeartbeat(NmtState),
     SdoRequest,
     SdoResponse,
     Nmt,
@@ -67,6 +69,7 @@ impl Decoded {
             Decoded::EposPdoLength { .. } => "EPOS4 PDO (bad length)",
             Decoded::Emcy { .. } => "EPOS4 EMCY",
             Decoded::Heartbeat(_) => "EPOS4 heartbeat",
+            Decoded::EcuHeartbeat(_) => "ECU heartbeat",
             Decoded::SdoRequest => "SDO request",
             Decoded::SdoResponse => "SDO response",
             Decoded::Nmt => "NMT",
@@ -161,6 +164,9 @@ impl Decoder {
         }
         if let Some(state) = nmt::parse_heartbeat(frame, self.node) {
             return Decoded::Heartbeat(state);
+        }
+        if let Some(state) = nmt::parse_heartbeat(frame, EcuHeartbeat::DEFAULT.node) {
+            return Decoded::EcuHeartbeat(state);
         }
         if ours(function::SDO_RX) {
             return Decoded::SdoRequest;
@@ -295,5 +301,23 @@ pub fn frame_error_words(e: &FrameError) -> String {
         }
         FrameError::UnknownAsState { code } => format!("unknown AS state {code}"),
         other => format!("{other:?}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ecus_own_heartbeat_is_named_not_other() {
+        // The EPOS4 link produces the ECU's heartbeat on node 127 for the drive to watch; the
+        // monitor listed it as "other" until it was decoded.
+        let decoder = Decoder::new(NodeId::new(1).unwrap(), PositionScale::new(84).unwrap());
+        let ecu = nmt::heartbeat_frame(EcuHeartbeat::DEFAULT.node, NmtState::Operational).unwrap();
+        let decoded = decoder.decode(&ecu);
+        assert_eq!(decoded, Decoded::EcuHeartbeat(NmtState::Operational));
+        assert_eq!(decoded.kind(), "ECU heartbeat");
+        let drive = nmt::heartbeat_frame(decoder.node, NmtState::Operational).unwrap();
+        assert_eq!(decoder.decode(&drive).kind(), "EPOS4 heartbeat");
     }
 }

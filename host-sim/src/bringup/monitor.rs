@@ -313,7 +313,7 @@ impl Monitor {
                 error_code,
                 error_register,
             } => format!("error code 0x{error_code:04X}  error register 0x{error_register:02X}"),
-            Decoded::Heartbeat(s) => nmt_words(*s).to_string(),
+            Decoded::Heartbeat(s) | Decoded::EcuHeartbeat(s) => nmt_words(*s).to_string(),
             _ => hex(rx.frame.data()),
         };
         format!(
