@@ -37,6 +37,17 @@ fn friction_named_and_validation_error_falls(kp: f64, train: &str, validate: &st
     };
     let d = diagnose(&rig, &rec, Some(&val), &opts);
     println!("{}", d.summary());
+    // A regime's GoF is a share of its own signals' spread, or none at all: never a number
+    // like the -4e150 % a nearly empty low-speed regime once gave.
+    for r in &d.where_.regimes {
+        for g in [r.gof_before, r.gof_after] {
+            assert!(
+                g.is_nan() || (-10.0..=1.0).contains(&g),
+                "{}: GoF {g}",
+                r.name
+            );
+        }
+    }
     assert_eq!(
         d.verdict.effects,
         vec!["coulomb_friction".to_string()],

@@ -8,6 +8,9 @@ use crate::analysis::{FrequencyResponse, h1_estimate};
 use rustfft::FftPlanner;
 use rustfft::num_complex::Complex;
 
+/// A regime's GoF is given only over at least this many samples.
+const MIN_REGIME_SAMPLES: usize = 20;
+
 /// Residual energy in one frequency band.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct Band {
@@ -235,6 +238,11 @@ pub fn locate(rig: &Rig, rec: &Record, scorer: &Scorer, sim0: &SimOut, after: &S
             den(&sel)
         };
         let (so, se) = (spread(y_o), spread(y_e));
+        // A GoF needs the regime's own signals to vary: with a handful of samples, or signals
+        // nearly constant within the regime, the ratio divides by almost nothing and says
+        // nothing (a BAM log's 0.2 % of low speed gave -4e150 %). Then there is no GoF.
+        let varies = |own: f64, whole: f64| own / cnt.max(1) as f64 >= 0.01 * whole / len as f64;
+        let measurable = cnt >= MIN_REGIME_SAMPLES && varies(so, do_) && varies(se, de);
         let g = |ro: &[f64], re: &[f64]| {
             super::combined_gof(1.0 - sum(ro, so).sqrt(), 1.0 - sum(re, se).sqrt())
         };
@@ -246,8 +254,8 @@ pub fn locate(rig: &Rig, rec: &Record, scorer: &Scorer, sim0: &SimOut, after: &S
             residual_share: (e0o + e0e) / (t0o + t0e).max(1e-300),
             residual_share_output: e0o / t0o.max(1e-300),
             residual_share_effort: e0e / t0e.max(1e-300),
-            gof_before: if cnt > 0 { g(&r0o, &r0e) } else { f64::NAN },
-            gof_after: if cnt > 0 { g(&r1o, &r1e) } else { f64::NAN },
+            gof_before: if measurable { g(&r0o, &r0e) } else { f64::NAN },
+            gof_after: if measurable { g(&r1o, &r1e) } else { f64::NAN },
             mask: full,
         }
     })
@@ -341,14 +349,21 @@ impl Where {
             "  regimes (share of time / of the residual; GoF before -> after):"
         );
         for r in &self.regimes {
+            let gof = if r.gof_before.is_finite() && r.gof_after.is_finite() {
+                format!(
+                    "{:6.1} -> {:6.1} %",
+                    100.0 * r.gof_before,
+                    100.0 * r.gof_after
+                )
+            } else {
+                "no GoF: too few samples, or the signals barely vary there".to_string()
+            };
             let _ = writeln!(
                 s,
-                "    {:<18} {:5.1} % / {:5.1} %   {:6.1} -> {:6.1} %",
+                "    {:<18} {:5.1} % / {:5.1} %   {gof}",
                 r.name,
                 100.0 * r.time_share,
                 100.0 * r.residual_share,
-                100.0 * r.gof_before,
-                100.0 * r.gof_after
             );
         }
         let segs: Vec<String> = self
