@@ -338,8 +338,7 @@ impl EffectPlant {
         effects: PlantEffects,
         dt_s: f64,
     ) -> Result<EffectPlant, PlantError> {
-        // The linear plant checks every parameter and the step; its checks are ours.
-        let linear = crate::plant::LinearPlant::new(params, dt_s)?;
+        params.check(dt_s)?;
         let (a, b) = params.electromechanical_state_space();
         let mut aug = SMatrix::<f64, 10, 10>::zeros();
         aug.fixed_view_mut::<7, 7>(0, 0).copy_from(&(a * dt_s));
@@ -364,7 +363,7 @@ impl EffectPlant {
             effects,
             ad,
             bd,
-            x: linear.state(),
+            x: [0.0; 7],
             dt_s,
             belt_half_nut_rad: 0.5 * effects.belt_play_deg.to_radians() / params.screw_to_pinion(),
             column_play: Play::new(0.0, 0.0),

@@ -284,8 +284,11 @@ impl std::fmt::Display for PlantError {
 
 impl std::error::Error for PlantError {}
 
-impl LinearPlant {
-    pub fn new(params: PlantParams, dt_s: f64) -> Result<Self, PlantError> {
+impl PlantParams {
+    /// Refuse parameters or a step no plant can be built from: every parameter finite,
+    /// positive where it divides, non-negative elsewhere, and a positive step.
+    pub fn check(&self, dt_s: f64) -> Result<(), PlantError> {
+        let params = self;
         if !(dt_s.is_finite() && dt_s > 0.0) {
             return Err(PlantError::BadStep { dt_s });
         }
@@ -330,6 +333,13 @@ impl LinearPlant {
                 value: params.j_bs_equivalent(),
             });
         }
+        Ok(())
+    }
+}
+
+impl LinearPlant {
+    pub fn new(params: PlantParams, dt_s: f64) -> Result<Self, PlantError> {
+        params.check(dt_s)?;
         let (a, b) = params.electromechanical_state_space();
         // ZOH: exp([[A, B], [0, 0]] dt) = [[Ad, Bd], [0, 1]]
         let mut aug = SMatrix::<f64, 8, 8>::zeros();

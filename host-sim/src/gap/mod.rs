@@ -850,7 +850,8 @@ fn pair_on_refitted_table(
     let mut refit = rig.clone();
     identify::apply(&mut refit, &id);
     let nominal = Effects::nominal();
-    let (_, _, c_single, n1) = fit_effects(
+    // The two fits tick `progress` themselves; the refit does not.
+    let (_, _, c_single, _) = fit_effects(
         &refit,
         rec,
         scorer,
@@ -860,7 +861,7 @@ fn pair_on_refitted_table(
         opts.fit,
         progress,
     );
-    let (_, _, c_pair, n2) = fit_effects(
+    let (_, _, c_pair, _) = fit_effects(
         &refit,
         rec,
         scorer,
@@ -870,8 +871,6 @@ fn pair_on_refitted_table(
         opts.fit,
         progress,
     );
-    // The two fits tick `progress` themselves; the refit does not.
-    let _ = (n1, n2);
     Some((c_single, c_pair, id.simulations))
 }
 
