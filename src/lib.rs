@@ -12,6 +12,8 @@
 //! - [`reference`]: the 100 Hz reference, interpolated with one sample of lag.
 //! - [`control`]: position PID + feedforward, PI current loop, their anti-windup.
 //! - [`paper_mode`]: the cascade at the paper's rates, as the firmware and host-sim both run it.
+//! - `chip` (built for the chip only): the bridge's PWM set-up and force-off and the CAN set-up,
+//!   shared by the firmware and the board suite.
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 // No input may make the firmware panic: the sites where a panic could hide (an index out of
@@ -32,6 +34,8 @@ pub mod amt20;
 pub mod as_state;
 pub mod can;
 pub mod canopen;
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+pub mod chip;
 pub mod commutation;
 pub mod control;
 pub mod controller;

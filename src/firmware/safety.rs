@@ -37,7 +37,7 @@ pub fn epos4_config() -> Epos4Config {
 /// Power stage off, from any context, without locks or allocation.
 pub fn drive_off() {
     #[cfg(feature = "drive-direct")]
-    super::bridge::force_off();
+    steering_ecu::chip::bridge::force_off();
     #[cfg(feature = "drive-epos4")]
     send_disable_raw();
 }
