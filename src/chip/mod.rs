@@ -4,3 +4,4 @@
 
 pub mod bridge;
 pub mod can;
+pub mod fault;

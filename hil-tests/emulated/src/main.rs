@@ -15,7 +15,9 @@
 //! Stack: each part of the work is run on freshly painted stack ([`stack`]), and the fast
 //! loop's step is then run in a real exception (SysTick, pended by software) the same way; the
 //! deepest work plus the interrupt on top of it is the deepest path, reported against the
-//! stack size.
+//! stack size. With the feature `stack-overflow`, main first recurses until the stack runs off
+//! the RAM start (flip-link's layout): the run must end in the firmware's HardFault entry
+//! (`steering_ecu::hard_fault_entry!`) with the statics intact.
 #![no_std]
 #![no_main]
 
@@ -429,6 +431,10 @@ fn main() -> ! {
             "feature corrupt-one-vector: sweep.bin current step 5000 is expected 1 V off; this run must FAIL"
         );
     }
+    if cfg!(feature = "stack-overflow") {
+        hprintln!("feature stack-overflow: recursing until the stack runs off the RAM start");
+        hprintln!("emulated suite: recursed {} levels", recurse(0));
+    }
     hprintln!("golden vectors (written by `host-sim golden`):");
     let mut meter = InstructionMeter::new();
     // The stack each part of the work takes below main's frame; the deepest is kept.
@@ -543,6 +549,40 @@ fn main() -> ! {
         hprintln!("emulated suite: FAIL");
         debug::exit(debug::EXIT_FAILURE);
     }
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Recurses for ever (`stack-overflow` feature), each level with a 256-byte frame the compiler
+/// cannot drop.
+#[allow(unconditional_recursion)]
+fn recurse(depth: u32) -> u32 {
+    let frame = core::hint::black_box([depth; 64]);
+    recurse(depth + 1).wrapping_add(frame[0])
+}
+
+/// Initialised static (`.data`), checked in the HardFault handler: flip-link keeps the statics
+/// above the stack, so an overflow must leave it as it was.
+static CANARY: AtomicU32 = AtomicU32::new(0x5AFE_C0DE);
+
+// The firmware's HardFault entry (it resets the stack pointer before anything uses the stack).
+#[allow(unsafe_code)]
+mod hard_fault {
+    steering_ecu::hard_fault_entry!(super::on_hard_fault);
+}
+
+extern "C" fn on_hard_fault() -> ! {
+    let canary = CANARY.load(Ordering::Relaxed);
+    hprintln!(
+        "emulated suite: HardFault, statics {}",
+        if canary == 0x5AFE_C0DE {
+            "intact"
+        } else {
+            "OVERWRITTEN"
+        }
+    );
+    debug::exit(debug::EXIT_FAILURE);
     loop {
         cortex_m::asm::wfi();
     }
