@@ -81,9 +81,12 @@ impl Read {
             Phase::Command => (Phase::Waiting { polls: 0 }, Next::Transfer(NOP_A5)),
             Phase::Waiting { polls } => match byte {
                 RD_POS => (Phase::Msb, Next::Transfer(NOP_A5)),
-                WAIT if polls < MAX_WAIT_POLLS => {
-                    (Phase::Waiting { polls: polls + 1 }, Next::Transfer(NOP_A5))
-                }
+                WAIT if polls < MAX_WAIT_POLLS => (
+                    Phase::Waiting {
+                        polls: polls.saturating_add(1),
+                    },
+                    Next::Transfer(NOP_A5),
+                ),
                 WAIT => (Phase::Done, Next::Failed(EncoderError::NoResponse)),
                 _ => (Phase::Done, Next::Failed(EncoderError::InvalidReading)),
             },

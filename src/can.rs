@@ -35,11 +35,9 @@ pub struct Frame {
 impl Frame {
     /// `None` if `data` is longer than 8 bytes.
     pub fn new(id: StandardId, data: &[u8]) -> Option<Self> {
-        if data.len() > 8 {
-            return None;
-        }
         let mut buf = [0u8; 8];
-        buf[..data.len()].copy_from_slice(data);
+        // `get_mut` is the length check: `None` beyond 8 bytes.
+        buf.get_mut(..data.len())?.copy_from_slice(data);
         Some(Frame {
             id,
             len: data.len() as u8,
@@ -58,7 +56,8 @@ impl Frame {
 
     /// The payload, 0 to 8 bytes.
     pub fn data(&self) -> &[u8] {
-        &self.data[..self.len as usize]
+        // `len` <= 8 by construction (`new`); the fallback is never taken.
+        self.data.get(..usize::from(self.len)).unwrap_or(&[])
     }
 }
 

@@ -62,8 +62,14 @@ const POSITIVE_TORQUE: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (1, 0), (2
 
 /// The Hall code of a sector (the inverse of [`sector_of`]), taken modulo 6.
 pub const fn code_of(sector: u8) -> u8 {
-    const CODES: [u8; 6] = [0b001, 0b011, 0b010, 0b110, 0b100, 0b101];
-    CODES[(sector % 6) as usize]
+    match sector % 6 {
+        0 => 0b001,
+        1 => 0b011,
+        2 => 0b010,
+        3 => 0b110,
+        4 => 0b100,
+        _ => 0b101,
+    }
 }
 
 /// Tracks the multi-turn Hall count (6 per electrical revolution; 84 per motor revolution on
@@ -101,7 +107,8 @@ impl HallDecoder {
     pub fn update(&mut self, code: u8) -> Result<i32, HallError> {
         let now = sector_of(code).ok_or(HallError::InvalidCode { code: code & 0b111 })?;
         if let Some(before) = self.sector {
-            let step = (now + 6 - before) % 6;
+            // Both sectors are 0..=5, so nothing wraps: the forward distance modulo 6.
+            let step = now.wrapping_add(6).wrapping_sub(before) % 6;
             match step {
                 0 => {}
                 1 => self.count = self.count.saturating_add(1),
@@ -125,14 +132,17 @@ impl HallDecoder {
     /// check counts it).
     pub fn winding_current(&self, phases: [f32; 3]) -> Option<f32> {
         let (high, _) = self.driven_legs()?;
-        Some(phases[high])
+        phases.get(high).copied()
     }
 
     /// The (high, low) legs positive torque drives in the current sector; `None` without a
     /// valid sector.
     pub fn driven_legs(&self) -> Option<(usize, usize)> {
         let sector = self.sector?;
-        Some(POSITIVE_TORQUE[((sector + self.phase_offset) % 6) as usize])
+        // Both 0..=5 (`sector_of`, `new`): the sum does not wrap.
+        POSITIVE_TORQUE
+            .get(usize::from(sector.wrapping_add(self.phase_offset) % 6))
+            .copied()
     }
 
     /// The terminal voltage a bridge command puts across the winding pair of the current
@@ -141,7 +151,7 @@ impl HallDecoder {
     /// (the inverse of [`HallDecoder::commutate`]; host-sim's bridge model uses it).
     pub fn terminal_voltage(&self, command: &BridgeCommand, supply: f32) -> Option<f32> {
         let (high, low) = self.driven_legs()?;
-        match (command[high], command[low]) {
+        match (command.get(high)?, command.get(low)?) {
             (Leg::Pwm(duty), Leg::Low) => Some(duty * supply),
             (Leg::Low, Leg::Pwm(duty)) => Some(-duty * supply),
             _ => None,
@@ -152,20 +162,24 @@ impl HallDecoder {
     /// picks the direction, its magnitude the duty (clamped to 0..1). Without a valid sector,
     /// or with a non-finite or non-positive supply, the bridge is off.
     pub fn commutate(&self, voltage: f32, supply: f32) -> BridgeCommand {
-        let Some(sector) = self.sector else {
+        let Some((mut high, mut low)) = self.driven_legs() else {
             return BRIDGE_OFF;
         };
         if !(voltage.is_finite() && supply.is_finite() && supply > 0.0) {
             return BRIDGE_OFF;
         }
         let duty = (voltage.abs() / supply).clamp(0.0, 1.0);
-        let (mut high, mut low) = POSITIVE_TORQUE[((sector + self.phase_offset) % 6) as usize];
         if voltage < 0.0 {
             core::mem::swap(&mut high, &mut low);
         }
         let mut legs = BRIDGE_OFF;
-        legs[high] = Leg::Pwm(duty);
-        legs[low] = Leg::Low;
+        // The table holds leg numbers 0..=2; a leg outside would leave it off.
+        if let Some(leg) = legs.get_mut(high) {
+            *leg = Leg::Pwm(duty);
+        }
+        if let Some(leg) = legs.get_mut(low) {
+            *leg = Leg::Low;
+        }
         legs
     }
 }

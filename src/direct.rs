@@ -127,7 +127,7 @@ impl FastLoop {
                 let code = match e {
                     HallError::InvalidCode { code } => HALL_INVALID_CODE + u16::from(code),
                     HallError::Jump { from, to } => {
-                        HALL_JUMP + u16::from(from) * 16 + u16::from(to)
+                        HALL_JUMP.saturating_add(u16::from(from) << 4 | u16::from(to))
                     }
                 };
                 let _ = ecu.on_hall_fault(now_us, code);

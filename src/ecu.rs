@@ -819,7 +819,7 @@ impl Ecu {
     pub fn diagnostic_frame(&mut self) -> Frame {
         use crate::protocol::{DIAGNOSTIC_PAGES, Diagnostic, FIRST_RECORD_PAGE};
         let page = self.diagnostic_page;
-        self.diagnostic_page = (page + 1) % DIAGNOSTIC_PAGES;
+        self.diagnostic_page = page.saturating_add(1) % DIAGNOSTIC_PAGES;
         self.diagnostic_counter = self.diagnostic_counter.next();
         let d = *self.e2e.drops();
         let words = match page {
@@ -833,10 +833,11 @@ impl Ecu {
             ],
             _ => {
                 let log = self.machine.fault_log();
-                let newest = usize::from(page - FIRST_RECORD_PAGE);
+                // Pages from FIRST_RECORD_PAGE on (the arms above take the others).
+                let newest = usize::from(page.saturating_sub(FIRST_RECORD_PAGE));
                 let record = log
                     .len()
-                    .checked_sub(newest + 1)
+                    .checked_sub(newest.saturating_add(1))
                     .and_then(|i| log.get(i))
                     .map(|r| (r.fault.bit(), r.detail));
                 Diagnostic::record_words(record)

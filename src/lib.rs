@@ -12,13 +12,30 @@
 //! - [`reference`]: the 100 Hz reference, interpolated with one sample of lag.
 //! - [`control`]: position PID + feedforward, PI current loop, their anti-windup.
 //! - [`paper_mode`]: the cascade at the paper's rates, as the firmware and host-sim both run it.
+//! - `chip` (built for the chip only): the bridge's PWM set-up and force-off and the CAN set-up,
+//!   shared by the firmware and the board suite.
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
+// No input may make the firmware panic: the sites where a panic could hide (an index out of
+// range, an integer overflow, an unwrap) are flagged, and each one that stays says why it
+// cannot fire. Not for the tests, where a panic is the failure report.
+#![cfg_attr(
+    not(test),
+    warn(
+        clippy::indexing_slicing,
+        clippy::arithmetic_side_effects,
+        clippy::expect_used,
+        clippy::unwrap_used,
+        clippy::panic
+    )
+)]
 
 pub mod amt20;
 pub mod as_state;
 pub mod can;
 pub mod canopen;
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+pub mod chip;
 pub mod commutation;
 pub mod control;
 pub mod controller;

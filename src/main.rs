@@ -32,9 +32,8 @@ mod firmware {
     use defmt_rtt as _;
     use embassy_executor::Spawner;
     use embassy_futures::select::{Either, select};
-    use embassy_stm32::can::filter::Mask32;
     use embassy_stm32::can::{
-        self, Can, Fifo, Id, Rx0InterruptHandler, Rx1InterruptHandler, SceInterruptHandler,
+        self, Can, Id, Rx0InterruptHandler, Rx1InterruptHandler, SceInterruptHandler,
         TxInterruptHandler,
     };
     use embassy_stm32::gpio::{Level, Output, Speed};
@@ -73,9 +72,6 @@ mod firmware {
     /// Chip select released between bytes for at least this long (AMT20 datasheet: 20 us).
     const ENCODER_BYTE_GAP_US: u64 = 25;
 
-    /// CAN bit rate, bit/s. 1 Mbit/s is the EPOS4's default and what the paper's car ran; the
-    /// bxCAN timing is derived from APB1 at start-up (45 MHz on the F446: 3 x 15 time quanta).
-    const CAN_BITRATE: u32 = 1_000_000;
     /// How often a silent bus is checked for bus-off, ms. A bus-off controller receives
     /// nothing, so the check cannot wait for a frame.
     const BUS_OFF_POLL_MS: u64 = 5;
@@ -310,13 +306,15 @@ mod firmware {
         bridge::start(
             ecu,
             bridge::Pins {
-                tim: peripherals.TIM1,
-                ch1: peripherals.PA8,
-                ch1n: peripherals.PB13,
-                ch2: peripherals.PA9,
-                ch2n: peripherals.PB14,
-                ch3: peripherals.PA10,
-                ch3n: peripherals.PB15,
+                bridge: steering_ecu::chip::bridge::Pins {
+                    tim: peripherals.TIM1,
+                    ch1: peripherals.PA8,
+                    ch1n: peripherals.PB13,
+                    ch2: peripherals.PA9,
+                    ch2n: peripherals.PB14,
+                    ch3: peripherals.PA10,
+                    ch3n: peripherals.PB15,
+                },
                 enable: peripherals.PC9,
                 hall: (peripherals.PC6, peripherals.PC7, peripherals.PC8),
                 adc: peripherals.ADC1,
@@ -355,11 +353,9 @@ mod firmware {
             peripherals.PA12,
             CanIrqs,
         );
-        can.modify_filters()
-            .enable_bank(0, Fifo::Fifo0, Mask32::accept_all());
-        can.modify_config().set_bitrate(CAN_BITRATE);
+        steering_ecu::chip::can::configure(&mut can);
         can.enable().await;
-        defmt::info!("CAN1 up at {=u32} bit/s", CAN_BITRATE);
+        defmt::info!("CAN1 up at {=u32} bit/s", steering_ecu::chip::can::BITRATE);
 
         // `main` keeps the peripheral alive (dropping `Can` would shut it down) and runs its
         // two halves for ever.

@@ -149,7 +149,8 @@ impl Interpolator {
             };
         }
         let position = self.position_at(self.tick);
-        self.tick += 1;
+        // Below `ticks_per_period` (checked above): no overflow.
+        self.tick = self.tick.saturating_add(1);
         Setpoint {
             position: MotorRad(position),
             velocity: self.slope,

@@ -57,10 +57,12 @@ impl ColumnEncoder {
     /// Steering angle from a raw word. Bits above the 12 used are ignored (masked), so any
     /// `u16` has a defined angle.
     pub fn angle(&self, raw: u16) -> SteeringRad {
-        let mask = (COLUMN_ENCODER_COUNTS - 1) as i32;
-        let diff = (raw as i32 - self.zero_raw as i32) & mask;
+        // Modulo 4096, which divides 2^16: the wrapping difference of the words is exact.
+        let mask = (COLUMN_ENCODER_COUNTS - 1) as u16;
+        let diff = i32::from(raw.wrapping_sub(self.zero_raw) & mask);
         let signed = if diff >= (COLUMN_ENCODER_COUNTS / 2) as i32 {
-            diff - COLUMN_ENCODER_COUNTS as i32
+            // 2048..=4095 minus 4096: nothing wraps.
+            diff.wrapping_sub(COLUMN_ENCODER_COUNTS as i32)
         } else {
             diff
         };
@@ -75,8 +77,10 @@ impl ColumnEncoder {
         } else {
             0
         };
+        // Modulo 4096, which divides 2^64: wrapping is exact even for a count saturated at
+        // the i64 range.
         let mask = (COLUMN_ENCODER_COUNTS - 1) as i64;
-        ((counts + self.zero_raw as i64) & mask) as u16
+        (counts.wrapping_add(i64::from(self.zero_raw)) & mask) as u16
     }
 }
 
@@ -120,5 +124,17 @@ mod tests {
             let back = enc.angle(enc.raw_from_angle(rad)).0 as f64;
             assert!((back - rad).abs() <= TAU as f64 / 4096.0, "{deg} -> {back}");
         }
+    }
+
+    #[test]
+    fn column_encoder_raw_of_any_angle_is_defined() {
+        // Angles whose count saturates at the i64 range, from a non-zero zero: the offset is
+        // added modulo the 12-bit word (the count here was once added unchecked and
+        // overflowed). i64::MAX and i64::MIN are -1 and 0 modulo 4096.
+        let enc = ColumnEncoder { zero_raw: 123 };
+        assert_eq!(enc.raw_from_angle(1e300), 122);
+        assert_eq!(enc.raw_from_angle(f64::MAX), 122);
+        assert_eq!(enc.raw_from_angle(-1e300), 123);
+        assert_eq!(enc.raw_from_angle(f64::INFINITY), 123);
     }
 }

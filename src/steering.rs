@@ -779,7 +779,7 @@ impl SteeringStateMachine {
     /// The column encoder reported an error (`code` is the firmware's, e.g. a status bit).
     pub fn on_encoder_fault(&mut self, now_us: u64, code: u16) -> Output {
         let now = self.advance(now_us);
-        let detail = EncoderFaultDetail::SensorReported as i32 + i32::from(code);
+        let detail = (EncoderFaultDetail::SensorReported as i32).saturating_add(i32::from(code));
         self.raise(now, Fault::Encoder, detail);
         self.output()
     }
@@ -889,8 +889,8 @@ impl SteeringStateMachine {
                 now.saturating_sub(since)
             };
             let reference_age = age_from(self.last_reference_us);
-            let limit =
-                u64::from(self.config.reference_timeout_us) + u64::from(self.config.hold_us);
+            let limit = u64::from(self.config.reference_timeout_us)
+                .saturating_add(u64::from(self.config.hold_us));
             if reference_age > limit {
                 self.raise(now, Fault::ReferenceTimeout, ms_detail(reference_age));
             }
@@ -973,8 +973,8 @@ impl SteeringStateMachine {
         let reference_fresh = reference_age.is_some_and(|a| a <= timeout);
         let encoder_fresh =
             encoder_age.is_some_and(|a| a <= u64::from(self.config.encoder_timeout_us));
-        let within_hold =
-            reference_age.is_some_and(|a| a <= timeout + u64::from(self.config.hold_us));
+        let within_hold = reference_age
+            .is_some_and(|a| a <= timeout.saturating_add(u64::from(self.config.hold_us)));
         let actuation = self.config.actuation;
         let may_power = self.as_state.is_some_and(|s| actuation.allows(s));
         let engaged = self.last_demand != DriveDemand::Disabled;

@@ -136,9 +136,10 @@ pub async fn drive_task(frames: FrameReceiver<'_>, tx: FrameSender<'_>, ecu: &Sh
             out
         });
         if now >= next_poll {
-            next_poll += DRIVE_POLL_PERIOD;
+            // `Instant + Duration` panics past u64 microseconds; saturate instead.
+            next_poll = next_poll.saturating_add(DRIVE_POLL_PERIOD);
             if next_poll <= now {
-                next_poll = now + DRIVE_POLL_PERIOD;
+                next_poll = now.saturating_add(DRIVE_POLL_PERIOD);
             }
         }
         for f in out {

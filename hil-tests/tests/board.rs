@@ -32,9 +32,11 @@ mod clock_f446;
 use clock_f446::clock_config;
 
 /// The bridge outputs: TIM1 CH1-3 on PA8/PA9/PA10, CH1N-3N on PB13/PB14/PB15 (morpho pins; the
-/// Arduino PA7 is the encoder's MOSI).
+/// Arduino PA7 is the encoder's MOSI). Set up and switched off by the firmware's own code
+/// (`steering_ecu::chip::bridge`); this module only reads them back.
 mod bridge {
     use embassy_stm32::pac;
+    pub use steering_ecu::chip::bridge::force_off;
 
     /// Every output at its level now: (CH1, CH1N, CH2, CH2N, CH3, CH3N) as read back from the
     /// pins' input data registers.
@@ -56,29 +58,14 @@ mod bridge {
         pac::TIM1.bdtr().read().moe()
     }
 
-    /// Off as the firmware must do it, from any context (the panic handler included): main
-    /// output disabled with the off-state forced to the idle level, and every idle level low, so
-    /// all six gates are driven low rather than left floating.
-    pub fn force_off() {
-        pac::TIM1.cr2().modify(|w| {
-            for ch in 0..3 {
-                w.set_ois(ch, false);
-                w.set_oisn(ch, false);
-            }
-        });
-        pac::TIM1.bdtr().modify(|w| {
-            w.set_ossi(pac::timer::vals::Ossi::IDLE_LEVEL);
-            w.set_moe(false);
-        });
-    }
-
     /// All six read low for `samples` reads in a row.
     pub fn stays_low(samples: u32) -> bool {
         (0..samples).all(|_| levels() == [false; 6])
     }
 }
 
-/// The panic handler of this suite does what the firmware's must: outputs off first. It then
+/// The panic handler of this suite does what the firmware's does: outputs off first, with the
+/// firmware's `force_off`. It then
 /// checks them: off -> the panic is reported (semihosting abort), which `pwm_off_on_panic`
 /// expects; still on -> a normal exit, so that `should_panic` test fails.
 #[panic_handler]
@@ -102,14 +89,11 @@ mod tests {
     use super::{CORE_HZ, CanIrqs, bridge, clock_config};
     use cortex_m::peripheral::DWT;
     use embassy_stm32::Peripherals;
-    use embassy_stm32::can::filter::Mask32;
-    use embassy_stm32::can::{self, Can, Fifo, Id};
-    use embassy_stm32::gpio::{Level, Output, OutputType, Pull, Speed};
+    use embassy_stm32::can::{self, Can, Id};
+    use embassy_stm32::gpio::{Level, Output, Pull, Speed};
     use embassy_stm32::spi::{self, Spi};
     use embassy_stm32::time::Hertz;
-    use embassy_stm32::timer::complementary_pwm::{ComplementaryPwm, ComplementaryPwmPin};
-    use embassy_stm32::timer::low_level::CountingMode;
-    use embassy_stm32::timer::simple_pwm::PwmPin;
+    use embassy_stm32::timer::complementary_pwm::ComplementaryPwm;
     use embassy_time::{Duration, Instant, Timer, with_timeout};
     use golden_vectors::loops::{self, Meter, Step, Verdict};
     use steering_ecu::amt20;
@@ -129,7 +113,6 @@ mod tests {
     /// Round trip of one 8-byte frame in loopback, us: 135 bit times at 1 Mbit/s worst case
     /// with stuffing, plus the interrupt and the executor's wake-up; 300 us is two frame times.
     const CAN_ROUND_TRIP_US: u32 = 300;
-    const CAN_BITRATE: u32 = 1_000_000;
     /// 5 % of the 20 kHz period, and of the 2 kHz period, at 180 MHz (issue 5).
     const CURRENT_BUDGET_CYCLES: u32 = CORE_HZ / 20_000 / 20;
     const POSITION_BUDGET_CYCLES: u32 = CORE_HZ / 2_000 / 20;
@@ -150,12 +133,9 @@ mod tests {
 
     async fn loopback_can(p: Peripherals) -> Can<'static> {
         let mut can = Can::new(p.CAN1, p.PA11, p.PA12, CanIrqs);
-        can.modify_filters()
-            .enable_bank(0, Fifo::Fifo0, Mask32::accept_all());
-        can.modify_config()
-            .set_loopback(true)
-            .set_silent(true)
-            .set_bitrate(CAN_BITRATE);
+        // The firmware's filter and bit rate, then loopback on top.
+        steering_ecu::chip::can::configure(&mut can);
+        can.modify_config().set_loopback(true).set_silent(true);
         can.enable().await;
         can
     }
@@ -311,23 +291,22 @@ mod tests {
         assert!(meter.position_max <= POSITION_BUDGET_CYCLES);
     }
 
-    /// TIM1 as a three-phase bridge at 20 kHz with the firmware's off-state settings.
+    /// TIM1 as the three-phase bridge at 20 kHz, set up by the firmware's own code (off, with
+    /// its dead time), then each phase at 50 % duty with its channels enabled and MOE still
+    /// clear.
     fn bridge_pwm(p: Peripherals) -> ComplementaryPwm<'static, embassy_stm32::peripherals::TIM1> {
-        let mut pwm = ComplementaryPwm::new(
-            p.TIM1,
-            Some(PwmPin::new(p.PA8, OutputType::PushPull)),
-            Some(ComplementaryPwmPin::new(p.PB13, OutputType::PushPull)),
-            Some(PwmPin::new(p.PA9, OutputType::PushPull)),
-            Some(ComplementaryPwmPin::new(p.PB14, OutputType::PushPull)),
-            Some(PwmPin::new(p.PA10, OutputType::PushPull)),
-            Some(ComplementaryPwmPin::new(p.PB15, OutputType::PushPull)),
-            None,
-            None,
+        let mut pwm = steering_ecu::chip::bridge::pwm(
+            steering_ecu::chip::bridge::Pins {
+                tim: p.TIM1,
+                ch1: p.PA8,
+                ch1n: p.PB13,
+                ch2: p.PA9,
+                ch2n: p.PB14,
+                ch3: p.PA10,
+                ch3n: p.PB15,
+            },
             Hertz::khz(20),
-            CountingMode::CenterAlignedBothInterrupts,
         );
-        // The constructor sets MOE: take it back before any channel is enabled.
-        bridge::force_off();
         for ch in [
             embassy_stm32::timer::Channel::Ch1,
             embassy_stm32::timer::Channel::Ch2,

@@ -588,7 +588,7 @@ impl Epos4Link {
             });
         }
         if config.heartbeat_ms == 0
-            || config.heartbeat_timeout_us <= config.heartbeat_ms as u64 * 1000
+            || config.heartbeat_timeout_us <= u64::from(config.heartbeat_ms).saturating_mul(1000)
         {
             return Err(ConfigError::Heartbeat);
         }
@@ -1087,7 +1087,7 @@ impl Epos4Link {
                     let _ = out.push(f);
                 }
                 self.missed_tpdos = self.missed_tpdos.saturating_add(1);
-                let period = self.config.cycle_ms as u64 * 1000;
+                let period = u64::from(self.config.cycle_ms).saturating_mul(1000);
                 self.next_sync_us = self.next_sync_us.saturating_add(period);
                 if self.next_sync_us <= now_us {
                     // Fell behind (the caller stalled): resume the grid from now rather than
@@ -1225,7 +1225,7 @@ impl Epos4Link {
                     });
                     return;
                 }
-                self.step += 1;
+                self.step = self.step.saturating_add(1);
                 self.run_script(now_us, out);
             }
             Phase::Enabling => self.on_enable_outcome(outcome, now_us, out),

@@ -94,7 +94,7 @@ impl PdoConfig {
                     bits: e.bits,
                 });
             }
-            bits += e.bits as u32;
+            bits = bits.saturating_add(u32::from(e.bits));
         }
         let entries =
             heapless::Vec::from_slice(entries).map_err(|_| PdoConfigError::TooLong { bits })?;
@@ -128,15 +128,16 @@ impl PdoConfig {
     }
 
     fn communication_index(&self) -> u16 {
-        let base = match self.direction {
+        let base: u16 = match self.direction {
             Direction::Receive => 0x1400,
             Direction::Transmit => 0x1800,
         };
-        base + (self.number as u16 - 1)
+        // `number` is 1..=4 (checked in `new`).
+        base.saturating_add(u16::from(self.number.saturating_sub(1)))
     }
 
     fn mapping_index(&self) -> u16 {
-        self.communication_index() + 0x200
+        self.communication_index().saturating_add(0x200)
     }
 
     /// The SDO writes that configure this PDO, in CiA 301 order.
@@ -159,7 +160,7 @@ impl PdoConfig {
         let _ = out.push(w(comm, 2, self.transmission as u32, Width::U8));
         let _ = out.push(w(map, 0, 0, Width::U8));
         for (i, e) in self.entries.iter().enumerate() {
-            let _ = out.push(w(map, i as u8 + 1, e.raw(), Width::U32));
+            let _ = out.push(w(map, (i as u8).saturating_add(1), e.raw(), Width::U32));
         }
         let _ = out.push(w(map, 0, self.entries.len() as u32, Width::U8));
         let _ = out.push(w(comm, 1, cob, Width::U32));

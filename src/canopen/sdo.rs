@@ -36,6 +36,16 @@ impl Width {
         self as usize
     }
 
+    /// The bytes of an expedited transfer's 4-byte data field that this width leaves unused
+    /// (the command byte's n field).
+    fn unused_bytes(self) -> u8 {
+        match self {
+            Width::U8 => 3,
+            Width::U16 => 2,
+            Width::U32 => 0,
+        }
+    }
+
     /// The value kept to this width (higher bytes cleared).
     pub fn truncate(self, value: u32) -> u32 {
         match self {
@@ -151,7 +161,7 @@ pub fn request_frame(node: NodeId, request: &SdoRequest) -> Option<Frame> {
     match request {
         SdoRequest::Download(w) => {
             // ccs = 1, e = 1, s = 1, n = 4 - width
-            data[0] = 0x23 | (((4 - w.width.bytes()) as u8) << 2);
+            data[0] = 0x23 | (w.width.unused_bytes() << 2);
             data[1..4].copy_from_slice(&address_bytes(w.object));
             data[4..8].copy_from_slice(&w.width.truncate(w.value).to_le_bytes());
         }
@@ -210,12 +220,16 @@ fn split(frame: &Frame, node: NodeId, base: u16) -> Option<(u8, ObjectAddress, u
 /// The value of an expedited transfer and its size in bytes if the command byte indicates it
 /// (s bit set: the n field counts the unused bytes); bytes beyond the size are masked off.
 fn expedited(cs: u8, payload: u32) -> (u32, Option<u8>) {
-    let bytes = (cs & 0x01 != 0).then(|| 4 - ((cs >> 2) & 0x03));
-    let value = match bytes {
-        Some(n) => payload & (u32::MAX >> (8 * (4 - n as u32))),
-        None => payload,
+    if cs & 0x01 == 0 {
+        return (payload, None);
+    }
+    let (mask, bytes) = match (cs >> 2) & 0x03 {
+        0 => (u32::MAX, 4),
+        1 => (0x00FF_FFFF, 3),
+        2 => (0x0000_FFFF, 2),
+        _ => (0x0000_00FF, 1),
     };
-    (value, bytes)
+    (payload & mask, Some(bytes))
 }
 
 /// The server's response in `frame`, if it is an 8-byte frame from `node`'s SDO server.
@@ -296,7 +310,7 @@ pub fn upload_response_frame(
     width: Width,
 ) -> Option<Frame> {
     let mut d = [0u8; 8];
-    d[0] = 0x43 | (((4 - width.bytes()) as u8) << 2);
+    d[0] = 0x43 | (width.unused_bytes() << 2);
     d[1..4].copy_from_slice(&address_bytes(object));
     d[4..8].copy_from_slice(&width.truncate(value).to_le_bytes());
     frame(cob_id(function::SDO_TX, node), &d)

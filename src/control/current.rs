@@ -74,10 +74,10 @@ fn exp_neg(x: f32) -> f32 {
         return 0.0;
     }
     let mut y = x;
-    let mut halvings = 0;
+    let mut halvings = 0_u32;
     while y > 1e-3 && halvings < 64 {
         y *= 0.5;
-        halvings += 1;
+        halvings = halvings.saturating_add(1);
     }
     let mut r = 1.0 - y + y * y / 2.0 - y * y * y / 6.0;
     for _ in 0..halvings {

@@ -16,30 +16,27 @@
 //! The low-side shunts carry the phase currents only while the low switches conduct, so the
 //! duty is capped at [`MAX_DUTY`] to keep that window wider than the three conversions.
 //!
-//! Outputs come up off: `ComplementaryPwm::new` sets MOE, which is cleared again before any
-//! channel is enabled; OSSI/OSSR make disabled outputs drive their idle level (low, every
-//! switch off) instead of floating; the gate driver's enable pin starts low and goes high only
-//! once the interrupt is armed. [`force_off`] (panic, HardFault) clears MOE and the enable pin.
+//! Outputs come up off: the TIM1 set-up and the off-state are the lib's
+//! [`steering_ecu::chip::bridge`] (shared with the board suite, which checks them on the chip);
+//! the gate driver's enable pin starts low and goes high only once the interrupt is armed. The
+//! panic and HardFault handlers call the lib's `force_off`.
 
 use core::cell::RefCell;
 use embassy_stm32::Peri;
 use embassy_stm32::adc::{Adc, AdcChannel, Exten, SampleTime};
-use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
+use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::pac;
-use embassy_stm32::peripherals::{
-    ADC1, PA0, PA1, PA4, PA8, PA9, PA10, PB13, PB14, PB15, PC6, PC7, PC8, PC9, TIM1,
-};
+use embassy_stm32::peripherals::{ADC1, PA0, PA1, PA4, PC6, PC7, PC8, PC9, TIM1};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::Channel;
-use embassy_stm32::timer::complementary_pwm::{ComplementaryPwm, ComplementaryPwmPin, Ossi, Ossr};
-use embassy_stm32::timer::low_level::CountingMode;
-use embassy_stm32::timer::simple_pwm::PwmPin;
+use embassy_stm32::timer::complementary_pwm::ComplementaryPwm;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::Instant;
 use static_cell::StaticCell;
+use steering_ecu::chip::bridge::{self as tim1_bridge, DEAD_TIME_TICKS};
 use steering_ecu::commutation::{BRIDGE_OFF, BridgeCommand, Leg};
 use steering_ecu::direct::FastLoop;
 use steering_ecu::paper_mode::CURRENT_LOOP_HZ;
@@ -49,9 +46,6 @@ use steering_ecu::units::{Amps, Volts};
 
 /// Bridge supply, V (Table 2: 24 V). A measured value would go to `FastLoop::set_supply`.
 const SUPPLY_V: f32 = 24.0;
-/// Dead time between a leg's high and low switch, TIM1 clock ticks: 90 at 180 MHz = 500 ns,
-/// for gate drivers and MOSFETs of the 20 A class; check your bridge's datasheet.
-const DEAD_TIME_TICKS: u16 = 90;
 /// Duty cap that leaves the low-side shunts a sampling window (3 x 1.2 us conversions at
 /// 22.5 MHz ADC clock, 15-cycle sampling) in every 50 us period: 0.92 x 24 V = 22 V at most.
 const MAX_DUTY: f32 = 0.92;
@@ -64,13 +58,8 @@ const AMPS_PER_COUNT: f32 = 25.0 / 2048.0;
 
 /// The pins and peripherals of the direct drive (the README's wiring table).
 pub struct Pins {
-    pub tim: Peri<'static, TIM1>,
-    pub ch1: Peri<'static, PA8>,
-    pub ch1n: Peri<'static, PB13>,
-    pub ch2: Peri<'static, PA9>,
-    pub ch2n: Peri<'static, PB14>,
-    pub ch3: Peri<'static, PA10>,
-    pub ch3n: Peri<'static, PB15>,
+    /// TIM1 and its six outputs.
+    pub bridge: tim1_bridge::Pins,
     /// Gate-driver enable, active high.
     pub enable: Peri<'static, PC9>,
     /// Hall sensors H1, H2, H3 (open collector: pulled up here).
@@ -93,27 +82,7 @@ static ENABLE: StaticCell<Output<'static>> = StaticCell::new();
 /// any leg switches.
 pub fn start(ecu: &'static SharedEcu, pins: Pins) {
     let enable = ENABLE.init(Output::new(pins.enable, Level::Low, Speed::Low));
-    let pwm = PWM.init(ComplementaryPwm::new(
-        pins.tim,
-        Some(PwmPin::new(pins.ch1, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(pins.ch1n, OutputType::PushPull)),
-        Some(PwmPin::new(pins.ch2, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(pins.ch2n, OutputType::PushPull)),
-        Some(PwmPin::new(pins.ch3, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(pins.ch3n, OutputType::PushPull)),
-        None,
-        None,
-        Hertz(CURRENT_LOOP_HZ),
-        CountingMode::CenterAlignedDownInterrupts,
-    ));
-    pwm.set_master_output_enable(false);
-    pwm.set_off_state_selection_idle(Ossi::IDLE_LEVEL);
-    pwm.set_off_state_selection_run(Ossr::IDLE_LEVEL);
-    pwm.set_dead_time(DEAD_TIME_TICKS);
-    for ch in [Channel::Ch1, Channel::Ch2, Channel::Ch3] {
-        pwm.set_duty(ch, 0);
-        pwm.disable(ch);
-    }
+    let pwm = PWM.init(tim1_bridge::pwm(pins.bridge, Hertz(CURRENT_LOOP_HZ)));
     // CC4 just below the top, counting down: the centre of the low-side on-time.
     let max = pwm.get_max_duty();
     pwm.set_duty(Channel::Ch4, max.saturating_sub(1));
@@ -160,13 +129,6 @@ pub fn start(ecu: &'static SharedEcu, pins: Pins) {
         DEAD_TIME_TICKS,
         MAX_DUTY
     );
-}
-
-/// Every switch off at once: MOE cleared (outputs to their idle level, low), gate driver
-/// disabled. Register writes only: callable from the panic and HardFault handlers.
-pub fn force_off() {
-    pac::TIM1.bdtr().modify(|w| w.set_moe(false));
-    pac::GPIOC.bsrr().write(|w| w.set_br(9, true));
 }
 
 /// The Hall code H3 H2 H1 from PC8, PC7, PC6.

@@ -1,5 +1,6 @@
-//! What the firmware does when its own code fails: a panic or a HardFault turns the drive's
-//! power stage off before anything else, then stops the MCU where a probe can see why.
+//! What the firmware does when its own code fails: a panic or a HardFault (a stack overflow
+//! included) turns the drive's power stage off before anything else, then stops the MCU where
+//! a probe can see why.
 //!
 //! - Direct drive: TIM1's main output enable (MOE) is cleared, which forces all six gate
 //!   signals to their idle level (low = every switch off; OSSI is set at start-up so the
@@ -37,7 +38,7 @@ pub fn epos4_config() -> Epos4Config {
 /// Power stage off, from any context, without locks or allocation.
 pub fn drive_off() {
     #[cfg(feature = "drive-direct")]
-    super::bridge::force_off();
+    steering_ecu::chip::bridge::force_off();
     #[cfg(feature = "drive-epos4")]
     send_disable_raw();
 }
@@ -88,10 +89,16 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     cortex_m::asm::udf()
 }
 
-// cortex-m-rt requires the HardFault handler to be an `unsafe fn`; its body is safe code.
+// The HardFault entry moves the stack pointer back to the top of the stack before the body
+// runs: after a stack overflow (flip-link: the stack ran off the RAM start) a handler that
+// pushed anything first would lock the core up with the drive still on. Why and how:
+// `steering_ecu::chip::fault`; the emulated suite's `stack-overflow` run tests it.
 #[allow(unsafe_code)]
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+mod hard_fault {
+    steering_ecu::hard_fault_entry!(super::on_hard_fault);
+}
+
+extern "C" fn on_hard_fault() -> ! {
     drive_off();
     loop {
         cortex_m::asm::nop();

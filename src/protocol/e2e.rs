@@ -256,7 +256,7 @@ impl E2eChecker {
         }
 
         if let Some(prev) = self.last_accepted {
-            let step = (i32::from(angle_raw) - i32::from(prev.angle_raw)).unsigned_abs();
+            let step = angle_raw.abs_diff(prev.angle_raw);
             let allowed = self.step_budget_raw(now_us.saturating_sub(prev.at_us));
             if u64::from(step) > allowed {
                 return Err(FrameError::RateTooHigh {
@@ -273,7 +273,7 @@ impl E2eChecker {
                 _ => prev,
             };
             self.window = Some(anchor);
-            let moved = (i32::from(angle_raw) - i32::from(anchor.angle_raw)).unsigned_abs();
+            let moved = angle_raw.abs_diff(anchor.angle_raw);
             let elapsed_us = now_us.saturating_sub(anchor.at_us);
             let allowed = self
                 .max_rate_raw_per_s

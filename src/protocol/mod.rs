@@ -522,6 +522,10 @@ pub fn frame_crc(id: StandardId, payload: &[u8; 8]) -> u8 {
 }
 
 /// `len` bits of the little-endian frame word from bit `start` (DBC Intel numbering).
+#[expect(
+    clippy::arithmetic_side_effects,
+    reason = "every caller names a literal field of 1 to 32 bits: the mask does not underflow"
+)]
 const fn field(word: u64, start: u32, len: u32) -> u64 {
     (word >> start) & ((1 << len) - 1)
 }
@@ -565,7 +569,7 @@ fn angle_to_raw(angle: SteeringDeg) -> i16 {
         return ANGLE_NOT_AVAILABLE;
     }
     let raw =
-        round_to_i32(angle.0 * ANGLE_BITS_PER_DEG).clamp(-i32::from(i16::MAX), i32::from(i16::MAX));
+        round_to_i32(angle.0 * ANGLE_BITS_PER_DEG).clamp(i32::from(-i16::MAX), i32::from(i16::MAX));
     raw as i16
 }
 
@@ -582,8 +586,8 @@ fn current_to_raw(current: Amps) -> i16 {
     if current.0.is_nan() {
         return CURRENT_NOT_AVAILABLE;
     }
-    let max = i32::from(CURRENT_RAW_MAX);
-    round_to_i32(current.0 * CURRENT_BITS_PER_A).clamp(-max, max) as i16
+    round_to_i32(current.0 * CURRENT_BITS_PER_A)
+        .clamp(i32::from(-CURRENT_RAW_MAX), i32::from(CURRENT_RAW_MAX)) as i16
 }
 
 fn current_from_raw(raw: i16) -> Amps {
@@ -603,7 +607,7 @@ fn motor_angle_to_raw(angle: MotorRad) -> i32 {
     let x = f64::from(angle.0) * MOTOR_BITS_PER_RAD;
     let rounded = if x >= 0.0 { x + 0.5 } else { x - 0.5 };
     // `as` saturates; the clamp keeps i32::MIN for "not available".
-    (rounded as i64).clamp(-i64::from(i32::MAX), i64::from(i32::MAX)) as i32
+    (rounded as i64).clamp(i64::from(-i32::MAX), i64::from(i32::MAX)) as i32
 }
 
 /// NaN -> "not available"; beyond +-32.767 A -> +-32.767 A.
@@ -611,8 +615,8 @@ fn motor_current_to_raw(current: Amps) -> i16 {
     if current.0.is_nan() {
         return MOTOR_CURRENT_NOT_AVAILABLE;
     }
-    let max = i32::from(i16::MAX);
-    round_to_i32(current.0 * MOTOR_CURRENT_BITS_PER_A).clamp(-max, max) as i16
+    round_to_i32(current.0 * MOTOR_CURRENT_BITS_PER_A)
+        .clamp(i32::from(-i16::MAX), i32::from(i16::MAX)) as i16
 }
 
 /// A 12-bit two's-complement field as an i16.

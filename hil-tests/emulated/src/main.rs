@@ -11,15 +11,35 @@
 //! between, the same on every run and every machine. (SysTick is no use here: QEMU clocks it
 //! from the 168 MHz system clock, so it counts 0.168 per instruction.) `embassy_stm32::init`
 //! is never called: QEMU has no model of the STM32 clock tree and it would hang.
+//!
+//! Stack: each part of the work is run on freshly painted stack ([`stack`]), and the fast
+//! loop's step is then run in a real exception (SysTick, pended by software) the same way; the
+//! deepest work plus the interrupt on top of it is the deepest path, reported against the
+//! stack size. With the feature `stack-overflow`, main first recurses until the stack runs off
+//! the RAM start (flip-link's layout): the run must end in the firmware's HardFault entry
+//! (`steering_ecu::hard_fault_entry!`) with the statics intact.
 #![no_std]
 #![no_main]
 
-use core::sync::atomic::{Ordering, compiler_fence};
-use cortex_m_rt::entry;
+mod stack;
+
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicU32, Ordering, compiler_fence};
+use cortex_m::interrupt::Mutex;
+use cortex_m::peripheral::SCB;
+use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hprintln};
 use embassy_stm32::pac;
 use golden_vectors::cases::{self, CaseWriter, Group, GroupReport};
 use golden_vectors::loops::{self, Meter, Report, Step, Tamper, Verdict};
+use steering_ecu::as_state::AsState;
+use steering_ecu::commutation::code_of;
+use steering_ecu::direct::FastLoop;
+use steering_ecu::ecu::Ecu;
+use steering_ecu::paper_mode::CURRENT_TICKS_PER_POSITION_TICK;
+use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
+use steering_ecu::steering::DriveDemand;
+use steering_ecu::units::{Amps, SteeringDeg, Volts};
 
 static SWEEP: &[u8] = include_bytes!("../../vectors/sweep.bin");
 static TRACK: &[u8] = include_bytes!("../../vectors/track.bin");
@@ -105,11 +125,17 @@ impl InstructionMeter {
 
     #[inline(always)]
     fn count<R>(&self, f: impl FnOnce() -> R) -> (R, u32) {
-        let start = instructions_now();
-        let out = core::hint::black_box(f());
-        let end = instructions_now();
-        (out, end.wrapping_sub(start).saturating_sub(self.overhead))
+        count_instructions(self.overhead, f)
     }
+}
+
+/// The result of `f` and the instructions it executed, `overhead` (the reads') subtracted.
+#[inline(always)]
+fn count_instructions<R>(overhead: u32, f: impl FnOnce() -> R) -> (R, u32) {
+    let start = instructions_now();
+    let out = core::hint::black_box(f());
+    let end = instructions_now();
+    (out, end.wrapping_sub(start).saturating_sub(overhead))
 }
 
 impl Meter for InstructionMeter {
@@ -229,49 +255,114 @@ fn print_counts(name: &str, c: &Counts, budget: u32, hz: u32) -> bool {
     ok
 }
 
+/// The direct drive's fast loop and the ECU it steps, owned by the SysTick exception as the
+/// firmware's ADC interrupt owns them; the main loop, as the firmware's tasks, reaches the ECU
+/// inside a critical section.
+struct Tracking {
+    fast: FastLoop,
+    ecu: Ecu,
+    period: u32,
+}
+
+static IN_INTERRUPT: Mutex<RefCell<Option<Tracking>>> = Mutex::new(RefCell::new(None));
+/// The read pair's instructions, subtracted from each count.
+static OVERHEAD: AtomicU32 = AtomicU32::new(0);
+/// The last period's instruction count; `NOT_RUN` until the exception ran one.
+static LAST_COUNT: AtomicU32 = AtomicU32::new(NOT_RUN);
+const NOT_RUN: u32 = u32::MAX;
+
+/// The sampled inputs of a fast-loop period: its time, the Hall code of a motor turning one
+/// sector every 2 ms (40 periods), and a winding current of 4 A.
+fn fast_loop_inputs(period: u32) -> (u64, u8, [Amps; 3]) {
+    let now_us = 1_000 + 50 * u64::from(period);
+    let code = code_of(((period / 40) % 6) as u8);
+    (now_us, code, [Amps(4.0), Amps(-4.0), Amps(0.0)])
+}
+
+/// The firmware's 20 kHz interrupt: one period of the fast loop, its instructions counted.
+#[exception]
+fn SysTick() {
+    let overhead = OVERHEAD.load(Ordering::Relaxed);
+    cortex_m::interrupt::free(|cs| {
+        if let Some(t) = IN_INTERRUPT.borrow(cs).borrow_mut().as_mut() {
+            let (now_us, code, phases) = fast_loop_inputs(t.period);
+            let (_, n) =
+                count_instructions(overhead, || t.fast.step(&mut t.ecu, now_us, code, phases));
+            t.period += 1;
+            LAST_COUNT.store(n, Ordering::Relaxed);
+        }
+    });
+}
+
+/// Pends the interrupt and returns the instructions of the period it ran, if it ran one.
+fn interrupt_period() -> Option<u32> {
+    LAST_COUNT.store(NOT_RUN, Ordering::Relaxed);
+    SCB::set_pendst();
+    // The exception is taken here, before the next instruction.
+    cortex_m::asm::isb();
+    Some(LAST_COUNT.load(Ordering::Relaxed)).filter(|&n| n != NOT_RUN)
+}
+
+/// Whether the interrupt's ECU is tracking (driving the bridge).
+fn interrupt_tracks() -> bool {
+    cortex_m::interrupt::free(|cs| {
+        IN_INTERRUPT
+            .borrow(cs)
+            .borrow()
+            .as_ref()
+            .is_some_and(|t| t.ecu.output().demand == DriveDemand::Track)
+    })
+}
+
 /// Instructions of the direct drive's whole interrupt, `FastLoop::step` (Hall decoding, the
 /// winding current from the three phase currents, the state machine's over-current check, the
-/// PI current loop, six-step commutation, and on every 10th period the position loop), on an
-/// ECU tracking a reference while the motor turns one sector every 2 ms. Returns the counts of
-/// the current-only periods and of the periods that also ran the position loop; `false` if the
-/// ECU did not track (the counts would be of an idle path).
+/// PI current loop, six-step commutation, and on every 10th period the position loop), run in
+/// the SysTick exception on an ECU tracking a reference while the motor turns one sector every
+/// 2 ms. Fills the counts of the current-only periods and of the periods that also ran the
+/// position loop; `false` if the ECU did not track (the counts would be of an idle path).
 fn count_fast_loop(meter: &InstructionMeter, current: &mut Counts, position: &mut Counts) -> bool {
-    use steering_ecu::as_state::AsState;
-    use steering_ecu::commutation::code_of;
-    use steering_ecu::direct::FastLoop;
-    use steering_ecu::ecu::Ecu;
-    use steering_ecu::paper_mode::CURRENT_TICKS_PER_POSITION_TICK;
-    use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
-    use steering_ecu::units::{Amps, SteeringDeg, Volts};
-
     let protocol = ProtocolConfig::default();
-    let Some(mut ecu) = Ecu::paper() else {
+    let Some(ecu) = Ecu::paper() else {
         return false;
     };
-    let mut fast = FastLoop::new(0, Volts(24.0));
+    let tracking = Tracking {
+        fast: FastLoop::new(0, Volts(24.0)),
+        ecu,
+        period: 0,
+    };
+    OVERHEAD.store(meter.overhead, Ordering::Relaxed);
+    cortex_m::interrupt::free(|cs| IN_INTERRUPT.borrow(cs).replace(Some(tracking)));
     let mut counter = AliveCounter::wrapping(0);
     for k in 0..4_000u32 {
-        let now_us = 1_000 + 50 * u64::from(k);
+        let now_us = fast_loop_inputs(k).0;
         // Outside the measurement, at the firmware's rates: a column sample every 2 ms (the
         // encoder task, which also keeps the fast loop's supervisor watchdog fed; at 10 ms the
         // fast loop would switch the bridge off half the time and count its idle path) and
         // the 100 Hz reference.
-        if k % 40 == 0 {
-            let _ = ecu.on_encoder(now_us, SteeringDeg(0.02 * (k / 40) as f32));
-        }
-        if k % 200 == 0 {
+        let frame = (k % 200 == 0).then(|| {
             counter = counter.next();
-            let frame = protocol.encode_reference(&Reference {
+            protocol.encode_reference(&Reference {
                 angle: SteeringDeg(10.0),
                 as_state: AsState::Driving,
                 counter,
                 clear_faults: false,
-            });
-            let _ = ecu.on_reference_frame(now_us, &frame);
-        }
-        let code = code_of(((k / 40) % 6) as u8);
-        let phases = [Amps(4.0), Amps(-4.0), Amps(0.0)];
-        let (_, n) = meter.count(|| fast.step(&mut ecu, now_us, code, phases));
+            })
+        });
+        cortex_m::interrupt::free(|cs| {
+            if let Some(t) = IN_INTERRUPT.borrow(cs).borrow_mut().as_mut() {
+                if k % 40 == 0 {
+                    let _ = t
+                        .ecu
+                        .on_encoder(now_us, SteeringDeg(0.02 * (k / 40) as f32));
+                }
+                if let Some(frame) = &frame {
+                    let _ = t.ecu.on_reference_frame(now_us, frame);
+                }
+            }
+        });
+        let Some(n) = interrupt_period() else {
+            return false;
+        };
         if k % CURRENT_TICKS_PER_POSITION_TICK == 0 {
             position.add(n);
         } else {
@@ -279,7 +370,52 @@ fn count_fast_loop(meter: &InstructionMeter, current: &mut Counts, position: &mu
         }
     }
     // The run must have driven the bridge, or the counts are of an idle path.
-    ecu.output().demand == steering_ecu::steering::DriveDemand::Track
+    interrupt_tracks()
+}
+
+/// Periods the interrupt runs for the stack measurement: two position-loop periods' worth.
+const INTERRUPT_RUNS: u32 = 2 * CURRENT_TICKS_PER_POSITION_TICK;
+
+/// The stack of the fast loop's interrupt (frame stacking included), measured after
+/// [`count_fast_loop`], on top of the deepest work measured before (`work_depth`), against the
+/// stack size; `false` if the interrupt did not run or its ECU stopped tracking.
+fn report_stack(work_depth: usize) -> bool {
+    let (ran, interrupt_depth) = stack::depth_of(|| {
+        (0..INTERRUPT_RUNS)
+            .filter(|_| interrupt_period().is_some())
+            .count()
+    });
+    let tracked = interrupt_tracks();
+    let (bottom, top) = stack::bounds();
+    let size = top - bottom;
+    let main_frame = top - stack::pointer();
+    let path = work_depth + interrupt_depth;
+    hprintln!(
+        "stack (painted; {:#010x}..{:#010x}, {} B below the statics):",
+        bottom,
+        top,
+        size
+    );
+    hprintln!(
+        "  deepest work (replays, cases, fast-loop run) {} B; the fast-loop interrupt (SysTick, {} periods, frame included) {} B",
+        work_depth,
+        ran,
+        interrupt_depth
+    );
+    let ok = ran == INTERRUPT_RUNS as usize && tracked && main_frame + path < size;
+    hprintln!(
+        "  deepest path: {} B, the interrupt on top of the deepest work ({} B with this suite's own {} B main frame) of {} B: {}",
+        path,
+        main_frame + path,
+        main_frame,
+        size,
+        if ok {
+            "within"
+        } else {
+            "OVER, or the interrupt did not run or track"
+        }
+    );
+    ok
 }
 
 #[entry]
@@ -295,44 +431,64 @@ fn main() -> ! {
             "feature corrupt-one-vector: sweep.bin current step 5000 is expected 1 V off; this run must FAIL"
         );
     }
+    if cfg!(feature = "stack-overflow") {
+        hprintln!("feature stack-overflow: recursing until the stack runs off the RAM start");
+        hprintln!("emulated suite: recursed {} levels", recurse(0));
+    }
     hprintln!("golden vectors (written by `host-sim golden`):");
     let mut meter = InstructionMeter::new();
-    let mut pass = check_loop(
-        "sweep.bin (paper sweep 6.0-6.6 s)",
-        SWEEP,
-        &mut meter,
-        tamper,
-    );
-    pass &= check_loop(
-        "track.bin (built-in track 110.0-110.5 s)",
-        TRACK,
-        &mut meter,
-        None,
-    );
+    // The stack each part of the work takes below main's frame; the deepest is kept.
+    let mut work_depth = 0;
+    let mut deepest = |(ok, depth): (bool, usize)| {
+        work_depth = work_depth.max(depth);
+        ok
+    };
+    let mut pass = deepest(stack::depth_of(|| {
+        check_loop(
+            "sweep.bin (paper sweep 6.0-6.6 s)",
+            SWEEP,
+            &mut meter,
+            tamper,
+        )
+    }));
+    pass &= deepest(stack::depth_of(|| {
+        check_loop(
+            "track.bin (built-in track 110.0-110.5 s)",
+            TRACK,
+            &mut meter,
+            None,
+        )
+    }));
     // ECU mode on its own meter, so each controller's counts are its own.
     let mut ecu_meter = InstructionMeter::new();
-    pass &= check_loop(
-        "ecu_sweep.bin (ECU mode, paper sweep 6.0-6.3 s)",
-        ECU_SWEEP,
-        &mut ecu_meter,
-        None,
-    );
-    pass &= check_loop(
-        "ecu_track.bin (ECU mode, built-in track 110.0-110.25 s)",
-        ECU_TRACK,
-        &mut ecu_meter,
-        None,
-    );
-    match cases::check(CASES, &mut print_group) {
-        Ok(differing) => pass &= differing == 0,
-        Err(e) => {
-            hprintln!(
-                "  cases.bin: unreadable: {:?} (regenerate: see hil-tests/README.md)",
-                e
-            );
-            pass = false;
+    pass &= deepest(stack::depth_of(|| {
+        check_loop(
+            "ecu_sweep.bin (ECU mode, paper sweep 6.0-6.3 s)",
+            ECU_SWEEP,
+            &mut ecu_meter,
+            None,
+        )
+    }));
+    pass &= deepest(stack::depth_of(|| {
+        check_loop(
+            "ecu_track.bin (ECU mode, built-in track 110.0-110.25 s)",
+            ECU_TRACK,
+            &mut ecu_meter,
+            None,
+        )
+    }));
+    pass &= deepest(stack::depth_of(|| {
+        match cases::check(CASES, &mut print_group) {
+            Ok(differing) => differing == 0,
+            Err(e) => {
+                hprintln!(
+                    "  cases.bin: unreadable: {:?} (regenerate: see hil-tests/README.md)",
+                    e
+                );
+                false
+            }
         }
-    }
+    }));
     hprintln!(
         "instructions per step (QEMU -icount shift=0: exact instruction counts, not cycles; {} subtracted per read pair):",
         meter.overhead
@@ -363,7 +519,9 @@ fn main() -> ! {
         steering_ecu::paper_mode::POSITION_LOOP_HZ,
     );
     let (mut current, mut position) = (Counts::new(), Counts::new());
-    if count_fast_loop(&meter, &mut current, &mut position) {
+    let (tracked, depth) = stack::depth_of(|| count_fast_loop(&meter, &mut current, &mut position));
+    work_depth = work_depth.max(depth);
+    if tracked {
         hprintln!(
             "direct drive's 20 kHz interrupt (FastLoop::step: Hall, current sense, commutation, ECU checks):"
         );
@@ -379,6 +537,7 @@ fn main() -> ! {
             POSITION_BUDGET,
             steering_ecu::paper_mode::POSITION_LOOP_HZ,
         );
+        pass &= report_stack(work_depth);
     } else {
         hprintln!("  FastLoop: the ECU did not track, so the count is of an idle path");
         pass = false;
@@ -390,6 +549,40 @@ fn main() -> ! {
         hprintln!("emulated suite: FAIL");
         debug::exit(debug::EXIT_FAILURE);
     }
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Recurses for ever (`stack-overflow` feature), each level with a 256-byte frame the compiler
+/// cannot drop.
+#[allow(unconditional_recursion)]
+fn recurse(depth: u32) -> u32 {
+    let frame = core::hint::black_box([depth; 64]);
+    recurse(depth + 1).wrapping_add(frame[0])
+}
+
+/// Initialised static (`.data`), checked in the HardFault handler: flip-link keeps the statics
+/// above the stack, so an overflow must leave it as it was.
+static CANARY: AtomicU32 = AtomicU32::new(0x5AFE_C0DE);
+
+// The firmware's HardFault entry (it resets the stack pointer before anything uses the stack).
+#[allow(unsafe_code)]
+mod hard_fault {
+    steering_ecu::hard_fault_entry!(super::on_hard_fault);
+}
+
+extern "C" fn on_hard_fault() -> ! {
+    let canary = CANARY.load(Ordering::Relaxed);
+    hprintln!(
+        "emulated suite: HardFault, statics {}",
+        if canary == 0x5AFE_C0DE {
+            "intact"
+        } else {
+            "OVERWRITTEN"
+        }
+    );
+    debug::exit(debug::EXIT_FAILURE);
     loop {
         cortex_m::asm::wfi();
     }
