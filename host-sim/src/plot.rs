@@ -1137,7 +1137,11 @@ impl From<Color> for RGBColor {
 /// Text of `px` pixels as the SVG shows it: plotters' SVG backend writes a font size of
 /// `size / 1.24`.
 fn font(px: f64, color: RGBColor, h: HPos, v: VPos) -> TextStyle<'static> {
-    FontDesc::new(FontFamily::SansSerif, px * 1.24, FontStyle::Normal)
+    font_styled(px, FontStyle::Normal, color, h, v)
+}
+
+fn font_styled(px: f64, style: FontStyle, color: RGBColor, h: HPos, v: VPos) -> TextStyle<'static> {
+    FontDesc::new(FontFamily::SansSerif, px * 1.24, style)
         .color(&color)
         .pos(Pos::new(h, v))
 }
@@ -1236,9 +1240,7 @@ fn draw_figure(out: &mut String, frame: &Frame, panels: &[&Panel]) -> DrawResult
     let root = SVGBackend::with_string(out, (width, height)).into_drawing_area();
     root.fill(&WHITE)?;
     if !frame.title.is_empty() {
-        let style = FontDesc::new(FontFamily::SansSerif, 16.0 * 1.24, FontStyle::Bold)
-            .color(&rgb(TEXT))
-            .pos(Pos::new(HPos::Center, VPos::Center));
+        let style = font_styled(16.0, FontStyle::Bold, rgb(TEXT), HPos::Center, VPos::Center);
         root.draw_text(&clean(frame.title), &style, (width as i32 / 2, 21))?;
     }
 
