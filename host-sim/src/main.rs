@@ -868,14 +868,16 @@ fn time_plot(title: &str, run: &Run, supply_v: f64) -> TimePlot {
         )
         .panel(Panel::new("error, deg").series("encoder - reference", &log.t, &error))
         .panel(
+            // The set-point over the measured current, translucent: in paper mode it chatters
+            // between the limits and would hide the current it commands.
             Panel::new("motor current, A")
+                .series("measured", &log.t, &log.current_a)
                 .series_styled(
                     "set-point",
                     &log.t,
                     setpoint,
-                    Style::new().color(host_sim::plot::Color::GRAY),
+                    Style::new().color(host_sim::plot::Color::GRAY).opacity(0.6),
                 )
-                .series("measured", &log.t, &log.current_a)
                 .hline(20.0, "+20 A")
                 .hline(-20.0, "-20 A"),
         )

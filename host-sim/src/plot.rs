@@ -1,5 +1,7 @@
-//! SVG line charts for the README and the reports, written by hand so that host-sim needs no
-//! plotting crate: stacked time plots ([`TimePlot`]) and Bode plots ([`BodePlot`]).
+//! Line charts for the README and the reports, drawn with plotters' SVG backend: stacked time
+//! plots ([`TimePlot`]) and Bode plots ([`BodePlot`]). Plotters draws the frame, grid, tick
+//! labels, lines and text; this module owns the layout, the ticks (1-2-5 steps, decades,
+//! multiples of 45 deg), the decimation of long logs, the clipping and the palette.
 //!
 //! # Theory of operation
 //!
@@ -18,45 +20,68 @@
 //!    0     2     4     6     8        <- x ticks, then the x label
 //! ```
 //!
-//! Series are copied in and drawn when [`TimePlot::to_svg`] runs. Before drawing, a series is
-//! decimated to at most four points per pixel column (first, min, max, last: the line looks the
-//! same as with every sample, spikes included), so a 240 000-sample trace costs a few tens of
-//! kilobytes. A NaN sample (sensor dropout) lifts the pen: the line breaks there. Points outside
-//! the axes are clipped, not dropped, so lines run to the edge. Colours come from the Okabe-Ito
+//! Series are copied in and drawn when [`TimePlot::to_svg`] runs, in the order they were added
+//! (a later series lies over an earlier one). Before drawing, a series is decimated to at most
+//! four samples per pixel column (first, min, max, last: the line looks the same as with every
+//! sample, spikes included), so a 240 000-sample trace costs a few tens of kilobytes. A NaN
+//! sample (sensor dropout) lifts the pen: the line breaks there. Lines are cut at the edge of the
+//! plotting area (plotters itself would draw across the axes). Colours come from the Okabe-Ito
 //! palette, which stays distinguishable with the common colour-vision deficiencies; the
-//! background is white so the picture also reads on GitHub's dark theme.
-use std::fmt::{self, Write as _};
+//! background is white so the picture also reads on GitHub's dark theme. Without plotters' font
+//! features the SVG backend writes plain `<text>` elements with a sans-serif family and
+//! estimates text widths itself, so nothing here needs fonts or system libraries.
+use plotters::coord::Shift;
+use plotters::coord::ranged1d::{KeyPointHint, NoDefaultFormatting, Ranged, ValueFormatter};
+use plotters::element::DashedPathElement;
+use plotters::prelude::{
+    Cartesian2d, ChartBuilder, ChartContext, Circle, DrawingArea, DrawingAreaErrorKind, FontDesc,
+    FontFamily, FontStyle, IntoDrawingArea, LabelAreaPosition, PathElement, RGBColor, Rectangle,
+    SVGBackend, ShapeStyle, TextStyle, WHITE,
+};
+use plotters::style::Color as _;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use std::fmt;
 use std::fs;
 use std::io;
+use std::ops::Range;
 use std::path::Path;
 
 const DEFAULT_WIDTH: f64 = 900.0;
-const DEFAULT_PANEL_HEIGHT: f64 = 190.0;
-const MARGIN_LEFT: f64 = 76.0;
-const MARGIN_RIGHT: f64 = 28.0;
-const TITLE_HEIGHT: f64 = 38.0;
-const NO_TITLE_HEIGHT: f64 = 10.0;
-const LEGEND_HEIGHT: f64 = 24.0;
+const DEFAULT_PANEL_HEIGHT: u32 = 190;
+const MARGIN_LEFT: u32 = 76;
+const MARGIN_RIGHT: u32 = 28;
+/// Room left of the rotated y label, and below the x label.
+const Y_LABEL_INSET: u32 = 8;
+const X_LABEL_INSET: u32 = 9;
+const TITLE_HEIGHT: u32 = 38;
+const NO_TITLE_HEIGHT: u32 = 10;
+const LEGEND_HEIGHT: u32 = 24;
 /// Space above a panel that has no legend strip.
-const PANEL_GAP: f64 = 12.0;
-const BOTTOM_HEIGHT: f64 = 50.0;
+const PANEL_GAP: u32 = 12;
+const BOTTOM_HEIGHT: u32 = 50;
+/// Stroke width of data lines in pixels (plotters' SVG backend takes whole pixels).
+const LINE_WIDTH: u32 = 2;
+const MARKER_RADIUS: u32 = 3;
+/// Dash and gap of a dashed series in pixels. The SVG backend has no dash pattern: plotters
+/// writes every dash as an element of its own, so short dashes on a long, busy trace (a square
+/// wave over 120 s) would cost a hundred kilobytes.
+const DASH: (u32, u32) = (12, 6);
 /// Markers are drawn only on sparse series; on dense ones they would merge into a smear.
 const MAX_MARKERS: usize = 400;
 /// Cap for series whose x is not sorted, which the per-column decimation cannot handle.
 const MAX_UNSORTED_POINTS: usize = 20_000;
-/// How far outside the plot a coordinate may land; beyond, it is pulled in so the file holds no
-/// absurd numbers. Far enough that the clipped line's visible part does not change.
-const MAX_OVERSHOOT_PX: f64 = 10_000.0;
+/// How far outside the plot (in plot widths) a coordinate may land; beyond, it is pulled in so
+/// the file holds no absurd numbers.
+const MAX_OVERSHOOT: f64 = 10.0;
 
-const TEXT: &str = "#222222";
-const TEXT_SOFT: &str = "#555555";
-const GRID: &str = "#e3e3e3";
-const GRID_MINOR: &str = "#f1f1f1";
-const GRID_ZERO: &str = "#c4c4c4";
-const FRAME: &str = "#444444";
-const SHADE_FILLS: [&str; 6] = [
-    "#ececec", "#fde9d2", "#d9efe5", "#e9e0f1", "#fff3c4", "#dceaf6",
-];
+const TEXT: u32 = 0x222222;
+const TEXT_SOFT: u32 = 0x555555;
+const GRID: u32 = 0xe3e3e3;
+const GRID_MINOR: u32 = 0xf1f1f1;
+const GRID_ZERO: u32 = 0xc4c4c4;
+const FRAME: u32 = 0x444444;
+const LIMIT: u32 = 0x555555;
+const SHADE_FILLS: [u32; 6] = [0xececec, 0xfde9d2, 0xd9efe5, 0xe9e0f1, 0xfff3c4, 0xdceaf6];
 
 /// An sRGB colour, written as `#rrggbb`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -98,6 +123,8 @@ pub struct Style {
     pub dashed: bool,
     /// A dot on every sample; skipped on series with more than a few hundred visible samples.
     pub markers: bool,
+    /// `None`: opaque. Lets a series drawn over another show what lies under it.
+    pub opacity: Option<f64>,
 }
 
 impl Style {
@@ -125,6 +152,14 @@ impl Style {
             ..self
         }
     }
+
+    /// Drawn with this opacity (0 transparent .. 1 opaque; other values are ignored).
+    pub fn opacity(self, opacity: f64) -> Self {
+        Self {
+            opacity: (0.0..=1.0).contains(&opacity).then_some(opacity),
+            ..self
+        }
+    }
 }
 
 /// Linear or logarithmic (decades) x axis.
@@ -143,6 +178,7 @@ struct Series {
     color: Color,
     dashed: bool,
     markers: bool,
+    opacity: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -177,7 +213,7 @@ enum YTicks {
 #[derive(Debug, Clone)]
 pub struct Panel {
     y_label: String,
-    height: f64,
+    height: u32,
     series: Vec<Series>,
     hlines: Vec<HLine>,
     vlines: Vec<VLine>,
@@ -267,7 +303,7 @@ impl Panel {
     /// Height of the plotting area in pixels (default 190).
     pub fn height(mut self, px: f64) -> Self {
         if px.is_finite() && px >= 40.0 {
-            self.height = px;
+            self.height = px.min(10_000.0).round() as u32;
         }
         self
     }
@@ -287,6 +323,7 @@ impl Panel {
             color,
             dashed: style.dashed,
             markers: style.markers,
+            opacity: style.opacity.unwrap_or(1.0),
         });
     }
 
@@ -294,7 +331,7 @@ impl Panel {
         self.legend && self.series.iter().any(|s| !s.name.is_empty())
     }
 
-    fn top_pad(&self) -> f64 {
+    fn top_pad(&self) -> u32 {
         if self.shows_legend() {
             LEGEND_HEIGHT
         } else {
@@ -371,13 +408,23 @@ impl TimePlot {
     /// Total width in pixels (default 900).
     pub fn width(mut self, px: f64) -> Self {
         if px.is_finite() && px >= 200.0 {
-            self.width = px;
+            self.width = px.min(10_000.0);
         }
         self
     }
 
     pub fn to_svg(&self) -> String {
-        let frame = Frame {
+        let panels: Vec<&Panel> = self.panels.iter().collect();
+        render(&self.frame(), &panels)
+    }
+
+    fn try_svg(&self) -> Result<String, String> {
+        let panels: Vec<&Panel> = self.panels.iter().collect();
+        try_render(&self.frame(), &panels)
+    }
+
+    fn frame(&self) -> Frame<'_> {
+        Frame {
             title: &self.title,
             x_label: &self.x_label,
             x_scale: XScale::Linear,
@@ -385,14 +432,12 @@ impl TimePlot {
             width: self.width,
             shared_shades: &self.shades,
             shared_vlines: &[],
-        };
-        let panels: Vec<&Panel> = self.panels.iter().collect();
-        render(&frame, &panels)
+        }
     }
 
     /// Writes the SVG to `path`, creating missing parent directories.
     pub fn save(&self, path: &Path) -> io::Result<()> {
-        save_svg(path, &self.to_svg())
+        save_svg(path, self.try_svg())
     }
 }
 
@@ -457,7 +502,7 @@ impl BodePlot {
     /// Total width in pixels (default 900).
     pub fn width(mut self, px: f64) -> Self {
         if px.is_finite() && px >= 200.0 {
-            self.width = px;
+            self.width = px.min(10_000.0);
         }
         self
     }
@@ -524,7 +569,15 @@ impl BodePlot {
     }
 
     pub fn to_svg(&self) -> String {
-        let frame = Frame {
+        render(&self.frame(), &self.panels())
+    }
+
+    fn try_svg(&self) -> Result<String, String> {
+        try_render(&self.frame(), &self.panels())
+    }
+
+    fn frame(&self) -> Frame<'_> {
+        Frame {
             title: &self.title,
             x_label: "frequency (Hz)",
             x_scale: self.x_scale,
@@ -532,15 +585,18 @@ impl BodePlot {
             width: self.width,
             shared_shades: &[],
             shared_vlines: &self.markers,
-        };
+        }
+    }
+
+    fn panels(&self) -> Vec<&Panel> {
         let mut panels = vec![&self.magnitude, &self.phase];
         panels.extend(self.coherence.as_ref());
-        render(&frame, &panels)
+        panels
     }
 
     /// Writes the SVG to `path`, creating missing parent directories.
     pub fn save(&self, path: &Path) -> io::Result<()> {
-        save_svg(path, &self.to_svg())
+        save_svg(path, self.try_svg())
     }
 
     fn next_color(&self) -> Color {
@@ -587,9 +643,11 @@ pub fn nice_ticks(lo: f64, hi: f64, max_count: usize) -> Vec<f64> {
     ticks_with_step(lo, hi, step)
 }
 
-/// Ticks for a logarithmic axis: `(labelled, unlabelled)`. Labelled are the decades, or 1-2-5
-/// (then 1..9) times a decade when the range holds too few decades to read it.
-pub fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+/// Ticks for a logarithmic axis: `(labelled, unlabelled)`. Labelled are 1-2-5 times a decade
+/// (what a reader needs to read off a bandwidth such as 2.3 Hz), or only the decades when 1-2-5
+/// would give more than `max_count` labels, or 1..9 times a decade when the range is too short
+/// for two 1-2-5 labels.
+pub fn log_ticks(lo: f64, hi: f64, max_count: usize) -> (Vec<f64>, Vec<f64>) {
     if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo < hi) {
         return (Vec::new(), Vec::new());
     }
@@ -600,17 +658,27 @@ pub fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
         .flat_map(|k| (1..=9u32).map(move |m| (m, f64::from(m) * 10f64.powi(k))))
         .filter(|&(_, v)| inside(v))
         .collect();
-    for mantissas in [&[1u32][..], &[1, 2, 5], &[1, 2, 3, 4, 5, 6, 7, 8, 9]] {
+    let split = |mantissas: &[u32]| -> (Vec<f64>, Vec<f64>) {
         let (major, minor): (Vec<_>, Vec<_>) =
             candidates.iter().partition(|(m, _)| mantissas.contains(m));
-        if major.len() >= 2 || mantissas.len() == 9 {
-            return (
-                major.iter().map(|&(_, v)| v).collect(),
-                minor.iter().map(|&(_, v)| v).collect(),
-            );
-        }
+        (
+            major.iter().map(|&(_, v)| v).collect(),
+            minor.iter().map(|&(_, v)| v).collect(),
+        )
+    };
+    let one_two_five = split(&[1, 2, 5]);
+    let labels = one_two_five.0.len();
+    if (2..=max_count.max(2)).contains(&labels) {
+        return one_two_five;
     }
-    (Vec::new(), Vec::new())
+    let decades = split(&[1]);
+    if labels > max_count && decades.0.len() >= 2 {
+        return decades;
+    }
+    if labels >= 2 {
+        return one_two_five;
+    }
+    split(&[1, 2, 3, 4, 5, 6, 7, 8, 9])
 }
 
 fn degree_ticks(lo: f64, hi: f64, max_count: usize) -> Vec<f64> {
@@ -660,7 +728,9 @@ fn format_hz(f: f64) -> String {
     }
 }
 
-fn save_svg(path: &Path, svg: &str) -> io::Result<()> {
+/// Writes a drawn figure; one plotters could not draw is an error, not a file.
+fn save_svg(path: &Path, svg: Result<String, String>) -> io::Result<()> {
+    let svg = svg.map_err(|e| io::Error::other(format!("figure not drawn: {e}")))?;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         fs::create_dir_all(dir)?;
     }
@@ -679,27 +749,42 @@ struct Frame<'a> {
     shared_vlines: &'a [VLine],
 }
 
-/// Maps data values to pixels along one direction.
-#[derive(Debug, Clone, Copy)]
-struct Axis {
+/// One axis: its data range, linear or decades, and the ticks we chose for it. It is the
+/// coordinate type plotters draws with, so the grid, the tick labels, the decimator's pixel
+/// columns and the clipping all use one mapping.
+#[derive(Debug, Clone)]
+struct Scale {
     lo: f64,
     hi: f64,
     log: bool,
-    px_lo: f64,
-    px_hi: f64,
+    /// Labelled ticks (plotters' bold mesh lines) and unlabelled ones (its light lines).
+    major: Vec<f64>,
+    minor: Vec<f64>,
+    /// Spacing of the labelled ticks on a linear axis: how many decimals a label needs.
+    step: f64,
 }
 
-impl Axis {
-    fn new(lo: f64, hi: f64, log: bool, px_lo: f64, px_hi: f64) -> Self {
+impl Scale {
+    fn new(lo: f64, hi: f64, log: bool) -> Self {
         Self {
             lo,
             hi,
             log,
-            px_lo,
-            px_hi,
+            major: Vec::new(),
+            minor: Vec::new(),
+            step: 1.0,
         }
     }
 
+    fn ticks(mut self, major: Vec<f64>, minor: Vec<f64>) -> Self {
+        self.step = major.windows(2).map(|w| w[1] - w[0]).next().unwrap_or(1.0);
+        self.major = major;
+        self.minor = minor;
+        self
+    }
+
+    /// The value along the axis' own straight line: itself, or its log10 on a decade axis.
+    /// `None` for NaN, infinities and, on a log axis, `v <= 0`.
     fn transform(&self, v: f64) -> Option<f64> {
         let t = if self.log {
             if v > 0.0 { v.log10() } else { return None }
@@ -709,17 +794,63 @@ impl Axis {
         t.is_finite().then_some(t)
     }
 
-    /// Pixel coordinate of `v`; `None` for NaN, infinities and, on a log axis, `v <= 0`.
-    fn px(self, v: f64) -> Option<f64> {
-        let t = self.transform(v)?;
-        let (t_lo, t_hi) = (self.transform(self.lo)?, self.transform(self.hi)?);
-        let px = self.px_lo + (t - t_lo) / (t_hi - t_lo) * (self.px_hi - self.px_lo);
-        let (min, max) = (self.px_lo.min(self.px_hi), self.px_lo.max(self.px_hi));
-        Some(px.clamp(min - MAX_OVERSHOOT_PX, max + MAX_OVERSHOOT_PX))
+    fn inverse(&self, t: f64) -> f64 {
+        if self.log { 10f64.powf(t) } else { t }
+    }
+
+    /// Where `v` lies along the axis: 0 at `lo`, 1 at `hi`.
+    fn fraction(&self, v: f64) -> Option<f64> {
+        let (t, t_lo, t_hi) = (
+            self.transform(v)?,
+            self.transform(self.lo)?,
+            self.transform(self.hi)?,
+        );
+        Some((t - t_lo) / (t_hi - t_lo)).filter(|f| f.is_finite())
     }
 
     fn contains(&self, v: f64) -> bool {
         self.transform(v).is_some() && v >= self.lo && v <= self.hi
+    }
+}
+
+impl Ranged for Scale {
+    type FormatOption = NoDefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        // Only clipped data reaches here; the clamp keeps a stray value from writing an absurd
+        // coordinate into the file.
+        let f = self
+            .fraction(*value)
+            .unwrap_or(0.0)
+            .clamp(-MAX_OVERSHOOT, 1.0 + MAX_OVERSHOOT);
+        (f64::from(limit.0) + f * f64::from(limit.1 - limit.0)).round() as i32
+    }
+
+    fn key_points<Hint: KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            self.minor.clone()
+        } else {
+            self.major.clone()
+        }
+    }
+
+    fn range(&self) -> Range<f64> {
+        self.lo..self.hi
+    }
+}
+
+impl ValueFormatter<f64> for Scale {
+    fn format(value: &f64) -> String {
+        format!("{value}")
+    }
+
+    fn format_ext(&self, value: &f64) -> String {
+        if self.log {
+            log_tick_label(*value)
+        } else {
+            tick_label(*value, self.step)
+        }
     }
 }
 
@@ -752,7 +883,7 @@ fn resolve_x_range(frame: &Frame, panels: &[&Panel]) -> (f64, f64) {
 }
 
 /// The panel's fixed range, else its visible data and limit lines with 5 % headroom.
-fn resolve_y_range(panel: &Panel, x_axis: &Axis) -> (f64, f64) {
+fn resolve_y_range(panel: &Panel, x_scale: &Scale) -> (f64, f64) {
     if let Some(range) = valid_range(panel.y_range, false) {
         return range;
     }
@@ -760,7 +891,7 @@ fn resolve_y_range(panel: &Panel, x_axis: &Axis) -> (f64, f64) {
         .series
         .iter()
         .flat_map(|s| s.x.iter().zip(&s.y))
-        .filter(|&(&x, y)| y.is_finite() && x_axis.contains(x))
+        .filter(|&(&x, y)| y.is_finite() && x_scale.contains(x))
         .map(|(_, &y)| y);
     let lines = panel.hlines.iter().map(|h| h.y).filter(|y| y.is_finite());
     let (lo, hi) = visible
@@ -780,39 +911,40 @@ fn resolve_y_range(panel: &Panel, x_axis: &Axis) -> (f64, f64) {
     (lo - d, hi + d)
 }
 
-/// A series reduced to what one pixel column can show: runs of pixel points, a new run after
-/// every NaN gap.
-fn decimate(x: &[f64], y: &[f64], x_axis: &Axis, y_axis: &Axis) -> Vec<Vec<(f64, f64)>> {
+/// A series reduced to what `columns` pixel columns can show: runs of samples `(x, y)`, a new
+/// run after every NaN gap. Plotters would otherwise write every sample of a 120 s log.
+fn decimate(x: &[f64], y: &[f64], x_scale: &Scale, columns: i64) -> Vec<Vec<(f64, f64)>> {
     let sorted = x.iter().filter(|v| !v.is_nan()).is_sorted();
     if !sorted {
-        return thin_unsorted(x, y, x_axis, y_axis);
+        return thin_unsorted(x, y, x_scale);
     }
-    let columns = (x_axis.px_hi - x_axis.px_lo).ceil() as i64;
     let mut out = Decimator::default();
     for (&xv, &yv) in x.iter().zip(y) {
-        let Some(px) = x_axis.px(xv) else {
+        let Some(f) = x_scale.fraction(xv) else {
             out.gap();
             continue;
         };
         // Everything left of the plot shares one column, everything right another: enough
         // to draw the clipped line into the edge.
-        let column = ((px - x_axis.px_lo).floor() as i64).clamp(-1, columns + 1);
+        let column = ((f * columns as f64).floor() as i64).clamp(-1, columns + 1);
         out.enter_column(column);
-        match y_axis.px(yv) {
-            Some(py) => out.point(px, py),
-            None => out.gap(),
+        if yv.is_finite() {
+            out.point(xv, yv);
+        } else {
+            out.gap();
         }
     }
     out.finish()
 }
 
-/// Per-column reduction to first, min, max and last point (the "M4" scheme).
+/// Per-column reduction to first, min, max and last sample (the "M4" scheme): the line looks
+/// the same as with every sample, single-sample spikes included.
 #[derive(Default)]
 struct Decimator {
     runs: Vec<Vec<(f64, f64)>>,
     current: Vec<(f64, f64)>,
     column: Option<i64>,
-    /// (sample count in column, px, py) of first, lowest, highest, last finite point.
+    /// (sample count in column, x, y) of first, lowest, highest, last finite sample.
     first: Option<(usize, f64, f64)>,
     min: (usize, f64, f64),
     max: (usize, f64, f64),
@@ -832,22 +964,21 @@ impl Decimator {
         }
     }
 
-    fn point(&mut self, px: f64, py: f64) {
+    fn point(&mut self, x: f64, y: f64) {
         // A gap with finite points on both sides inside one pixel column is invisible; it
         // would only multiply path pieces on a signal that drops out at a high rate.
         self.gap_after = false;
         self.count += 1;
-        let p = (self.count, px, py);
+        let p = (self.count, x, y);
         if self.first.is_none() {
             self.first = Some(p);
             self.min = p;
             self.max = p;
         }
-        // Pixel y grows downwards; "min" and "max" here are just the two extremes.
-        if py < self.min.2 {
+        if y < self.min.2 {
             self.min = p;
         }
-        if py > self.max.2 {
+        if y > self.max.2 {
             self.max = p;
         }
         self.last = p;
@@ -871,9 +1002,9 @@ impl Decimator {
         let mut points = [first, self.min, self.max, self.last];
         points.sort_by_key(|p| p.0);
         let mut previous = None;
-        for (k, px, py) in points {
+        for (k, x, y) in points {
             if previous != Some(k) {
-                self.current.push((px, py));
+                self.current.push((x, y));
                 previous = Some(k);
             }
         }
@@ -892,15 +1023,15 @@ impl Decimator {
 }
 
 /// Fallback for x that is not sorted (no pixel columns to reduce over): every n-th sample.
-fn thin_unsorted(x: &[f64], y: &[f64], x_axis: &Axis, y_axis: &Axis) -> Vec<Vec<(f64, f64)>> {
+fn thin_unsorted(x: &[f64], y: &[f64], x_scale: &Scale) -> Vec<Vec<(f64, f64)>> {
     let stride = x.len().div_ceil(MAX_UNSORTED_POINTS).max(1);
     let mut runs = Vec::new();
     let mut current = Vec::new();
     for (&xv, &yv) in x.iter().zip(y).step_by(stride) {
-        match (x_axis.px(xv), y_axis.px(yv)) {
-            (Some(px), Some(py)) => current.push((px, py)),
-            _ if !current.is_empty() => runs.push(std::mem::take(&mut current)),
-            _ => {}
+        if x_scale.transform(xv).is_some() && yv.is_finite() {
+            current.push((xv, yv));
+        } else if !current.is_empty() {
+            runs.push(std::mem::take(&mut current));
         }
     }
     if !current.is_empty() {
@@ -909,167 +1040,222 @@ fn thin_unsorted(x: &[f64], y: &[f64], x_axis: &Axis, y_axis: &Axis) -> Vec<Vec<
     runs
 }
 
-/// The SVG text being built. Writing to a `String` cannot fail, so results are discarded.
-struct Svg {
-    out: String,
-}
-
-impl Svg {
-    fn new(width: f64, height: f64) -> Self {
-        let mut svg = Self {
-            out: String::with_capacity(64 * 1024),
-        };
-        svg.raw(format_args!(
-            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{height:.0}\" \
-             viewBox=\"0 0 {width:.0} {height:.0}\" font-family=\"sans-serif\">\n"
-        ));
-        svg
-    }
-
-    fn raw(&mut self, args: fmt::Arguments) {
-        let _ = self.out.write_fmt(args);
-    }
-
-    fn line(&mut self, (x1, y1): (f64, f64), (x2, y2): (f64, f64), stroke: &str, extra: &str) {
-        self.raw(format_args!(
-            "<line x1=\"{x1:.1}\" y1=\"{y1:.1}\" x2=\"{x2:.1}\" y2=\"{y2:.1}\" stroke=\"{stroke}\"{extra}/>\n"
-        ));
-    }
-
-    /// Text; `extra` carries further attributes, already escaped.
-    fn text(
-        &mut self,
-        (x, y): (f64, f64),
-        size: f64,
-        anchor: &str,
-        fill: &str,
-        extra: &str,
-        content: &str,
-    ) {
-        self.raw(format_args!(
-            "<text x=\"{x:.1}\" y=\"{y:.1}\" font-size=\"{size}\" text-anchor=\"{anchor}\" \
-             fill=\"{fill}\"{extra}>{}</text>\n",
-            Escaped(content)
-        ));
-    }
-
-    /// Text over data, on a pale box so it stays readable where lines cross it. (A text halo
-    /// through `paint-order` would be lighter, but not every SVG renderer supports it.)
-    fn label(&mut self, label: &Label) {
-        let Label {
-            at: (x, y),
-            anchor,
-            size,
-            ..
-        } = *label;
-        let width = text_width(&label.text, size) + 4.0;
-        let left = match anchor {
-            "end" => x - width + 2.0,
-            "middle" => x - width / 2.0,
-            _ => x - 2.0,
-        };
-        self.raw(format_args!(
-            "<rect x=\"{left:.1}\" y=\"{:.1}\" width=\"{width:.1}\" height=\"{:.1}\" \
-             fill=\"#ffffff\" fill-opacity=\"0.8\" rx=\"2\"/>\n",
-            y - size * 0.95,
-            size * 1.3
-        ));
-        self.text((x, y), size, anchor, &label.color, "", &label.text);
-    }
-
-    fn finish(mut self) -> String {
-        self.out.push_str("</svg>\n");
-        self.out
-    }
-}
-
-/// Text escaped for XML content and attribute values.
-struct Escaped<'a>(&'a str);
-
-impl fmt::Display for Escaped<'_> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        for c in self.0.chars() {
-            match c {
-                '&' => f.write_str("&amp;")?,
-                '<' => f.write_str("&lt;")?,
-                '>' => f.write_str("&gt;")?,
-                '"' => f.write_str("&quot;")?,
-                '\'' => f.write_str("&apos;")?,
-                // Control characters are not allowed in XML 1.0 at all.
-                c if c.is_control() => f.write_char(' ')?,
-                c => f.write_char(c)?,
+/// Cuts runs to the plotting box (plotters draws wherever it is told, also over the axes): a
+/// line leaving the box ends on its edge, one coming back starts a new run there. Straight in
+/// the axis' own coordinates, so on a log axis it is cut in decades, as it is drawn.
+fn clip(runs: Vec<Vec<(f64, f64)>>, x: &Scale, y: (f64, f64)) -> Vec<Vec<(f64, f64)>> {
+    let (Some(x_lo), Some(x_hi)) = (x.transform(x.lo), x.transform(x.hi)) else {
+        return Vec::new();
+    };
+    let bounds = [x_lo, x_hi, y.0, y.1];
+    let inside = |(tx, ty): (f64, f64)| (x_lo..=x_hi).contains(&tx) && (y.0..=y.1).contains(&ty);
+    let mut out = Vec::new();
+    for run in runs {
+        let points: Vec<(f64, f64)> = run
+            .iter()
+            .filter_map(|&(px, py)| Some((x.transform(px)?, py)))
+            .collect();
+        let mut current: Vec<(f64, f64)> = Vec::new();
+        if let [only] = points[..] {
+            if inside(only) {
+                out.push(vec![(x.inverse(only.0), only.1)]);
+            }
+            continue;
+        }
+        for pair in points.windows(2) {
+            let Some((a, b, cut_end)) = clip_segment(pair[0], pair[1], bounds) else {
+                if !current.is_empty() {
+                    out.push(std::mem::take(&mut current));
+                }
+                continue;
+            };
+            if current.is_empty() {
+                current.push((x.inverse(a.0), a.1));
+            }
+            current.push((x.inverse(b.0), b.1));
+            if cut_end {
+                out.push(std::mem::take(&mut current));
             }
         }
-        Ok(())
+        if !current.is_empty() {
+            out.push(current);
+        }
+    }
+    out
+}
+
+type Point = (f64, f64);
+
+/// Liang-Barsky: the part of `p0..p1` inside `[x_lo, x_hi, y_lo, y_hi]`, and whether the end
+/// was cut off.
+fn clip_segment(
+    p0: (f64, f64),
+    p1: (f64, f64),
+    [x_lo, x_hi, y_lo, y_hi]: [f64; 4],
+) -> Option<(Point, Point, bool)> {
+    let (dx, dy) = (p1.0 - p0.0, p1.1 - p0.1);
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (p, q) in [
+        (-dx, p0.0 - x_lo),
+        (dx, x_hi - p0.0),
+        (-dy, p0.1 - y_lo),
+        (dy, y_hi - p0.1),
+    ] {
+        if p == 0.0 {
+            if q < 0.0 {
+                return None;
+            }
+        } else {
+            let r = q / p;
+            if p < 0.0 {
+                t0 = t0.max(r);
+            } else {
+                t1 = t1.min(r);
+            }
+        }
+    }
+    if t0 > t1 {
+        return None;
+    }
+    let at = |t: f64| (p0.0 + t * dx, p0.1 + t * dy);
+    Some((at(t0), at(t1), t1 < 1.0))
+}
+
+type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
+type DrawResult = Result<(), DrawingAreaErrorKind<io::Error>>;
+
+fn rgb(hex: u32) -> RGBColor {
+    RGBColor((hex >> 16) as u8, (hex >> 8) as u8, hex as u8)
+}
+
+impl From<Color> for RGBColor {
+    fn from(c: Color) -> Self {
+        RGBColor(c.0, c.1, c.2)
     }
 }
 
-/// Annotation text, drawn after the data and the frame so nothing covers it.
+/// Text of `px` pixels as the SVG shows it: plotters' SVG backend writes a font size of
+/// `size / 1.24`.
+fn font(px: f64, color: RGBColor, h: HPos, v: VPos) -> TextStyle<'static> {
+    font_styled(px, FontStyle::Normal, color, h, v)
+}
+
+fn font_styled(px: f64, style: FontStyle, color: RGBColor, h: HPos, v: VPos) -> TextStyle<'static> {
+    FontDesc::new(FontFamily::SansSerif, px * 1.24, style)
+        .color(&color)
+        .pos(Pos::new(h, v))
+}
+
+/// Text as XML 1.0 allows it: plotters escapes markup but passes control characters, which
+/// no XML parser accepts.
+fn clean(text: &str) -> String {
+    text.chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect()
+}
+
+/// Rough width of a label: sans-serif averages about 0.56 em (plotters' own estimate for the
+/// SVG backend, which has no font metrics either).
+fn text_width(text: &str, size: f64) -> i32 {
+    (text.chars().count() as f64 * size * 0.56).round() as i32
+}
+
+/// Annotation text over data, drawn after the data and the frame so nothing covers it.
 struct Label {
-    at: (f64, f64),
-    anchor: &'static str,
+    /// Anchor point: the text's vertical centre.
+    at: (i32, i32),
+    anchor: HPos,
     size: f64,
-    color: String,
+    color: RGBColor,
     text: String,
 }
 
-/// Rough width of a label: no font metrics here, and sans-serif averages about 0.56 em.
-fn text_width(text: &str, size: f64) -> f64 {
-    text.chars().count() as f64 * size * 0.56
-}
-
-/// A 1 px line on a pixel centre, so it is drawn sharp instead of smeared over two pixels.
-fn crisp(v: f64) -> f64 {
-    v.floor() + 0.5
-}
-
-fn dash_attr(dashed: bool) -> &'static str {
-    if dashed {
-        " stroke-dasharray=\"7 4\""
-    } else {
-        ""
+impl Label {
+    /// On a pale box so it stays readable where lines cross it.
+    fn draw(&self, root: &Area) -> DrawResult {
+        let width = text_width(&self.text, self.size) + 4;
+        let (x, y) = self.at;
+        let left = match self.anchor {
+            HPos::Right => x - width + 2,
+            HPos::Center => x - width / 2,
+            HPos::Left => x - 2,
+        };
+        let half = (self.size * 0.65).round() as i32;
+        root.draw(&Rectangle::new(
+            [(left, y - half), (left + width, y + half)],
+            WHITE.mix(0.8).filled(),
+        ))?;
+        root.draw_text(
+            &clean(&self.text),
+            &font(self.size, self.color, self.anchor, VPos::Center),
+            self.at,
+        )
     }
 }
 
+/// The SVG text of a figure. Plotters draws into a `String`, and that backend has no
+/// operation that can fail; should a future version fail anyway, the figure says so in
+/// place of the picture instead of looking like an empty plot.
 fn render(frame: &Frame, panels: &[&Panel]) -> String {
-    let log = frame.x_scale == XScale::Log;
-    let (plot_left, plot_right) = (MARGIN_LEFT, frame.width - MARGIN_RIGHT);
-    let (x_lo, x_hi) = resolve_x_range(frame, panels);
-    let x_axis = Axis::new(x_lo, x_hi, log, plot_left, plot_right);
-    let (x_major, x_minor) = if log {
-        log_ticks(x_lo, x_hi)
-    } else {
-        let max_ticks = ((plot_right - plot_left) / 85.0).max(2.0) as usize;
-        (nice_ticks(x_lo, x_hi, max_ticks), Vec::new())
-    };
-    let x_step = x_major
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .next()
-        .unwrap_or(1.0);
+    try_render(frame, panels).unwrap_or_else(|error| {
+        let mut out = String::new();
+        let root = SVGBackend::with_string(&mut out, (frame.width as u32, 40)).into_drawing_area();
+        let text = format!("{}: figure not drawn ({error})", clean(frame.title));
+        let style = font(13.0, rgb(TEXT), HPos::Left, VPos::Center);
+        // Nothing is left to report a second failure to; the text is in the buffer or not.
+        let _ = root.fill(&WHITE);
+        let _ = root.draw_text(&text, &style, (10, 20));
+        let _ = root.present();
+        drop(root);
+        out
+    })
+}
 
+fn try_render(frame: &Frame, panels: &[&Panel]) -> Result<String, String> {
+    let mut out = String::with_capacity(64 * 1024);
+    draw_figure(&mut out, frame, panels).map_err(|e| e.to_string())?;
+    Ok(out)
+}
+
+fn draw_figure(out: &mut String, frame: &Frame, panels: &[&Panel]) -> DrawResult {
+    let width = frame.width.round() as u32;
     let title_height = if frame.title.is_empty() {
         NO_TITLE_HEIGHT
     } else {
         TITLE_HEIGHT
     };
-    let height =
-        title_height + panels.iter().map(|p| p.top_pad() + p.height).sum::<f64>() + BOTTOM_HEIGHT;
-    let mut svg = Svg::new(frame.width, height);
-    svg.raw(format_args!(
-        "<rect width=\"{:.0}\" height=\"{height:.0}\" fill=\"#ffffff\"/>\n",
-        frame.width
-    ));
+    let heights: Vec<u32> = panels
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let axis = if k + 1 == panels.len() {
+                BOTTOM_HEIGHT
+            } else {
+                0
+            };
+            p.top_pad() + p.height + axis
+        })
+        .collect();
+    let height = title_height + heights.iter().sum::<u32>().max(BOTTOM_HEIGHT);
+    let root = SVGBackend::with_string(out, (width, height)).into_drawing_area();
+    root.fill(&WHITE)?;
     if !frame.title.is_empty() {
-        svg.text(
-            (frame.width / 2.0, 25.0),
-            16.0,
-            "middle",
-            TEXT,
-            " font-weight=\"600\"",
-            frame.title,
-        );
+        let style = font_styled(16.0, FontStyle::Bold, rgb(TEXT), HPos::Center, VPos::Center);
+        root.draw_text(&clean(frame.title), &style, (width as i32 / 2, 21))?;
     }
+
+    let log = frame.x_scale == XScale::Log;
+    let (x_lo, x_hi) = resolve_x_range(frame, panels);
+    let plot_width = width.saturating_sub(MARGIN_LEFT + MARGIN_RIGHT);
+    let (x_major, x_minor) = if log {
+        log_ticks(x_lo, x_hi, (plot_width / 60).max(2) as usize)
+    } else {
+        (
+            nice_ticks(x_lo, x_hi, (plot_width / 85).max(2) as usize),
+            Vec::new(),
+        )
+    };
+    let x_scale = Scale::new(x_lo, x_hi, log).ticks(x_major, x_minor);
 
     // Tints by label, in order of first appearance, so a regime has one colour everywhere.
     let mut shade_labels: Vec<&str> = Vec::new();
@@ -1084,300 +1270,268 @@ fn render(frame: &Frame, panels: &[&Panel]) -> String {
     }
     let tint = |label: &str| {
         let k = shade_labels.iter().position(|l| *l == label).unwrap_or(0);
-        SHADE_FILLS[k % SHADE_FILLS.len()]
+        rgb(SHADE_FILLS[k % SHADE_FILLS.len()])
     };
 
-    let mut top = title_height;
-    for (index, panel) in panels.iter().enumerate() {
-        top += panel.top_pad();
-        let bottom = top + panel.height;
-        let (y_lo, y_hi) = resolve_y_range(panel, &x_axis);
-        let y_axis = Axis::new(y_lo, y_hi, false, bottom, top);
-        let max_y_ticks = (panel.height / 34.0).max(2.0) as usize;
-        let y_ticks = match panel.y_ticks {
-            YTicks::Decimal => nice_ticks(y_lo, y_hi, max_y_ticks),
-            YTicks::Degrees => degree_ticks(y_lo, y_hi, max_y_ticks),
+    let (_, mut rest) = root.split_vertically(title_height);
+    for (index, (panel, &panel_height)) in panels.iter().zip(&heights).enumerate() {
+        let (area, below) = rest.split_vertically(panel_height);
+        rest = below;
+        let (_, chart_area) = area.split_vertically(panel.top_pad());
+        let place = Place {
+            is_top: index == 0,
+            is_bottom: index + 1 == panels.len(),
         };
-        let y_step = y_ticks
-            .windows(2)
-            .map(|w| w[1] - w[0])
-            .next()
-            .unwrap_or(1.0);
-        let is_top = index == 0;
-
-        svg.raw(format_args!(
-            "<clipPath id=\"clip{index}\"><rect x=\"{plot_left:.1}\" y=\"{top:.1}\" \
-             width=\"{:.1}\" height=\"{:.1}\"/></clipPath>\n",
-            plot_right - plot_left,
-            panel.height
-        ));
-
-        let mut labels = Vec::new();
-
-        // Shaded intervals, under everything else.
-        let shared = frame.shared_shades.iter().map(|s| (s, is_top));
-        let own = panel.shades.iter().map(|s| (s, true));
-        for (shade, labelled) in shared.chain(own) {
-            let ends = (x_axis.px(shade.x0), x_axis.px(shade.x1));
-            let (Some(a), Some(b)) = ends else { continue };
-            let (a, b) = (a.min(b).max(plot_left), a.max(b).min(plot_right));
-            if b <= a {
-                continue;
-            }
-            svg.raw(format_args!(
-                "<rect x=\"{a:.1}\" y=\"{top:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"{}\"/>\n",
-                b - a,
-                panel.height,
-                tint(&shade.label)
-            ));
-            if labelled && !shade.label.is_empty() && text_width(&shade.label, 10.0) + 6.0 < b - a {
-                labels.push(Label {
-                    at: (a + 4.0, top + 13.0),
-                    anchor: "start",
-                    size: 10.0,
-                    color: TEXT_SOFT.to_string(),
-                    text: shade.label.clone(),
-                });
-            }
-        }
-
-        // Grid.
-        svg.raw(format_args!(
-            "<g shape-rendering=\"crispEdges\" stroke-width=\"1\">\n"
-        ));
-        for &x in &x_minor {
-            if let Some(px) = x_axis.px(x) {
-                svg.line((crisp(px), top), (crisp(px), bottom), GRID_MINOR, "");
-            }
-        }
-        for &x in &x_major {
-            if let Some(px) = x_axis.px(x) {
-                svg.line((crisp(px), top), (crisp(px), bottom), GRID, "");
-            }
-        }
-        for &y in &y_ticks {
-            if let Some(py) = y_axis.px(y) {
-                let color = if y.abs() < y_step * 1e-6 {
-                    GRID_ZERO
-                } else {
-                    GRID
-                };
-                svg.line((plot_left, crisp(py)), (plot_right, crisp(py)), color, "");
-            }
-        }
-        svg.raw(format_args!("</g>\n"));
-
-        // Series, clipped to the plotting area.
-        svg.raw(format_args!(
-            "<g clip-path=\"url(#clip{index})\" fill=\"none\" stroke-width=\"1.6\" \
-             stroke-linejoin=\"round\" stroke-linecap=\"round\">\n"
-        ));
-        for series in &panel.series {
-            draw_series(&mut svg, series, &x_axis, &y_axis);
-        }
-        svg.raw(format_args!("</g>\n"));
-
-        // Limit lines and markers over the data: they are what the reader compares against.
-        for h in &panel.hlines {
-            let Some(py) = y_axis.px(h.y).filter(|py| (top..=bottom).contains(py)) else {
-                continue;
-            };
-            svg.line(
-                (plot_left, py),
-                (plot_right, py),
-                "#555555",
-                " stroke-width=\"1.2\" stroke-dasharray=\"5 4\"",
-            );
-            if !h.label.is_empty() {
-                // Below the line when above it would leave the panel.
-                let ty = if py - top < 16.0 { py + 13.0 } else { py - 4.0 };
-                labels.push(Label {
-                    at: (plot_right - 4.0, ty),
-                    anchor: "end",
-                    size: 11.0,
-                    color: TEXT_SOFT.to_string(),
-                    text: h.label.clone(),
-                });
-            }
-        }
-        let shared = frame.shared_vlines.iter().map(|v| (v, is_top));
-        let own = panel.vlines.iter().map(|v| (v, true));
-        let mut stacked = 0.0;
-        for (v, labelled) in shared.chain(own) {
-            let Some(px) = x_axis
-                .px(v.x)
-                .filter(|px| (plot_left..=plot_right).contains(px))
-            else {
-                continue;
-            };
-            let color = v.color.to_string();
-            svg.line(
-                (px, top),
-                (px, bottom),
-                &color,
-                " stroke-width=\"1.2\" stroke-dasharray=\"5 4\"",
-            );
-            if labelled && !v.label.is_empty() {
-                let width = text_width(&v.label, 11.0);
-                let (ty, prefer_left) = if v.label_at_bottom {
-                    (bottom - 8.0 - stacked * 16.0, true)
-                } else {
-                    (top + 15.0 + stacked * 16.0, false)
-                };
-                stacked += 1.0;
-                let fits_left = px - 5.0 - width > plot_left;
-                let fits_right = px + 5.0 + width < plot_right;
-                let (tx, anchor) = if (prefer_left && fits_left) || !fits_right {
-                    (px - 5.0, "end")
-                } else {
-                    (px + 5.0, "start")
-                };
-                labels.push(Label {
-                    at: (tx, ty),
-                    anchor,
-                    size: 11.0,
-                    color: color.clone(),
-                    text: v.label.clone(),
-                });
-            }
-        }
-
-        svg.raw(format_args!(
-            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"none\" \
-             stroke=\"{FRAME}\" stroke-width=\"1\" shape-rendering=\"crispEdges\"/>\n",
-            crisp(plot_left),
-            crisp(top),
-            (plot_right - plot_left).round(),
-            panel.height.round()
-        ));
-        for label in &labels {
-            svg.label(label);
-        }
-
-        for &y in &y_ticks {
-            if let Some(py) = y_axis.px(y) {
-                svg.text(
-                    (plot_left - 7.0, py + 4.0),
-                    11.0,
-                    "end",
-                    TEXT_SOFT,
-                    "",
-                    &tick_label(y, y_step),
-                );
-            }
-        }
-        let mid = (top + bottom) / 2.0;
-        svg.raw(format_args!(
-            "<text transform=\"translate(18,{mid:.1}) rotate(-90)\" font-size=\"13\" \
-             text-anchor=\"middle\" fill=\"{TEXT}\">{}</text>\n",
-            Escaped(&panel.y_label)
-        ));
-
-        if panel.shows_legend() {
-            draw_legend(&mut svg, panel, plot_left, top - 8.0);
-        }
-        top = bottom;
+        draw_panel(&root, &chart_area, frame, panel, &x_scale, place, &tint)?;
     }
-
-    // Shared x axis under the bottom panel.
-    for &x in &x_major {
-        if let Some(px) = x_axis.px(x) {
-            svg.line(
-                (crisp(px), top),
-                (crisp(px), top + 4.0),
-                FRAME,
-                " shape-rendering=\"crispEdges\"",
-            );
-            let label = if log {
-                log_tick_label(x)
-            } else {
-                tick_label(x, x_step)
-            };
-            svg.text((px, top + 17.0), 11.0, "middle", TEXT_SOFT, "", &label);
-        }
-    }
-    svg.text(
-        ((plot_left + plot_right) / 2.0, top + 38.0),
-        13.0,
-        "middle",
-        TEXT,
-        "",
-        frame.x_label,
-    );
-    svg.finish()
+    root.present()
 }
 
-fn draw_series(svg: &mut Svg, series: &Series, x_axis: &Axis, y_axis: &Axis) {
-    let runs = decimate(&series.x, &series.y, x_axis, y_axis);
-    if runs.is_empty() {
-        return;
-    }
-    svg.raw(format_args!(
-        "<path stroke=\"{}\"{} d=\"",
-        series.color,
-        dash_attr(series.dashed)
-    ));
-    for run in &runs {
-        for (k, (x, y)) in run.iter().enumerate() {
-            let command = match k {
-                0 => "M",
-                1 => "L",
-                _ => " ",
-            };
-            svg.raw(format_args!("{command}{x:.1},{y:.1}"));
-        }
-        if run.len() == 1 {
-            // A lone sample between dropouts: a zero-length segment that the round cap turns
-            // into a dot.
-            svg.raw(format_args!("h0"));
-        }
-    }
-    svg.raw(format_args!("\"/>\n"));
+#[derive(Clone, Copy)]
+struct Place {
+    is_top: bool,
+    is_bottom: bool,
+}
 
+fn draw_panel(
+    root: &Area,
+    area: &Area,
+    frame: &Frame,
+    panel: &Panel,
+    x_scale: &Scale,
+    place: Place,
+    tint: &dyn Fn(&str) -> RGBColor,
+) -> DrawResult {
+    let (y_lo, y_hi) = resolve_y_range(panel, x_scale);
+    let max_y_ticks = (panel.height / 34).max(2) as usize;
+    let y_ticks = match panel.y_ticks {
+        YTicks::Decimal => nice_ticks(y_lo, y_hi, max_y_ticks),
+        YTicks::Degrees => degree_ticks(y_lo, y_hi, max_y_ticks),
+    };
+    let y_scale = Scale::new(y_lo, y_hi, false).ticks(y_ticks, Vec::new());
+    let (x_lo, x_hi) = (x_scale.lo, x_scale.hi);
+    let mut chart = ChartBuilder::on(area)
+        .margin_left(Y_LABEL_INSET)
+        .margin_right(MARGIN_RIGHT)
+        .margin_bottom(if place.is_bottom { X_LABEL_INSET } else { 0 })
+        .set_label_area_size(LabelAreaPosition::Left, MARGIN_LEFT - Y_LABEL_INSET)
+        .set_label_area_size(
+            LabelAreaPosition::Bottom,
+            if place.is_bottom {
+                BOTTOM_HEIGHT - X_LABEL_INSET
+            } else {
+                0
+            },
+        )
+        .build_cartesian_2d(x_scale.clone(), y_scale.clone())?;
+    let (x_px, y_px) = chart.plotting_area().get_pixel_range();
+    let (plot_left, plot_right, top, bottom) = (x_px.start, x_px.end, y_px.start, y_px.end);
+    let mut labels = Vec::new();
+
+    // Shaded intervals, under everything else.
+    let shared = frame.shared_shades.iter().map(|s| (s, place.is_top));
+    let own = panel.shades.iter().map(|s| (s, true));
+    for (shade, labelled) in shared.chain(own) {
+        let (a, b) = (shade.x0.min(shade.x1), shade.x0.max(shade.x1));
+        let (a, b) = (a.max(x_lo), b.min(x_hi));
+        if !(b > a && x_scale.contains(a) && x_scale.contains(b)) {
+            continue;
+        }
+        chart.plotting_area().draw(&Rectangle::new(
+            [(a, y_hi), (b, y_lo)],
+            tint(&shade.label).filled(),
+        ))?;
+        let (pa, pb) = (
+            chart.backend_coord(&(a, y_lo)).0,
+            chart.backend_coord(&(b, y_lo)).0,
+        );
+        if labelled && !shade.label.is_empty() && text_width(&shade.label, 10.0) + 6 < pb - pa {
+            labels.push(Label {
+                at: (pa + 4, top + 9),
+                anchor: HPos::Left,
+                size: 10.0,
+                color: rgb(TEXT_SOFT),
+                text: shade.label.clone(),
+            });
+        }
+    }
+
+    let mut mesh = chart.configure_mesh();
+    mesh.bold_line_style(rgb(GRID).stroke_width(1))
+        .light_line_style(rgb(GRID_MINOR).stroke_width(1))
+        .axis_style(rgb(FRAME).stroke_width(1))
+        .set_all_tick_mark_size(4)
+        .label_style(font(11.0, rgb(TEXT_SOFT), HPos::Center, VPos::Center))
+        .axis_desc_style(font(13.0, rgb(TEXT), HPos::Center, VPos::Center))
+        .y_desc(clean(&panel.y_label));
+    if place.is_bottom {
+        mesh.x_desc(clean(frame.x_label));
+    }
+    mesh.draw()?;
+    // Zero drawn a shade darker than the grid: the reference level of most panels.
+    if y_scale.major.iter().any(|y| y.abs() < y_scale.step * 1e-6) {
+        chart.plotting_area().draw(&PathElement::new(
+            vec![(x_lo, 0.0), (x_hi, 0.0)],
+            rgb(GRID_ZERO).stroke_width(1),
+        ))?;
+    }
+
+    // Series in the order they were added: a later one is drawn over an earlier one.
+    let columns = i64::from(plot_right - plot_left + 1);
+    for series in &panel.series {
+        draw_series(&chart, series, x_scale, (y_lo, y_hi), columns)?;
+    }
+
+    // Limit lines and markers over the data: they are what the reader compares against.
+    let limit_style = rgb(LIMIT).stroke_width(1);
+    for h in &panel.hlines {
+        if !(h.y.is_finite() && (y_lo..=y_hi).contains(&h.y)) {
+            continue;
+        }
+        chart.plotting_area().draw(&DashedPathElement::new(
+            vec![(x_lo, h.y), (x_hi, h.y)],
+            5,
+            4,
+            limit_style,
+        ))?;
+        if !h.label.is_empty() {
+            let py = chart.backend_coord(&(x_lo, h.y)).1;
+            // Below the line when above it would leave the panel.
+            let ty = if py - top < 16 { py + 9 } else { py - 8 };
+            labels.push(Label {
+                at: (plot_right - 4, ty),
+                anchor: HPos::Right,
+                size: 11.0,
+                color: rgb(TEXT_SOFT),
+                text: h.label.clone(),
+            });
+        }
+    }
+    let shared = frame.shared_vlines.iter().map(|v| (v, place.is_top));
+    let own = panel.vlines.iter().map(|v| (v, true));
+    let mut stacked = 0;
+    for (v, labelled) in shared.chain(own) {
+        if !x_scale.contains(v.x) {
+            continue;
+        }
+        let color = RGBColor::from(v.color);
+        chart.plotting_area().draw(&DashedPathElement::new(
+            vec![(v.x, y_lo), (v.x, y_hi)],
+            5,
+            4,
+            color.stroke_width(1),
+        ))?;
+        if labelled && !v.label.is_empty() {
+            let px = chart.backend_coord(&(v.x, y_lo)).0;
+            let width = text_width(&v.label, 11.0);
+            let (ty, prefer_left) = if v.label_at_bottom {
+                (bottom - 12 - stacked * 16, true)
+            } else {
+                (top + 11 + stacked * 16, false)
+            };
+            stacked += 1;
+            let fits_left = px - 5 - width > plot_left;
+            let fits_right = px + 5 + width < plot_right;
+            let (tx, anchor) = if (prefer_left && fits_left) || !fits_right {
+                (px - 5, HPos::Right)
+            } else {
+                (px + 5, HPos::Left)
+            };
+            labels.push(Label {
+                at: (tx, ty),
+                anchor,
+                size: 11.0,
+                color,
+                text: v.label.clone(),
+            });
+        }
+    }
+
+    // On the pixels of plotters' axis lines (left of and below the plotting area), so the
+    // frame is one line wide all round.
+    root.draw(&Rectangle::new(
+        [(plot_left - 1, top), (plot_right - 1, bottom)],
+        rgb(FRAME).stroke_width(1),
+    ))?;
+    for label in &labels {
+        label.draw(root)?;
+    }
+    if panel.shows_legend() {
+        draw_legend(root, panel, plot_left, top - 12)?;
+    }
+    Ok(())
+}
+
+fn series_style(series: &Series) -> ShapeStyle {
+    RGBColor::from(series.color)
+        .mix(series.opacity)
+        .stroke_width(LINE_WIDTH)
+}
+
+fn draw_series(
+    chart: &ChartContext<SVGBackend, Cartesian2d<Scale, Scale>>,
+    series: &Series,
+    x_scale: &Scale,
+    y_range: (f64, f64),
+    columns: i64,
+) -> DrawResult {
+    let area = chart.plotting_area();
+    let style = series_style(series);
+    let runs = clip(
+        decimate(&series.x, &series.y, x_scale, columns),
+        x_scale,
+        y_range,
+    );
+    for run in runs {
+        match run[..] {
+            // A lone sample between dropouts: a dot, where a line has nothing to join.
+            [only] => area.draw(&Circle::new(only, LINE_WIDTH, style.filled()))?,
+            _ if series.dashed => area.draw(&DashedPathElement::new(run, DASH.0, DASH.1, style))?,
+            _ => area.draw(&PathElement::new(run, style))?,
+        }
+    }
     if series.markers {
         let visible: Vec<(f64, f64)> = series
             .x
             .iter()
             .zip(&series.y)
-            .filter(|&(&x, _)| x_axis.contains(x))
-            .filter_map(|(&x, &y)| Some((x_axis.px(x)?, y_axis.px(y)?)))
+            .filter(|&(&x, &y)| x_scale.contains(x) && y.is_finite())
+            .filter(|&(_, &y)| (y_range.0..=y_range.1).contains(&y))
+            .map(|(&x, &y)| (x, y))
             .collect();
+        // On dense series the dots would merge into a smear.
         if visible.len() <= MAX_MARKERS {
-            svg.raw(format_args!(
-                "<g fill=\"{}\" stroke=\"none\">",
-                series.color
-            ));
-            for (x, y) in visible {
-                svg.raw(format_args!(
-                    "<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"2.6\"/>"
-                ));
+            for p in visible {
+                area.draw(&Circle::new(p, MARKER_RADIUS, style.filled()))?;
             }
-            svg.raw(format_args!("</g>\n"));
         }
     }
+    Ok(())
 }
 
-fn draw_legend(svg: &mut Svg, panel: &Panel, left: f64, baseline: f64) {
+/// One row above the panel: a line sample and the name of each named series.
+fn draw_legend(root: &Area, panel: &Panel, left: i32, y: i32) -> DrawResult {
     let mut x = left;
     for series in panel.series.iter().filter(|s| !s.name.is_empty()) {
-        let color = series.color.to_string();
-        let attrs = format!(" stroke-width=\"2\"{}", dash_attr(series.dashed));
-        svg.line(
-            (x, baseline - 4.0),
-            (x + 24.0, baseline - 4.0),
-            &color,
-            &attrs,
-        );
-        if series.markers {
-            svg.raw(format_args!(
-                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"2.6\" fill=\"{color}\"/>\n",
-                x + 12.0,
-                baseline - 4.0
-            ));
+        let style = series_style(series);
+        let sample = vec![(x, y), (x + 24, y)];
+        if series.dashed {
+            root.draw(&DashedPathElement::new(sample, DASH.0, DASH.1, style))?;
+        } else {
+            root.draw(&PathElement::new(sample, style))?;
         }
-        svg.text((x + 30.0, baseline), 12.0, "start", TEXT, "", &series.name);
-        x += 30.0 + text_width(&series.name, 12.0) + 18.0;
+        if series.markers {
+            root.draw(&Circle::new((x + 12, y), MARKER_RADIUS, style.filled()))?;
+        }
+        let name = clean(&series.name);
+        root.draw_text(
+            &name,
+            &font(12.0, rgb(TEXT), HPos::Left, VPos::Center),
+            (x + 30, y),
+        )?;
+        x += 30 + text_width(&name, 12.0) + 18;
     }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -1495,25 +1649,223 @@ mod tests {
             .bandwidth_of("paper model", 4.8)
     }
 
+    /// Every `<text>` element: its attributes and its content (plotters puts the content on a
+    /// line of its own).
+    fn texts(svg: &str) -> Vec<(&str, &str)> {
+        svg.split("<text ")
+            .skip(1)
+            .filter_map(|rest| {
+                let (attrs, rest) = rest.split_once('>')?;
+                let (content, _) = rest.split_once("</text>")?;
+                Some((attrs, content.trim()))
+            })
+            .collect()
+    }
+
+    fn has_text(svg: &str, wanted: &str) -> bool {
+        texts(svg).iter().any(|&(_, t)| t == wanted)
+    }
+
+    /// A `<polyline>`: its position in the document, its stroke colour, its points.
+    type Polyline = (usize, String, Vec<(i32, i32)>);
+
+    /// Every `<polyline>` of the document.
+    fn polylines(svg: &str) -> Vec<Polyline> {
+        svg.match_indices("<polyline ")
+            .map(|(at, _)| {
+                let tag = &svg[at..at + svg[at..].find("/>").expect("closed")];
+                let attr = |name: &str| {
+                    let start = tag.find(&format!(" {name}=\"")).expect(name) + name.len() + 3;
+                    tag[start..start + tag[start..].find('"').expect("quote")].to_string()
+                };
+                let points = attr("points")
+                    .split_whitespace()
+                    .map(|p| {
+                        let (x, y) = p.split_once(',').expect("x,y");
+                        (x.parse().expect("x"), y.parse().expect("y"))
+                    })
+                    .collect();
+                (at, attr("stroke").to_lowercase(), points)
+            })
+            .collect()
+    }
+
     #[test]
     fn time_plot_is_well_formed_and_escapes_text() {
         let svg = time_plot(5_000).to_svg();
         assert_well_formed(&svg);
-        assert!(svg.contains("Square wave &lt;10 deg&gt; &amp; current"));
-        assert!(svg.contains("+20 A limit") && svg.contains("saturated"));
-        assert!(svg.contains("font-family=\"sans-serif\""));
+        assert!(has_text(&svg, "Square wave &lt;10 deg&gt; &amp; current"));
+        assert!(has_text(&svg, "+20 A limit") && has_text(&svg, "saturated"));
+        assert!(has_text(&svg, "steering wheel (deg)") && has_text(&svg, "time (s)"));
+        // Plain text in a generic family: no font file is needed to draw or to view it.
+        let all = texts(&svg);
+        assert!(all.len() > 10);
+        assert!(
+            all.iter()
+                .all(|(attrs, _)| attrs.contains("font-family=\"sans-serif\""))
+        );
     }
 
     #[test]
-    fn bode_plot_is_well_formed_and_labels_the_bandwidth() {
+    fn control_characters_never_reach_the_file() {
+        let svg = TimePlot::new("a\u{1}b")
+            .panel(Panel::new("y\u{7f}").series("s\u{0}", &[0.0, 1.0], &[0.0, 1.0]))
+            .to_svg();
+        assert_well_formed(&svg);
+        assert!(!svg.chars().any(|c| c.is_control() && c != '\n'));
+        assert!(has_text(&svg, "a b"));
+    }
+
+    #[test]
+    fn bode_plot_is_well_formed_and_labels_the_bandwidth_and_coherence() {
         let svg = bode(400).to_svg();
         assert_well_formed(&svg);
-        assert!(svg.contains("simulated: -3 dB at 5.1 Hz"), "{svg}");
-        assert!(svg.contains(">-3 dB<"));
-        assert!(svg.contains("coherence"));
+        assert!(has_text(&svg, "simulated: -3 dB at 5.1 Hz"), "{svg}");
+        assert!(has_text(&svg, "-3 dB"));
+        // The coherence panel's y label, rotated like the others.
+        let label = texts(&svg)
+            .into_iter()
+            .find(|&(_, t)| t == "coherence")
+            .expect("coherence label");
+        assert!(label.0.contains("rotate(270"), "{}", label.0);
+        assert!(has_text(&svg, "magnitude (dB)") && has_text(&svg, "phase (deg)"));
         let linear = bode(50).x_scale(XScale::Linear).bandwidth(5.1).to_svg();
         assert_well_formed(&linear);
-        assert!(linear.contains(">-3 dB at 5.1 Hz<"));
+        assert!(has_text(&linear, "-3 dB at 5.1 Hz"));
+    }
+
+    /// The numeric labels under the frequency axis (centred; the y labels are right-aligned).
+    fn frequency_labels(svg: &str) -> Vec<f64> {
+        texts(svg)
+            .into_iter()
+            .filter(|(attrs, _)| attrs.contains("text-anchor=\"middle\""))
+            .filter_map(|(_, t)| t.parse().ok())
+            .collect()
+    }
+
+    #[test]
+    fn bode_frequency_axis_is_labelled_at_one_two_five() {
+        let labels = frequency_labels(&bode(400).to_svg());
+        assert_ticks(
+            &labels,
+            &[0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0],
+        );
+        let labels = frequency_labels(&bode(400).x_range(2.0, 30.0).to_svg());
+        assert_ticks(&labels, &[2.0, 5.0, 10.0, 20.0]);
+        // Six decades on a narrow figure: only the decades fit.
+        let f: Vec<f64> = (0..200)
+            .map(|k| 10f64.powf(-2.0 + 6.0 * k as f64 / 199.0))
+            .collect();
+        let flat = vec![0.0; f.len()];
+        let wide = BodePlot::new("wide")
+            .width(400.0)
+            .series("s", &f, &flat, &flat)
+            .to_svg();
+        let labels = frequency_labels(&wide);
+        assert_ticks(&labels, &[0.01, 0.1, 1.0, 10.0, 100.0, 1000.0, 10000.0]);
+    }
+
+    #[test]
+    fn later_series_are_drawn_over_earlier_ones() {
+        let t: Vec<f64> = (0..2000).map(|k| k as f64 * 1e-3).collect();
+        let measured: Vec<f64> = t.iter().map(|t| 8.0 * (t * 30.0).sin()).collect();
+        let setpoint: Vec<f64> = t
+            .iter()
+            .map(|t| 20.0 * (t * 300.0).sin().signum())
+            .collect();
+        let svg = TimePlot::new("current")
+            .panel(
+                Panel::new("motor current, A")
+                    .series("measured", &t, &measured)
+                    .series_styled(
+                        "set-point",
+                        &t,
+                        &setpoint,
+                        Style::new().color(Color::GRAY).opacity(0.6),
+                    ),
+            )
+            .to_svg();
+        let lines = polylines(&svg);
+        let position = |stroke: &str| -> Vec<usize> {
+            lines
+                .iter()
+                .filter(|(_, s, p)| s == stroke && p.len() > 2)
+                .map(|&(at, _, _)| at)
+                .collect()
+        };
+        let (blue, gray) = (position("#0072b2"), position("#666666"));
+        assert!(!blue.is_empty() && !gray.is_empty());
+        assert!(blue.iter().max() < gray.iter().min(), "{blue:?} {gray:?}");
+        assert!(svg.contains("opacity=\"0.6\""));
+    }
+
+    #[test]
+    fn palette_colours_are_handed_out_in_order() {
+        let t = [0.0, 1.0, 2.0];
+        let panel = (0..4).fold(Panel::new("y"), |p, k| {
+            p.series(&format!("s{k}"), &t, &[k as f64, 1.0, 0.0])
+        });
+        let svg = TimePlot::new("palette").panel(panel).to_svg();
+        let mut seen: Vec<String> = Vec::new();
+        for (_, stroke, _) in polylines(&svg) {
+            if PALETTE.iter().any(|c| c.to_string() == stroke) && !seen.contains(&stroke) {
+                seen.push(stroke);
+            }
+        }
+        let expected: Vec<String> = PALETTE[..4].iter().map(Color::to_string).collect();
+        assert_eq!(seen, expected);
+    }
+
+    #[test]
+    fn lines_are_cut_at_the_edge_of_the_plot() {
+        let t: Vec<f64> = (0..1000).map(|k| k as f64 * 0.01).collect();
+        let y: Vec<f64> = t.iter().map(|t| 5.0 * (t * 3.0).sin()).collect();
+        let svg = TimePlot::new("clipped")
+            .x_range(2.0, 8.0)
+            .panel(
+                Panel::new("y")
+                    .series("s", &t, &y)
+                    .y_range(-1.0, 1.0)
+                    .hide_legend(),
+            )
+            .to_svg();
+        // The series' lines only: plotters draws the grid and tick marks as polylines too.
+        let points: Vec<(i32, i32)> = polylines(&svg)
+            .into_iter()
+            .filter(|(_, stroke, _)| *stroke == PALETTE[0].to_string())
+            .flat_map(|(_, _, p)| p)
+            .collect();
+        assert!(points.len() > 20);
+        let (xs, ys): (Vec<i32>, Vec<i32>) = points.into_iter().unzip();
+        let left = MARGIN_LEFT as i32;
+        let right = (DEFAULT_WIDTH as u32 - MARGIN_RIGHT) as i32;
+        let top = (TITLE_HEIGHT + PANEL_GAP) as i32;
+        let bottom = top + DEFAULT_PANEL_HEIGHT as i32;
+        assert!(xs.iter().all(|x| (left..=right).contains(x)), "{xs:?}");
+        assert!(ys.iter().all(|y| (top..=bottom).contains(y)), "{ys:?}");
+
+        // A peak above the box: the line ends on the edge and starts again where it comes back.
+        let runs = clip(
+            vec![vec![(0.0, 0.0), (2.0, 2.0), (4.0, 0.0)]],
+            &Scale::new(0.0, 4.0, false),
+            (-1.0, 1.0),
+        );
+        assert_eq!(
+            runs,
+            vec![vec![(0.0, 0.0), (1.0, 1.0)], vec![(3.0, 1.0), (4.0, 0.0)]]
+        );
+        // On a decade axis the cut is straight in decades: 1 -> 100 crosses 10 halfway.
+        let runs = clip(
+            vec![vec![(1.0, 0.0), (100.0, 2.0)]],
+            &Scale::new(0.5, 10.0, true),
+            (-5.0, 5.0),
+        );
+        assert_eq!(runs.len(), 1);
+        let end = runs[0][1];
+        assert!(
+            (end.0 - 10.0).abs() < 1e-9 && (end.1 - 1.0).abs() < 1e-9,
+            "{end:?}"
+        );
     }
 
     #[test]
@@ -1525,18 +1877,18 @@ mod tests {
     }
 
     #[test]
-    fn decimation_keeps_a_single_sample_spike() {
+    fn decimation_keeps_min_max_and_a_single_sample_spike() {
         let n = 240_000;
         let x: Vec<f64> = (0..n).map(|i| i as f64).collect();
         let mut y = vec![0.0; n];
         y[123_457] = 100.0;
-        let x_axis = Axis::new(0.0, n as f64, false, 0.0, 800.0);
-        let y_axis = Axis::new(0.0, 100.0, false, 200.0, 0.0);
-        let runs = decimate(&x, &y, &x_axis, &y_axis);
+        y[7] = -3.0;
+        let scale = Scale::new(0.0, n as f64, false);
+        let runs = decimate(&x, &y, &scale, 800);
         assert_eq!(runs.len(), 1);
         assert!(runs[0].len() <= 4 * 802, "{} points", runs[0].len());
-        let top = runs[0].iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
-        assert!(top.abs() < 1e-9, "spike drawn at y = {top}");
+        assert!(runs[0].contains(&(123_457.0, 100.0)));
+        assert!(runs[0].contains(&(7.0, -3.0)));
     }
 
     #[test]
@@ -1566,10 +1918,15 @@ mod tests {
             !lower.contains("nan") && !lower.contains("inf"),
             "non-finite value in SVG"
         );
+        // The lone sample 701 is a dot; the markers are 50 more.
+        assert_eq!(
+            svg.matches("<circle").count(),
+            51 + 1,
+            "legend marker included"
+        );
 
-        let x_axis = Axis::new(0.0, 10.0, false, 0.0, 800.0);
-        let y_axis = Axis::new(-1.0, 1.0, false, 200.0, 0.0);
-        let runs = decimate(&t, &y, &x_axis, &y_axis);
+        let scale = Scale::new(0.0, 10.0, false);
+        let runs = decimate(&t, &y, &scale, 800);
         // Gaps at 300..400, 500, 700 and 702; the lone sample 701 is a run of its own.
         assert_eq!(
             runs.len(),
@@ -1603,7 +1960,10 @@ mod tests {
     fn assert_ticks(got: &[f64], expected: &[f64]) {
         assert_eq!(got.len(), expected.len(), "{got:?} vs {expected:?}");
         for (g, e) in got.iter().zip(expected) {
-            assert!((g - e).abs() < 1e-9, "{got:?} vs {expected:?}");
+            assert!(
+                (g - e).abs() < 1e-9 * e.abs().max(1.0),
+                "{got:?} vs {expected:?}"
+            );
         }
     }
 
@@ -1631,6 +1991,7 @@ mod tests {
         assert_eq!(tick_label(20.0, 10.0), "20");
         assert_eq!(tick_label(0.05, 0.05), "0.05");
         assert_eq!(log_tick_label(0.1), "0.1");
+        assert_eq!(log_tick_label(0.2), "0.2");
         assert_eq!(log_tick_label(100.0), "100");
     }
 
@@ -1643,14 +2004,21 @@ mod tests {
     }
 
     #[test]
-    fn log_ticks_label_decades_or_one_two_five() {
-        let (major, minor) = log_ticks(0.1, 100.0);
+    fn log_ticks_label_one_two_five_or_decades() {
+        let (major, minor) = log_ticks(0.1, 100.0, 12);
+        assert_ticks(
+            &major,
+            &[0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0],
+        );
+        assert_eq!(minor.len(), 6 * 3);
+        let (major, minor) = log_ticks(0.1, 100.0, 5);
         assert_ticks(&major, &[0.1, 1.0, 10.0, 100.0]);
         assert_eq!(minor.len(), 8 * 3);
-        let (major, _) = log_ticks(2.0, 30.0);
+        let (major, _) = log_ticks(2.0, 30.0, 12);
         assert_ticks(&major, &[2.0, 5.0, 10.0, 20.0]);
-        let (major, _) = log_ticks(2.5, 4.5);
+        let (major, _) = log_ticks(2.5, 4.5, 12);
         assert_ticks(&major, &[3.0, 4.0]);
+        assert_eq!(log_ticks(0.0, 1.0, 12), (Vec::new(), Vec::new()));
     }
 
     #[test]
@@ -1660,5 +2028,6 @@ mod tests {
         bode(100).save(&path).expect("save");
         let text = fs::read_to_string(&path).expect("read back");
         assert_well_formed(&text);
+        assert_eq!(text, bode(100).to_svg());
     }
 }

@@ -74,6 +74,45 @@ fn sweep_writes_figures_log_and_pictures() {
     }
 }
 
+/// Where each polyline of `stroke` (with more than two points: a data line, not a grid line or
+/// a legend sample) starts in `svg`.
+fn data_lines(svg: &str, stroke: &str) -> Vec<usize> {
+    svg.match_indices("<polyline ")
+        .map(|(at, _)| (at, &svg[at..at + svg[at..].find("/>").unwrap()]))
+        .filter(|(_, tag)| tag.contains(&format!("stroke=\"{stroke}\"")))
+        .filter(|(_, tag)| tag.matches(',').count() > 2)
+        .map(|(at, _)| at)
+        .collect()
+}
+
+#[test]
+fn time_figures_draw_the_set_point_over_the_current_and_stay_small() {
+    let dir = tempfile::tempdir().unwrap();
+    let plots = dir.path().join("plots");
+    for command in ["step", "track"] {
+        let out = host_sim(&[command, "--plots", plots.to_str().unwrap()]);
+        assert!(out.status.success(), "{command}");
+    }
+    let svg = std::fs::read_to_string(plots.join("step_time.svg")).unwrap();
+    // The current panel: from its y label (plotters draws the axes first) to the next panel's.
+    let start = svg.find("motor current, A").unwrap();
+    let end = start + svg[start..].find("voltage, V").unwrap();
+    let panel = &svg[start..end];
+    let measured = data_lines(panel, "#0072B2");
+    let setpoint = data_lines(panel, "#666666");
+    assert!(!measured.is_empty() && !setpoint.is_empty());
+    assert!(
+        measured.iter().max() < setpoint.iter().min(),
+        "set-point drawn under the measured current"
+    );
+    assert!(panel.contains("set-point") && panel.contains("measured"));
+
+    // 120 s logged at 1 kHz in four panels: decimated per pixel column, not 120 000 points a line.
+    let track = std::fs::read_to_string(plots.join("track_time.svg")).unwrap();
+    assert!(track.starts_with("<svg") && track.trim_end().ends_with("</svg>"));
+    assert!(track.len() < 250_000, "{} bytes", track.len());
+}
+
 #[test]
 fn track_reads_a_reference_csv() {
     let dir = tempfile::tempdir().unwrap();
