@@ -1,5 +1,6 @@
 //! The `steer-can` binary end to end: every command with `--iface sim` (the simulated ECU in
 //! virtual time), the candump fixtures, and the errors a team meets on the first day.
+#![cfg(feature = "sim")]
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
 use std::path::{Path, PathBuf};
@@ -303,7 +304,7 @@ fn campaign_with_a_fault_mid_run_aborts_and_still_writes_the_log() {
     assert!(out.contains("ABORTED: fault at"), "{out}");
     assert!(out.contains("column encoder"), "{out}");
     assert!(out.contains("ECU faulted"), "{out}");
-    let written = host_sim::logfmt::Log::load(&log).unwrap();
+    let written = host_io::logfmt::Log::load(&log).unwrap();
     assert!(
         written.len() > 100 && written.len() < 300,
         "{} rows",
@@ -362,7 +363,7 @@ fn record_on_sim_holds_the_vehicle_frames_and_converts_to_a_log() {
         log.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let written = host_sim::logfmt::Log::load(&log).unwrap();
+    let written = host_io::logfmt::Log::load(&log).unwrap();
     // The rows in AS Ready and Driving.
     assert_eq!(written.len(), 30 + 201, "{}", stdout(&o));
     let peak = written.sw_deg.iter().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -452,7 +453,7 @@ fn the_simulated_car_runs_either_controller() {
             log.to_str().unwrap(),
         ]);
         assert!(o.status.success(), "{controller}: {}", stderr(&o));
-        let log = host_sim::logfmt::Log::load(&log).unwrap();
+        let log = host_io::logfmt::Log::load(&log).unwrap();
         let (sum, n) = log
             .ref_sw_deg
             .iter()
