@@ -126,6 +126,20 @@ fn convert_reads_gzip_candump_and_names_the_file_in_errors() {
     assert_refused(&o, &["ecu_only.candump: no valid reference frame (0x100)"]);
 }
 
+/// An interface that is missing or down (the first thing the laptop on the car meets): refused
+/// with the command that brings it up, in either build.
+#[test]
+fn a_missing_interface_says_how_to_bring_it_up() {
+    let o = steer_can(&["--iface", "nocan7", "monitor", "--duration-s", "0.1"]);
+    assert_refused(
+        &o,
+        &[
+            "nocan7: no such interface",
+            "sudo ip link set nocan7 up type can bitrate 1000000",
+        ],
+    );
+}
+
 /// The laptop build has no simulated car: `--iface sim`, `--iface sim:PATH`, `rehearse` and
 /// `sim-car` each say so and how to get a build with one, before touching any bus or file.
 #[cfg(not(feature = "sim"))]

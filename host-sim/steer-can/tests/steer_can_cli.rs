@@ -412,18 +412,6 @@ fn malformed_candump_is_refused_with_the_line_number() {
     assert!(stderr(&o).contains("cannot open candump file no-such.candump"));
 }
 
-#[test]
-fn a_missing_interface_says_how_to_bring_it_up() {
-    let o = steer_can(&["--iface", "nocan7", "monitor", "--duration-s", "0.1"]);
-    assert!(!o.status.success());
-    let err = stderr(&o);
-    assert!(err.contains("nocan7: no such interface"), "{err}");
-    assert!(
-        err.contains("sudo ip link set nocan7 up type can bitrate 1000000"),
-        "{err}"
-    );
-}
-
 /// `--controller ecu` on the simulated car runs the ECU's own controller through the
 /// firmware's tasks: the same track campaign (a 2 Hz, 10 deg sine for 3 s) is followed more
 /// closely than in paper mode (RMS error of the logged column against the logged reference).
