@@ -19,7 +19,7 @@ use steering_ecu::gains::{EposGains, GainError};
 use steering_ecu::gearing::Gearing;
 use steering_ecu::paper_mode::{
     CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, Cascade, POSITION_LOOP_HZ,
-    POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ,
+    POSITION_TICKS_PER_REFERENCE,
 };
 use steering_ecu::reference::ReferenceError;
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
@@ -357,5 +357,5 @@ pub fn run_on<A: Actuator>(
     Ok(Run { log, summary })
 }
 
-/// Reference samples per second, for scenario builders.
-pub const REFERENCE_RATE_HZ: f64 = REFERENCE_HZ as f64;
+/// Reference samples per second, for scenario builders (defined beside them, in host-io).
+pub use crate::scenario::REFERENCE_RATE_HZ;

@@ -1,7 +1,7 @@
 //! The simulated car on the bus: the firmware's own tasks (`steering_ecu::tasks`: reference
 //! receiver, status sender, encoder reader and, in EPOS4 mode, the EPOS4 link) and its `Ecu`,
 //! the simulated EPOS4 at its node and the paper's plant, all on one in-memory CAN bus in
-//! virtual time. A host tool attaches as a further node through [`crate::bringup::Transport`],
+//! virtual time. A host tool attaches as a further node through [`canlink::Transport`],
 //! so every `steer-can` command runs against it exactly as against the car.
 //!
 //! Two builds of the car, as the firmware has two drive modes ([`SimDrive`]):
@@ -35,11 +35,11 @@
 //!                 encoder value; mock clock += 50 µs
 //! ```
 
-use crate::bringup::profile::ReferenceSender;
-use crate::bringup::{BringupError, Clock, Stamped, Transport};
-use crate::canbus::{CanBus, Port};
 use crate::epos4_sim::Epos4Sim;
 use crate::plant::{Actuator, LinearPlant, PlantParams};
+use canlink::canbus::{CanBus, Port};
+use canlink::reference::ReferenceSender;
+use canlink::{Clock, LinkError, Stamped, Transport};
 use embassy_time::{Duration, MockDriver};
 use std::cell::Cell;
 use std::collections::VecDeque;
@@ -571,12 +571,12 @@ impl Clock for SimEcu {
 }
 
 impl Transport for SimEcu {
-    fn send(&mut self, frame: &Frame) -> Result<(), BringupError> {
+    fn send(&mut self, frame: &Frame) -> Result<(), LinkError> {
         self.bus.send(self.host_port, *frame, self.now_us);
         Ok(())
     }
 
-    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, BringupError> {
+    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, LinkError> {
         loop {
             if let Some(rx) = self.inbox.pop_front() {
                 return Ok(Some(rx));

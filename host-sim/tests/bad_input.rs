@@ -1,50 +1,22 @@
 //! Issue 13's bad-input table, row by row, through the real binaries: every input has a defined
 //! outcome (handled with a warning, or refused with file, line and reason), never a panic and
-//! never a plausible-looking answer computed from garbage.
+//! never a plausible-looking answer computed from garbage. Row 4 (`steer-can convert`) is in
+//! steer-can's own `tests/bad_input.rs`.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
-use std::io::Write;
-use std::path::{Path, PathBuf};
+#[path = "support/refusal.rs"]
+mod refusal;
+
+use refusal::{assert_refused, gzip, s, stderr, stdout, write_lines};
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
-fn run(exe: &str, args: &[&str]) -> Output {
-    Command::new(exe)
+fn host_sim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
         .args(args)
         .stdin(Stdio::null())
         .output()
         .unwrap()
-}
-
-fn host_sim(args: &[&str]) -> Output {
-    run(env!("CARGO_BIN_EXE_host-sim"), args)
-}
-
-fn steer_can(args: &[&str]) -> Output {
-    run(env!("CARGO_BIN_EXE_steer-can"), args)
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Refused as the issue asks: a failure exit (not the 101 of a panic), no panic message, and
-/// every piece of `expected` in the error.
-fn assert_refused(o: &Output, expected: &[&str]) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "accepted: {}\n{err}", stdout(o));
-    assert_ne!(o.status.code(), Some(101), "panicked: {err}");
-    assert!(!err.contains("panicked"), "{err}");
-    for piece in expected {
-        assert!(err.contains(piece), "`{piece}` not in: {err}");
-    }
 }
 
 /// The lines of a log that host-sim itself wrote: a 1.5 s step at 1 kHz, header on line 1.
@@ -57,10 +29,6 @@ fn step_log(dir: &Path) -> Vec<String> {
         .lines()
         .map(str::to_string)
         .collect()
-}
-
-fn write_lines(path: &Path, lines: &[String]) {
-    std::fs::write(path, lines.join("\n") + "\n").unwrap();
 }
 
 /// Sets field `column` of file line `line` (1-based, as an editor shows it).
@@ -249,12 +217,6 @@ fn track_refuses_a_project_log_with_garbage_in_any_column() {
     assert_refused(&o, &["as_reference.csv", "line 10", "column `current_a`"]);
 }
 
-fn gzip(bytes: &[u8]) -> Vec<u8> {
-    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
-    gz.write_all(bytes).unwrap();
-    gz.finish().unwrap()
-}
-
 /// A 3 s track reference with enough samples that its gzip is several blocks long.
 fn track_text() -> String {
     let mut text = String::from("t,ref_sw_deg\n");
@@ -303,112 +265,6 @@ fn gap_names_a_truncated_gzip_log() {
     std::fs::write(&cut, &gz[..gz.len() / 2]).unwrap();
     let o = host_sim(&["gap", s(&cut), "--threads", "2"]);
     assert_refused(&o, &["cut.csv.gz", "truncated gzip"]);
-}
-
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name)
-}
-
-fn ramp_lines() -> Vec<String> {
-    std::fs::read_to_string(fixture("bringup_ramp.candump"))
-        .unwrap()
-        .lines()
-        .map(str::to_string)
-        .collect()
-}
-
-/// Replaces the time stamp of candump line `line` (1-based).
-fn set_stamp(lines: &mut [String], line: usize, stamp: &str) {
-    let rest = lines[line - 1].split_once(' ').unwrap().1.to_string();
-    lines[line - 1] = format!("({stamp}) {rest}");
-}
-
-fn stamp_of(lines: &[String], line: usize) -> f64 {
-    let l = &lines[line - 1];
-    l[1..l.find(')').unwrap()].parse().unwrap()
-}
-
-/// Row 4: `steer-can convert` with a time stamp of 1e300: refused with file and line.
-#[test]
-fn convert_refuses_an_absurd_time_stamp_with_file_and_line() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut lines = ramp_lines();
-    set_stamp(&mut lines, 20, "1e300");
-    let dump = dir.path().join("far.candump");
-    write_lines(&dump, &lines);
-    let out = dir.path().join("far.csv");
-    let o = steer_can(&["convert", s(&dump), "--out", s(&out)]);
-    assert_refused(&o, &["far.candump:20", "1e300", "Unix time"]);
-    assert!(!out.exists(), "no log from a refused file");
-}
-
-/// Row 4: a frame stamped 1 s back is dropped, counted and warned about; the rest converts as
-/// before, nothing moved in time.
-#[test]
-fn convert_drops_a_frame_a_second_back_with_count_and_warning() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut lines = ramp_lines();
-    let line = 25;
-    let back = stamp_of(&lines, line) - 1.0;
-    set_stamp(&mut lines, line, &format!("{back:.6}"));
-    let dump = dir.path().join("back.candump");
-    write_lines(&dump, &lines);
-    let out = dir.path().join("back.csv");
-    let o = steer_can(&["convert", s(&dump), "--out", s(&out)]);
-    let err = stderr(&o);
-    assert!(o.status.success(), "{err}");
-    assert!(
-        err.contains("warning: ") && err.contains("back.candump: 1 frames stamped"),
-        "{err}"
-    );
-    assert!(err.contains("dropped (the first at line 25)"), "{err}");
-    let said = stdout(&o);
-    let clean = steer_can(&[
-        "convert",
-        s(&fixture("bringup_ramp.candump")),
-        "--out",
-        s(&dir.path().join("clean.csv")),
-    ]);
-    let frames = |text: &str| -> usize {
-        let after = &text[text.find(": ").unwrap() + 2..];
-        after.split_whitespace().next().unwrap().parse().unwrap()
-    };
-    assert_eq!(frames(&said) + 1, frames(&stdout(&clean)), "{said}");
-}
-
-/// Section 4, and row 5 for candump: `convert` reads `.candump.gz`, and its errors name the
-/// file.
-#[test]
-fn convert_reads_gzip_candump_and_names_the_file_in_errors() {
-    let dir = tempfile::tempdir().unwrap();
-    let packed = dir.path().join("ramp.candump.gz");
-    let raw = std::fs::read(fixture("bringup_ramp.candump")).unwrap();
-    std::fs::write(&packed, gzip(&raw)).unwrap();
-    let out = dir.path().join("ramp.csv");
-    let o = steer_can(&["convert", s(&packed), "--out", s(&out)]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert_eq!(
-        std::fs::read_to_string(&out).unwrap(),
-        std::fs::read_to_string(fixture("bringup_ramp.csv")).unwrap()
-    );
-
-    let cut = dir.path().join("cut.candump.gz");
-    let gz = gzip(&raw);
-    std::fs::write(&cut, &gz[..gz.len() / 2]).unwrap();
-    let o = steer_can(&["convert", s(&cut), "--out", s(&out)]);
-    assert_refused(&o, &["cut.candump.gz", "truncated gzip"]);
-
-    // A recording without the vehicle's references: the error names the file it read.
-    let ecu_only: Vec<String> = ramp_lines()
-        .into_iter()
-        .filter(|l| !l.contains(" 100#"))
-        .collect();
-    let dump = dir.path().join("ecu_only.candump");
-    write_lines(&dump, &ecu_only);
-    let o = steer_can(&["convert", s(&dump), "--out", s(&out)]);
-    assert_refused(&o, &["ecu_only.candump: no valid reference frame (0x100)"]);
 }
 
 /// Row 1's last clause: a worker thread that fails fails the run. A record with a NaN in it

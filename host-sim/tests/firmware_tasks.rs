@@ -4,9 +4,9 @@
 //! steering rules, end to end. Own test binary: the mock clock and task pools are global.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
+use canlink::Stamped;
 use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
-use host_sim::bringup::Stamped;
 use host_sim::effect_plant::{EffectPlant, PlantEffects};
 use host_sim::plant::{Actuator, PlantParams};
 use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period_sensed};
@@ -567,8 +567,8 @@ fn bus_off_ends_reception_and_latches_the_fault_in() {
 /// status period, and `steer-can monitor`'s decoding shows them by name.
 #[test]
 fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() {
-    use host_sim::bringup::decode::Decoder;
-    use host_sim::bringup::monitor::Monitor;
+    use steer_can::decode::Decoder;
+    use steer_can::monitor::Monitor;
     use steering_ecu::canopen::NodeId;
     use steering_ecu::canopen::epos4::PositionScale;
 
@@ -619,7 +619,7 @@ fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() 
     assert_eq!(d.counter("bus-off events"), Some(0));
     // The silence and the corrupted run each held the position 30 ms after the last good frame.
     assert_eq!(d.counter("hold entries"), Some(2));
-    use host_sim::bringup::monitor::RecordPage;
+    use steer_can::monitor::RecordPage;
     let records = d.records();
     // The score that latched it.
     assert_eq!(records[0], RecordPage::Fault(Ok(Fault::InvalidFrames), 5));

@@ -10,8 +10,8 @@
 //! bus; the car stamps them with its own time and echoes them to the other clients.
 
 use super::candump::{format_line, parse_frame_line};
-use super::{BringupError, Clock, Stamped, Transport};
-use crate::sim_ecu::SimEcu;
+use super::{BringupError, Clock, LinkError, Stamped, Transport};
+use host_sim::sim_ecu::SimEcu;
 use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
@@ -27,8 +27,8 @@ const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
 /// A client hears from the car at least every millisecond; silence this long means it is gone.
 const READ_TIMEOUT: Duration = Duration::from_secs(2);
 
-fn io(context: String) -> impl FnOnce(std::io::Error) -> BringupError {
-    move |source| BringupError::Io { context, source }
+fn io(context: String) -> impl FnOnce(std::io::Error) -> LinkError {
+    move |source| LinkError::Io { context, source }
 }
 
 fn beacon(t_us: u64) -> String {
@@ -152,8 +152,8 @@ pub struct SimSocket {
 }
 
 impl SimSocket {
-    pub fn connect(socket: &Path) -> Result<SimSocket, BringupError> {
-        let no_car = |e: std::io::Error| BringupError::NoInterface {
+    pub fn connect(socket: &Path) -> Result<SimSocket, LinkError> {
+        let no_car = |e: std::io::Error| LinkError::NoInterface {
             iface: format!("sim:{}", socket.display()),
             detail: format!(
                 "{e}; start the car with `steer-can sim-car --socket {}`",
@@ -178,20 +178,20 @@ impl SimSocket {
     }
 
     /// One line from the car: a frame, or `None` for a time stamp.
-    fn read_one(&mut self) -> Result<Option<Stamped>, BringupError> {
+    fn read_one(&mut self) -> Result<Option<Stamped>, LinkError> {
         self.line.clear();
         let n = self
             .reader
             .read_line(&mut self.line)
             .map_err(io(format!("{}: the simulated car is silent", self.name)))?;
         if n == 0 {
-            return Err(BringupError::NoInterface {
+            return Err(LinkError::NoInterface {
                 iface: self.name.clone(),
                 detail: "the simulated car stopped".into(),
             });
         }
         let line = self.line.trim();
-        let bad = |m: String| BringupError::Io {
+        let bad = |m: String| LinkError::Io {
             context: format!("{}: `{line}`", self.name),
             source: std::io::Error::new(std::io::ErrorKind::InvalidData, m),
         };
@@ -222,7 +222,7 @@ impl Clock for SimSocket {
 }
 
 impl Transport for SimSocket {
-    fn send(&mut self, frame: &Frame) -> Result<(), BringupError> {
+    fn send(&mut self, frame: &Frame) -> Result<(), LinkError> {
         let line = frame_line(&Stamped {
             t_us: self.now_us,
             frame: *frame,
@@ -232,7 +232,7 @@ impl Transport for SimSocket {
             .map_err(io(format!("{}: cannot send", self.name)))
     }
 
-    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, BringupError> {
+    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, LinkError> {
         // Lines already read come first, even past the deadline.
         while self.now_us < deadline_us || !self.reader.buffer().is_empty() {
             if let Some(rx) = self.read_one()? {
@@ -247,6 +247,6 @@ impl Transport for SimSocket {
     }
 
     fn epoch_s(&self) -> f64 {
-        crate::sim_ecu::EPOCH_S
+        host_sim::sim_ecu::EPOCH_S
     }
 }

@@ -1,6 +1,6 @@
 //! The `steer-can` command line: argument parsing, the confirmation prompt, Ctrl-C, progress
 //! on stderr, results on stdout. `--iface sim` runs every command against the simulated car
-//! (`crate::sim_ecu`, the default firmware unless `--drive direct`), held to the wall clock
+//! (`host_sim::sim_ecu` through `simcar`, the default firmware unless `--drive direct`), held to the wall clock
 //! unless `--fast`: the tests use it, and a team can rehearse the bring-up on a laptop before
 //! the car is there (`rehearse`, `sim-car`). Each command returns what it found
 //! ([`Outcome`]) besides printing it, so `rehearse` judges values, not text.
@@ -9,12 +9,12 @@ use super::campaign::{self, Campaign, Live};
 use super::decode::{Decoder, faults_in_words};
 use super::logbuild::{self, Rows};
 use super::monitor::Monitor;
-use super::profile::{self, Profile, ReferenceSender, parse_as_state};
+use super::profile::{self, Profile, parse_as_state};
+use super::simcar;
 use super::{BringupError, Transport, candump, epos, pump};
-use crate::scenario::Sweep;
-use crate::sim::Controller;
-use crate::sim_ecu::{Injection, SimCar, SimDrive, SimEcu};
+use canlink::reference::ReferenceSender;
 use clap::{Args, Parser, Subcommand};
+use host_io::scenario::Sweep;
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -60,8 +60,8 @@ pub struct Cli {
     pub sim_column_deg: f64,
     /// With `--iface sim`: the simulated ECU's steering controller, `paper` (the paper's
     /// cascade) or `ecu` (the ECU's own, README "ECU mode").
-    #[arg(long, global = true, value_enum, default_value_t = Controller::Paper)]
-    pub controller: Controller,
+    #[arg(long, global = true, value_enum, default_value_t = ControllerArg::Paper)]
+    pub controller: ControllerArg,
     /// With `--iface sim`: the firmware build the simulated car runs, `epos4` (the default
     /// build: the ECU's EPOS4 link, CSP, SYNC, heartbeats, PDOs) or `direct` (the ECU's own
     /// bridge, `--features drive-direct`).
@@ -69,6 +69,25 @@ pub struct Cli {
     pub drive: DriveArg,
     #[command(subcommand)]
     pub command: Command,
+}
+
+/// `--controller`: which steering controller the simulated ECU runs.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ControllerArg {
+    /// The paper's EPOS4 cascade on the motor angle (Table 3), bit-exact with the firmware.
+    Paper,
+    /// The ECU's own controller (`steering_ecu::ecu_mode`).
+    Ecu,
+}
+
+impl ControllerArg {
+    /// The firmware's name for it.
+    pub fn kind(self) -> ControllerKind {
+        match self {
+            ControllerArg::Paper => ControllerKind::Paper,
+            ControllerArg::Ecu => ControllerKind::Ecu,
+        }
+    }
 }
 
 /// `--drive`: which firmware build the simulated car runs.
@@ -256,9 +275,11 @@ pub struct CampaignArgs {
 /// `println!` that ends the program quietly when stdout is closed (`steer-can ... | head`).
 macro_rules! say {
     ($($arg:tt)*) => {
-        crate::out::stdout_line("steer-can", format_args!($($arg)*))
+        host_io::out::stdout_line("steer-can", format_args!($($arg)*))
     };
 }
+// `rehearse` prints its steps with it too (it exists with the simulated car only).
+#[cfg(feature = "sim")]
 pub(crate) use say;
 
 /// Exit code of a campaign that stopped on a fault or Ctrl-C (the log is still written).
@@ -276,83 +297,11 @@ pub fn main() -> ExitCode {
     }
 }
 
-/// The vehicle computer of the simulated car while `record` listens: 0.3 s in AS Ready, a
-/// 5 deg, 1 Hz sine for 2 s in AS Driving, 0.2 s of AS Finished and 0.2 s of AS Off, then
-/// silence. On the car someone else steers while `record` listens; without this the recording
-/// would hold no reference frame and `convert` would have no log to build.
-fn record_vehicle_script() -> Result<Vec<(AsState, f64)>, BringupError> {
-    let sine = profile::sine(5.0, 1.0, 2.0)?;
-    let mut script = vec![(AsState::Ready, 0.0); 30];
-    script.extend(sine.samples.iter().map(|&deg| (AsState::Driving, deg)));
-    let last = sine.samples.last().copied().unwrap_or(0.0);
-    script.extend([(AsState::Finished, last); 20]);
-    script.extend([(AsState::Off, last); 20]);
-    Ok(script)
-}
-
-/// The simulated car the global options describe (`--drive`, `--controller`,
-/// `--sim-column-deg`, `--sim-inject`), at t = 0.
-pub(crate) fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
-    let kind = match cli.controller {
-        Controller::Paper => ControllerKind::Paper,
-        Controller::Ecu => ControllerKind::Ecu,
-    };
-    let mut sim = SimEcu::new(SimCar {
-        column_deg: cli.sim_column_deg,
-        controller: kind,
-        drive: match cli.drive {
-            DriveArg::Epos4 => SimDrive::Epos4,
-            DriveArg::Direct => SimDrive::Direct,
-        },
-    });
-    if let Some(spec) = &cli.sim_inject {
-        let bad = || BringupError::Usage {
-            reason: format!(
-                "--sim-inject `{spec}`: expected KIND@SECONDS, KIND one of encoder, overcurrent, epos"
-            ),
-        };
-        let (kind, at) = spec.split_once('@').ok_or_else(bad)?;
-        let injection = Injection::parse(kind).ok_or_else(bad)?;
-        if !sim.can_inject(injection) {
-            return Err(BringupError::Usage {
-                reason: format!(
-                    "--sim-inject `{spec}`: the EPOS4 senses its own current; a current-sense \
-                     fault exists in direct drive only (--drive direct)"
-                ),
-            });
-        }
-        let at_s: f64 = at.parse().map_err(|_| bad())?;
-        sim.inject_at((at_s * 1e6) as u64, injection);
-    }
-    Ok(sim)
-}
-
-/// Let the simulated vehicle computer steer while `record` listens ([`record_vehicle_script`]).
-pub(crate) fn vehicle_for_record(sim: &mut SimEcu) -> Result<(), BringupError> {
-    eprintln!(
-        "sim: a simulated vehicle computer steers while this records (0.3 s AS Ready, a 5 deg \
-         1 Hz sine for 2 s in AS Driving, AS Finished, AS Off)"
-    );
-    sim.script_vehicle(record_vehicle_script()?);
-    Ok(())
-}
-
+/// The bus the command runs on: the car's SocketCAN interface, or the simulated car
+/// (`sim`, `sim:PATH`), which only a build with the `sim` feature has.
 fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
-    if cli.iface == "sim" {
-        let mut sim = sim_car(cli)?;
-        if matches!(cli.command, Command::Record { .. }) {
-            vehicle_for_record(&mut sim)?;
-        }
-        if cli.fast {
-            return Ok(Box::new(sim));
-        }
-        return Ok(Box::new(super::WallPaced::new(sim)));
-    }
-    #[cfg(unix)]
-    if let Some(path) = cli.iface.strip_prefix("sim:") {
-        return Ok(Box::new(super::simsock::SimSocket::connect(Path::new(
-            path,
-        ))?));
+    if cli.iface == "sim" || cli.iface.starts_with("sim:") {
+        return simcar::open(cli);
     }
     #[cfg(target_os = "linux")]
     {
@@ -360,10 +309,10 @@ fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     }
     #[cfg(not(target_os = "linux"))]
     {
-        Err(BringupError::NoInterface {
+        Err(BringupError::Link(canlink::LinkError::NoInterface {
             iface: cli.iface.clone(),
             detail: "SocketCAN exists on Linux only".into(),
-        })
+        }))
     }
 }
 
@@ -452,13 +401,9 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
                     ),
                 });
             }
-            super::rehearse::rehearse(&cli, dir)?
+            simcar::rehearse(&cli, dir)?
         }
-        #[cfg(unix)]
-        Command::SimCar { socket } => {
-            super::simsock::serve(sim_car(&cli)?, socket, &stop_flag())?;
-            Outcome::Served
-        }
+        Command::SimCar { socket } => simcar::serve(&cli, socket)?,
         command => {
             let mut t = open(&cli)?;
             execute(command, node, &dec, t.as_mut())?
@@ -666,7 +611,7 @@ fn record(
         if let Some(e) = err {
             return Err(io(e));
         }
-        crate::out::progress_line(format_args!(
+        host_io::out::progress_line(format_args!(
             "recording {}: {n} frames, {:.1} s",
             out.display(),
             (t.now_us() - start) as f64 * 1e-6
@@ -676,7 +621,7 @@ fn record(
         }
     }
     w.flush().map_err(io)?;
-    crate::out::progress_end();
+    host_io::out::progress_end();
     say!("{n} frames written to {}", out.display());
     say!("{}", m.summary().trim_end());
     Ok((n, m))
@@ -691,7 +636,7 @@ fn progress(l: &Live, profile_s: f64) {
     let width = 24;
     let filled = (share * width as f64).round() as usize;
     let err = l.ref_deg - l.column_deg;
-    crate::out::progress_line(format_args!(
+    host_io::out::progress_line(format_args!(
         "[{}{}] {:3.0} % {:>7}  t {:6.2} s / {:.1} s  ref {:+7.2} deg  column {:+7.2} deg  \
          error {:+6.2} deg  current {:+6.2} A ",
         "#".repeat(filled),
@@ -766,7 +711,7 @@ fn campaign_cmd(
     };
     let profile_s = c.profile.duration_s();
     let run = c.run(t, dec, &ready, |l| progress(l, profile_s))?;
-    crate::out::progress_end();
+    host_io::out::progress_end();
     let record_path = args.record.clone().unwrap_or_else(|| {
         let mut p = args.out.clone().into_os_string();
         p.push(".candump");
@@ -892,7 +837,7 @@ fn send(
             .map(|(_, s)| (f64::from(s.angle.0), f64::from(s.current.0), s.faults))
             .unwrap_or((f64::NAN, f64::NAN, 0));
         if i % 10 == 9 || i + 1 == n {
-            crate::out::progress_line(format_args!(
+            host_io::out::progress_line(format_args!(
                 "{:5.2} s  ref {angle:+7.2} deg  column {column:+7.2} deg  current {current:+6.2} A  faults: {} ",
                 (i + 1) as f64 / profile::RATE_HZ,
                 faults_in_words(faults)
@@ -900,7 +845,7 @@ fn send(
         }
         next = next.max(t.now_us()) + PERIOD_US as u64;
     }
-    crate::out::progress_end();
+    host_io::out::progress_end();
     if finish && as_state.actuator_may_be_powered() {
         // Leave the drive disabled rather than timing out: 0.2 s of AS Finished.
         for _ in 0..20 {

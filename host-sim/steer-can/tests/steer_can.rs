@@ -1,20 +1,21 @@
 //! steer-can against the simulated ECU (the firmware's tasks, the paper plant and the simulated
 //! EPOS4 on an in-memory bus, virtual time): the campaign, its abort paths, the EPOS4 check and
 //! the monitor's counters. The simulated ECU serialises itself (one per process at a time).
+#![cfg(feature = "sim")]
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
-use host_sim::bringup::campaign::{self, AbortReason, Campaign};
-use host_sim::bringup::decode::{Decoded, Decoder};
-use host_sim::bringup::monitor::Monitor;
-use host_sim::bringup::profile::{self, Profile};
-use host_sim::bringup::{BringupError, Clock, Stamped, Transport, epos, pump};
-use host_sim::canbus::Fault as BusFault;
+use canlink::canbus::Fault as BusFault;
+use host_io::scenario::Sweep;
 use host_sim::gap::rig::Rig;
 use host_sim::gap::{Options, diagnose};
-use host_sim::scenario::Sweep;
 use host_sim::sim_ecu::{Injection, SimEcu};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use steer_can::campaign::{self, AbortReason, Campaign};
+use steer_can::decode::{Decoded, Decoder};
+use steer_can::monitor::Monitor;
+use steer_can::profile::{self, Profile};
+use steer_can::{BringupError, Clock, LinkError, Stamped, Transport, epos, pump};
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
 use steering_ecu::canopen::epos4::{PositionScale, gain_words};
@@ -115,7 +116,7 @@ fn encoder_fault_mid_campaign_aborts_disables_the_drive_and_keeps_the_log() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("aborted.csv");
     campaign::save_log(&built.log, &path).unwrap();
-    let log = host_sim::logfmt::Log::load(&path).unwrap();
+    let log = host_io::logfmt::Log::load(&path).unwrap();
     let end = log.t.last().copied().unwrap();
     assert!((2.5..3.2).contains(&end), "log ends at {end} s");
     // The rows stop with the last reference in AS Driving, before the fault; the recording
@@ -169,10 +170,10 @@ impl Clock for SilentBus {
 }
 
 impl Transport for SilentBus {
-    fn send(&mut self, _: &Frame) -> Result<(), BringupError> {
+    fn send(&mut self, _: &Frame) -> Result<(), LinkError> {
         Ok(())
     }
-    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, BringupError> {
+    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, LinkError> {
         self.0 = self.0.max(deadline_us);
         Ok(None)
     }

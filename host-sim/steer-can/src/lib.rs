@@ -9,9 +9,9 @@
 //!   steer-can <command> --iface can0|sim|sim:PATH
 //!        |
 //!        v
-//!   Transport (send a frame, receive until a deadline, now_us)   <- the only I/O
+//!   Transport (send a frame, receive until a deadline, now_us)   <- the only I/O, `canlink`
 //!        |-- SocketCan (Linux, wall clock; thin)                  `socketcan.rs`
-//!        |-- SimEcu (the firmware's tasks + plant + EPOS4 sim,     `crate::sim_ecu`
+//!        |-- SimEcu (the firmware's tasks + plant + EPOS4 sim,     `host_sim::sim_ecu`
 //!        |           in-memory bus, virtual time; WallPaced holds it to the wall clock)
 //!        '-- SimSocket (a SimEcu that `sim-car` serves to many calls) `simsock.rs`
 //!   decode   frame -> Decoded (reference, status, motor, EPOS4 PDO/SDO/EMCY/heartbeat, NMT)
@@ -27,6 +27,10 @@
 //! Every command takes its time from the transport, so a campaign against the simulated ECU
 //! runs in virtual time (held to the wall clock unless `--fast`), and one on the car in
 //! wall-clock time.
+//!
+//! The simulated car (`--iface sim`, `sim-car`, `rehearse`) is host-sim's, behind the default
+//! feature `sim`; without it (`--no-default-features`, the laptop on the car) the tool builds
+//! without the simulator's numerics and says so when asked for the simulated car.
 
 pub mod campaign;
 pub mod candump;
@@ -36,49 +40,25 @@ pub mod epos;
 pub mod logbuild;
 pub mod monitor;
 pub mod profile;
+#[cfg(feature = "sim")]
 pub mod rehearse;
-#[cfg(unix)]
+pub mod simcar;
+#[cfg(all(unix, feature = "sim"))]
 pub mod simsock;
 #[cfg(target_os = "linux")]
 pub mod socketcan;
 
+pub use canlink::{Clock, LinkError, Stamped, Transport};
 use std::fmt;
 use std::path::PathBuf;
 use steering_ecu::can::Frame;
 
-/// A frame with the time it was seen (received, or sent by this tool), µs on the transport's
-/// clock.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Stamped {
-    pub t_us: u64,
-    pub frame: Frame,
-}
-
-/// Where time comes from: wall clock on the car, virtual time in the simulation.
-pub trait Clock {
-    /// Monotonic time, µs, from an arbitrary origin.
-    fn now_us(&self) -> u64;
-}
-
-/// One CAN interface, blocking: the commands are written against this alone.
-pub trait Transport: Clock {
-    /// Put one frame on the bus.
-    fn send(&mut self, frame: &Frame) -> Result<(), BringupError>;
-    /// The next received frame, or `None` once `deadline_us` has passed without one. A
-    /// deadline in the past still returns frames already waiting.
-    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, BringupError>;
-    /// Interface name for messages ("can0", "sim").
-    fn name(&self) -> &str;
-    /// Wall-clock time of `now_us() == 0`, s since the Unix epoch, for candump timestamps.
-    fn epoch_s(&self) -> f64;
-}
-
 /// Everything the tool reports as an error; each names what to check.
 #[derive(Debug)]
 pub enum BringupError {
-    /// The CAN interface does not exist or is down.
-    NoInterface { iface: String, detail: String },
-    /// A read or write on the interface or a file failed.
+    /// The CAN interface is missing or down, or a send or receive on it failed.
+    Link(LinkError),
+    /// A read or write on a file failed.
     Io {
         context: String,
         source: std::io::Error,
@@ -103,16 +83,15 @@ pub enum BringupError {
     NotConfirmed,
     /// A command line the tool cannot act on (an option that does not fit, a bad value).
     Usage { reason: String },
+    /// The simulated car was asked for (`asked`: `--iface sim`, `rehearse`, `sim-car`) in a
+    /// build without it (`--no-default-features`).
+    NoSimCar { asked: String },
 }
 
 impl fmt::Display for BringupError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            BringupError::NoInterface { iface, detail } => write!(
-                f,
-                "{iface}: no such interface, or it is down ({detail}) — bring it up with \
-                 `sudo ip link set {iface} up type can bitrate 1000000`"
-            ),
+            BringupError::Link(e) => write!(f, "{e}"),
             BringupError::Io { context, source } => write!(f, "{context}: {source}"),
             BringupError::EcuSilent { waited_ms } => write!(
                 f,
@@ -130,6 +109,12 @@ impl fmt::Display for BringupError {
             BringupError::Epos { reason } => write!(f, "EPOS4: {reason}"),
             BringupError::Log { reason } => write!(f, "log: {reason}"),
             BringupError::Usage { reason } => write!(f, "{reason}"),
+            BringupError::NoSimCar { asked } => write!(
+                f,
+                "{asked}: this steer-can was built without the simulated car (no `sim` \
+                 feature); a build with it: `cargo install --path host-sim/steer-can` or \
+                 `cargo run -p steer-can -- ...` (the default features)"
+            ),
             BringupError::NotConfirmed => write!(
                 f,
                 "not confirmed; nothing was sent (answer `yes`, or pass --yes in a script)"
@@ -142,8 +127,15 @@ impl std::error::Error for BringupError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
             BringupError::Io { source, .. } => Some(source),
+            BringupError::Link(e) => e.source(),
             _ => None,
         }
+    }
+}
+
+impl From<LinkError> for BringupError {
+    fn from(e: LinkError) -> Self {
+        BringupError::Link(e)
     }
 }
 
@@ -201,11 +193,11 @@ impl<T: Transport> Clock for WallPaced<T> {
 }
 
 impl<T: Transport> Transport for WallPaced<T> {
-    fn send(&mut self, frame: &Frame) -> Result<(), BringupError> {
+    fn send(&mut self, frame: &Frame) -> Result<(), LinkError> {
         self.inner.send(frame)
     }
 
-    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, BringupError> {
+    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, LinkError> {
         loop {
             let horizon = self.wall_us().saturating_add(Self::LEAD_US);
             if let Some(rx) = self.inner.recv_until(deadline_us.min(horizon))? {

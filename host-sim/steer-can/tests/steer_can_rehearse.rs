@@ -2,6 +2,7 @@
 //! simulated car in one session, every step matching what the README says to expect. The
 //! number of steps is counted here from the README independently of the tool, so a rehearsal
 //! that silently ran fewer steps than the README names fails.
+#![cfg(feature = "sim")]
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
 use std::process::{Command, Stdio};
@@ -10,7 +11,7 @@ use std::process::{Command, Stdio};
 /// list on (outside fenced blocks), mentions of `rehearse` itself left out.
 fn readme_steer_can_commands() -> usize {
     let readme =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../README.md")).unwrap();
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../README.md")).unwrap();
     let start = readme
         .find("### Bring-up on the car with `steer-can`")
         .unwrap();
@@ -81,7 +82,7 @@ fn rehearse_runs_the_readme_first_day_and_every_step_passes() {
     ] {
         assert!(dir.path().join(f).exists(), "{f} missing");
     }
-    let log = host_sim::logfmt::Log::load(&dir.path().join("log.csv")).unwrap();
+    let log = host_io::logfmt::Log::load(&dir.path().join("log.csv")).unwrap();
     assert!(!log.is_empty());
 }
 

@@ -29,9 +29,10 @@
 use super::decode::{Decoded, Decoder, faults_in_words};
 use super::logbuild::{self, Rows};
 use super::monitor::Monitor;
-use super::profile::{Profile, ReferenceSender};
+use super::profile::Profile;
 use super::{BringupError, Stamped, Transport, pump};
-use crate::logfmt::Log;
+use canlink::reference::ReferenceSender;
+use host_io::logfmt::Log;
 use std::fmt;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

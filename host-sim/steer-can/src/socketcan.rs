@@ -2,7 +2,7 @@
 //! tool. Wall-clock time since the socket was opened; classic 11-bit data frames only (others
 //! are not this bus's protocol and are skipped).
 
-use super::{BringupError, Clock, Stamped, Transport};
+use super::{Clock, LinkError, Stamped, Transport};
 use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Id, Socket, StandardId as ScStandardId};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use steering_ecu::can::{Frame, StandardId};
@@ -18,8 +18,8 @@ pub struct SocketCan {
 
 impl SocketCan {
     /// Opens `iface`; a missing or down interface names the command that brings it up.
-    pub fn open(iface: &str) -> Result<SocketCan, BringupError> {
-        let socket = CanSocket::open(iface).map_err(|e| BringupError::NoInterface {
+    pub fn open(iface: &str) -> Result<SocketCan, LinkError> {
+        let socket = CanSocket::open(iface).map_err(|e| LinkError::NoInterface {
             iface: iface.to_string(),
             detail: e.to_string(),
         })?;
@@ -35,14 +35,14 @@ impl SocketCan {
         })
     }
 
-    fn io(&self, what: &str, source: std::io::Error) -> BringupError {
+    fn io(&self, what: &str, source: std::io::Error) -> LinkError {
         if source.kind() == std::io::ErrorKind::NetworkDown {
-            return BringupError::NoInterface {
+            return LinkError::NoInterface {
                 iface: self.iface.clone(),
                 detail: source.to_string(),
             };
         }
-        BringupError::Io {
+        LinkError::Io {
             context: format!("{}: {what}", self.iface),
             source,
         }
@@ -56,12 +56,12 @@ impl Clock for SocketCan {
 }
 
 impl Transport for SocketCan {
-    fn send(&mut self, frame: &Frame) -> Result<(), BringupError> {
-        let id = ScStandardId::new(frame.id().raw()).ok_or_else(|| BringupError::Io {
+    fn send(&mut self, frame: &Frame) -> Result<(), LinkError> {
+        let id = ScStandardId::new(frame.id().raw()).ok_or_else(|| LinkError::Io {
             context: format!("{}: send", self.iface),
             source: std::io::Error::other("identifier above 0x7FF"),
         })?;
-        let out = CanFrame::new(id, frame.data()).ok_or_else(|| BringupError::Io {
+        let out = CanFrame::new(id, frame.data()).ok_or_else(|| LinkError::Io {
             context: format!("{}: send", self.iface),
             source: std::io::Error::other("more than 8 data bytes"),
         })?;
@@ -73,7 +73,7 @@ impl Transport for SocketCan {
         })
     }
 
-    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, BringupError> {
+    fn recv_until(&mut self, deadline_us: u64) -> Result<Option<Stamped>, LinkError> {
         loop {
             let now = self.now_us();
             // Frames already waiting are taken even past the deadline.

@@ -2,7 +2,7 @@
 //! `--iface sim:PATH`), as processes: a fault one call leaves is seen and cleared by the next,
 //! and a `record` running beside a `send` records the reference frames the send puts on the
 //! bus. The car keeps to the wall clock, so this test takes a few seconds.
-#![cfg(unix)]
+#![cfg(all(unix, feature = "sim"))]
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
 use std::path::Path;
@@ -106,7 +106,7 @@ fn calls_share_one_car_and_a_record_sees_another_calls_frames() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // The log's rows are the send's AS Driving periods: they end with the wheel on the step.
-    let rows = host_sim::logfmt::Log::load(&log).unwrap();
+    let rows = host_io::logfmt::Log::load(&log).unwrap();
     assert!((95..=101).contains(&rows.len()), "{} rows", rows.len());
     let end = rows.sw_deg.last().copied().unwrap();
     assert!((end - 3.0).abs() < 0.5, "the wheel at the end: {end} deg");

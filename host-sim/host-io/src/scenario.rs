@@ -2,9 +2,12 @@
 //! the paper's sine sweep (section 4.2), a driverless track run (section 4.4) and a step.
 
 use crate::logfmt::{LogError, Table};
-use crate::sim::REFERENCE_RATE_HZ;
 use std::f64::consts::PI;
 use std::path::Path;
+use steering_ecu::paper_mode::REFERENCE_HZ;
+
+/// Reference samples per second: the vehicle computer's rate, one sample per frame.
+pub const REFERENCE_RATE_HZ: f64 = REFERENCE_HZ as f64;
 
 /// Linear chirp `A sin(2 pi (f0 t + (f1 - f0) t^2 / (2 T)))`, sampled at 100 Hz over `[0, T]`.
 /// The paper's sweep is 0 -> 10 Hz in 10 s at 10 deg (section 4.2).

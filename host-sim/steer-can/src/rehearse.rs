@@ -14,10 +14,10 @@
 use super::cli::{self, Cli, Command, Outcome, SendProfile, say};
 use super::decode::{Decoder, ecu_state_words, faults_in_words, nmt_words};
 use super::monitor::Monitor;
-use super::{BringupError, Transport, WallPaced};
-use crate::scenario;
-use crate::sim_ecu::SimEcu;
+use super::{BringupError, Transport, WallPaced, simcar};
 use clap::Parser;
+use host_io::scenario;
+use host_sim::sim_ecu::SimEcu;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use steering_ecu::as_state::AsState;
@@ -215,7 +215,7 @@ pub fn rehearse(outer: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
         reason: format!("--node {}: a CANopen node ID is 1 to 127", outer.node),
     })?;
     let dec = cli::decoder(node)?;
-    let sim = cli::sim_car(outer)?;
+    let sim = simcar::sim_car(outer)?;
     let mut car = if outer.fast {
         Car::Fast(sim)
     } else {
@@ -345,7 +345,7 @@ fn run_step(
         _ => {}
     }
     if matches!(command, Command::Record { .. })
-        && let Err(e) = cli::vehicle_for_record(car.sim())
+        && let Err(e) = simcar::vehicle_for_record(car.sim())
     {
         return fail("a vehicle computer steering", e.to_string());
     }

@@ -1,5 +1,6 @@
-//! Reference profiles at 100 Hz (deg at the wheel) and the frames that carry them: alive
-//! counter, CRC, and the AS state the tool claims, stated by the caller every time.
+//! Reference profiles at 100 Hz (deg at the wheel), ready for the frames that carry them
+//! (`canlink::reference::ReferenceSender`: alive counter, CRC, and the AS state the tool
+//! claims, stated by the caller every time).
 //!
 //! Every profile goes through the ECU's own limits before it is sent: |angle| <= 90 deg and at
 //! most 400 deg/s between samples (`ProtocolConfig::DEFAULT`). A sample beyond the rate would
@@ -8,13 +9,11 @@
 //! how many samples it changed. The paper's 10 deg sweep needs this above about 6.4 Hz:
 //! 2 pi f A = 400 deg/s there.
 
-use super::BringupError;
-use crate::scenario::{self, Sweep};
+use crate::BringupError;
+use host_io::scenario::{self, Sweep};
 use std::path::Path;
 use steering_ecu::as_state::AsState;
-use steering_ecu::can::Frame;
-use steering_ecu::protocol::{AliveCounter, PERIOD_US, ProtocolConfig, Reference};
-use steering_ecu::units::SteeringDeg;
+use steering_ecu::protocol::{PERIOD_US, ProtocolConfig};
 
 /// Samples per second of every profile (the protocol's period).
 pub const RATE_HZ: f64 = 1e6 / PERIOD_US as f64;
@@ -142,36 +141,6 @@ pub fn track(csv: Option<&Path>) -> Result<Profile, BringupError> {
             scenario::builtin_track(),
             0.0,
         ),
-    }
-}
-
-/// Builds reference frames: one counter for the whole session, so the ECU's E2E check sees
-/// +1 per frame whatever the caller sends.
-#[derive(Debug, Clone)]
-pub struct ReferenceSender {
-    protocol: ProtocolConfig,
-    counter: AliveCounter,
-}
-
-impl Default for ReferenceSender {
-    fn default() -> Self {
-        ReferenceSender {
-            protocol: ProtocolConfig::DEFAULT,
-            counter: AliveCounter::wrapping(0),
-        }
-    }
-}
-
-impl ReferenceSender {
-    /// The next frame: `angle_deg` at the wheel, in AS state `as_state`.
-    pub fn frame(&mut self, angle_deg: f64, as_state: AsState, clear_faults: bool) -> Frame {
-        self.counter = self.counter.next();
-        self.protocol.encode_reference(&Reference {
-            angle: SteeringDeg(angle_deg as f32),
-            as_state,
-            counter: self.counter,
-            clear_faults,
-        })
     }
 }
 

@@ -31,7 +31,7 @@
 
 use super::decode::{Decoded, Decoder};
 use super::{BringupError, Stamped};
-use crate::logfmt::{Log, Row};
+use host_io::logfmt::{Log, Row};
 use steering_ecu::as_state::AsState;
 use steering_ecu::protocol::PERIOD_US;
 
