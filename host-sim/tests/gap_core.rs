@@ -180,3 +180,89 @@ fn the_segment_replay_puts_a_delay_before_the_motor_and_backlash_after_it() {
         assert_eq!(json["where"]["segment"], segment, "{name}");
     }
 }
+
+/// The log at `path` again, with its current column `rows` rows late (each row takes the
+/// current of the row `rows` before it; the first rows repeat the first current): a current
+/// that reaches the logger later than the angles, made here on the file, not by the model.
+fn current_late_by_rows(path: &std::path::Path, rows: usize) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(path).expect("read log");
+    let mut lines = text.lines();
+    let header = lines.next().expect("header");
+    let rows_in: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    let out = path.with_extension("late.csv");
+    let mut f = std::fs::File::create(&out).expect("create log");
+    writeln!(f, "{header}").expect("write");
+    for (k, row) in rows_in.iter().enumerate() {
+        let late = &rows_in[k.saturating_sub(rows)][4];
+        writeln!(f, "{},{},{},{},{}", row[0], row[1], row[2], row[3], late).expect("write");
+    }
+    out
+}
+
+#[test]
+fn a_current_two_periods_late_against_the_angles_is_named_a_delay_of_the_current() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let rig = Rig::paper();
+    let nominal = write_log(dir.path(), "nominal.csv", Effects::nominal());
+    let late = current_late_by_rows(&nominal, 2);
+    let rec = rig.load_record(&late).expect("load");
+    let opts = Options {
+        effects: host_sim::gap::EffectKind::for_rig(&rig),
+        ..opts()
+    };
+    let d = diagnose(&rig, &rec, None, &opts);
+    println!("{}", d.summary());
+    assert_eq!(
+        d.verdict.effects,
+        vec!["delay".to_string()],
+        "{}",
+        d.verdict.reason
+    );
+    assert_eq!(d.ranking[0].effect, "delay_current", "{}", d.verdict.reason);
+    let ms = d.ranking[0].params["delay_ms"];
+    assert!(
+        (15.0..25.0).contains(&ms),
+        "fitted {ms} ms, the file's current is 20 ms late"
+    );
+}
+
+#[test]
+fn a_late_reference_and_every_measurement_late_are_one_delay_to_a_log() {
+    // Why the diagnosis has one `delay` for the reference and for all measurements alike: the
+    // loop is time-invariant, so the log of a reference 30 ms late is the log of the prompt
+    // reference with every signal 30 ms late (3 rows), to well within the sensors' noise
+    // (0.02 deg on the angle, 0.1 A on the current), while the delay itself moves the
+    // signals far more.
+    let rig = Rig::paper();
+    let rec = host_sim::gap::Record {
+        dt: 0.01,
+        reference: chirp(6.0, 4.0, 10.0),
+        ..host_sim::gap::Record::default()
+    };
+    let prompt = host_sim::gap::simulate(&rig, &rec, &Effects::nominal());
+    let mut fx = Effects::nominal();
+    fx.delay_s = 0.03;
+    let late_reference = host_sim::gap::simulate(&rig, &rec, &fx);
+    let rms = |a: &[f64], b: &[f64], shift: usize| -> f64 {
+        let n = a.len() - shift;
+        (a[shift..]
+            .iter()
+            .zip(&b[..n])
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f64>()
+            / n as f64)
+            .sqrt()
+    };
+    let angle_shifted = rms(&late_reference.output, &prompt.output, 3);
+    let angle_moved = rms(&late_reference.output, &prompt.output, 0);
+    let current_shifted = rms(&late_reference.effort, &prompt.effort, 3);
+    let current_moved = rms(&late_reference.effort, &prompt.effort, 0);
+    println!(
+        "angle: {angle_shifted:.4} deg against the shifted log, {angle_moved:.3} deg unshifted; \
+         current: {current_shifted:.4} A, {current_moved:.3} A"
+    );
+    assert!(angle_shifted < 0.02 && angle_moved > 10.0 * angle_shifted);
+    assert!(current_shifted < 0.1 && current_moved > 5.0 * current_shifted);
+}

@@ -9,7 +9,14 @@ use host_sim::gap::selftest;
 fn selftest_names_at_least_90_percent_of_withheld_effects() {
     let mut opts = selftest::default_options();
     opts.threads = 2;
-    let report = selftest::run(selftest::World::Model, 50, 1, 12.0, &opts, &|_| {});
+    let report = selftest::run(
+        selftest::World::Model,
+        &(0..50).collect::<Vec<_>>(),
+        1,
+        12.0,
+        &opts,
+        &|_| {},
+    );
     for r in &report.cases {
         println!(
             "case {:3} {:<32} hidden {:<28} named {:<28} GoF {:5.1} -> {:5.1} %",

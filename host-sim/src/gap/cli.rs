@@ -46,6 +46,10 @@ pub struct GapArgs {
     /// selftest: number of cases.
     #[arg(long, default_value_t = 50)]
     pub cases: usize,
+    /// selftest: run only these cases of the seed (comma-separated indices, as the run
+    /// printed them), e.g. to look again at a miss.
+    #[arg(long = "case", value_delimiter = ',', value_name = "I,...")]
+    pub case: Vec<usize>,
     /// selftest: seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -121,6 +125,7 @@ fn options(args: &GapArgs, rig: &Rig) -> Result<Options> {
 fn print_help(selftest: bool) -> Result<()> {
     let own = [
         "cases",
+        "case",
         "seed",
         "duration_s",
         "model_world",
@@ -296,7 +301,12 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
     } else {
         selftest::World::Independent
     };
-    let report = selftest::run(world, args.cases, args.seed, args.duration_s, &opts, &|r| {
+    let indices: Vec<usize> = if args.case.is_empty() {
+        (0..args.cases).collect()
+    } else {
+        args.case.clone()
+    };
+    let report = selftest::run(world, &indices, args.seed, args.duration_s, &opts, &|r| {
         eprintln!(
             "case {:3} {:<32} hidden {:<28} named {:<28} {}  GoF {:5.1} -> {:5.1} %",
             r.case.index,

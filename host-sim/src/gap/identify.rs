@@ -54,6 +54,21 @@ pub fn identify_with(
     progress: bool,
     fx: &Effects,
 ) -> Result<Identified, String> {
+    identify_within(rig, rec, iterations, progress, fx, 10.0)
+}
+
+/// Fit Table 4 with effects `fx` held in the plant, every parameter kept within `factor` of
+/// the rig's value (either way): the best a car within that tolerance of the table explains.
+/// Beside an unbounded fit it tells a car far off the table from one whose log leaves a
+/// weakly identified parameter free to wander.
+pub fn identify_within(
+    rig: &Rig,
+    rec: &Record,
+    iterations: usize,
+    progress: bool,
+    fx: &Effects,
+    factor: f64,
+) -> Result<Identified, String> {
     let RigModel::Paper(model) = &rig.model else {
         return Err(format!(
             "identify needs a paper-type rig (Table 4); rig {} is not one",
@@ -62,15 +77,21 @@ pub fn identify_with(
     };
     let base = model.plant;
     let names = base.identified();
-    // Bounds a decade either side of Table 4; beta_tb (0 in Table 4) gets an absolute range.
+    if !(factor.is_finite() && factor > 1.0) {
+        return Err(format!(
+            "identify: the bound factor must be above 1, got {factor}"
+        ));
+    }
+    // Bounds `factor` either side of Table 4 (a decade for the free fit); beta_tb (0 in
+    // Table 4) gets an absolute range, a tenth of it within a tolerance (as `within_factor`).
     let specs: Vec<ParamSpec> = names
         .iter()
         .map(|(name, v)| {
             if *v > 0.0 {
                 ParamSpec {
                     name,
-                    lo: v / 10.0,
-                    hi: v * 10.0,
+                    lo: v / factor,
+                    hi: v * factor,
                     start: *v,
                     step: 0.05 * v,
                 }
@@ -78,7 +99,7 @@ pub fn identify_with(
                 ParamSpec {
                     name,
                     lo: 0.0,
-                    hi: 0.1,
+                    hi: if factor >= 10.0 { 0.1 } else { 0.01 },
                     start: 0.0,
                     step: 0.002,
                 }
@@ -163,6 +184,27 @@ impl Identified {
         );
         s
     }
+}
+
+/// The refitted parameters that left `factor` of the rig's value, as `name xF` (F the ratio
+/// to the rig's value), for a verdict's reason.
+pub fn outside_factor(rig: &Rig, id: &Identified, factor: f64) -> Vec<String> {
+    let RigModel::Paper(m) = &rig.model else {
+        return Vec::new();
+    };
+    m.plant
+        .identified()
+        .iter()
+        .filter_map(|(name, table)| {
+            let v = id.params.get(*name)?;
+            if *table > 0.0 {
+                let r = v / table;
+                (r > factor || r < 1.0 / factor).then(|| format!("{name} x{r:.2}"))
+            } else {
+                (*v > 0.01).then(|| format!("{name} {v:.3}"))
+            }
+        })
+        .collect()
 }
 
 /// Every refitted parameter within `factor` of the rig's value (either way); a parameter the

@@ -204,17 +204,21 @@ pub enum EffectKind {
     /// The tyre under Dahl's law (the `tire_ground` family's second form): the force
     /// approaches its largest value smoothly, where the elasto-plastic bristle has a corner.
     TireDahl,
+    /// The measured current late against the angles (the `delay` family's second place): a
+    /// delay of every signal alike is `Delay` (a log cannot tell it from a late reference).
+    CurrentDelay,
 }
 
 impl EffectKind {
-    /// The paper rig's candidates: the four core effects, friction at the rack and play in
-    /// the belt/nut.
-    pub const PAPER: [EffectKind; 7] = [
+    /// The paper rig's candidates: the four core effects, friction at the rack, play in the
+    /// belt/nut, the Dahl tyre and the current late against the angles.
+    pub const PAPER: [EffectKind; 8] = [
         EffectKind::Backlash,
         EffectKind::BeltPlay,
         EffectKind::CoulombFriction,
         EffectKind::RackFriction,
         EffectKind::Delay,
+        EffectKind::CurrentDelay,
         EffectKind::TireGround,
         EffectKind::TireDahl,
     ];
@@ -237,6 +241,7 @@ impl EffectKind {
             EffectKind::RackFriction => "coulomb_friction_rack",
             EffectKind::BeltPlay => "backlash_belt",
             EffectKind::TireDahl => "tire_ground_dahl",
+            EffectKind::CurrentDelay => "delay_current",
         }
     }
 
@@ -247,6 +252,7 @@ impl EffectKind {
             EffectKind::RackFriction => "coulomb_friction",
             EffectKind::BeltPlay => "backlash",
             EffectKind::TireDahl => "tire_ground",
+            EffectKind::CurrentDelay => "delay",
             k => k.name(),
         }
     }
@@ -261,6 +267,7 @@ impl EffectKind {
             EffectKind::RackFriction,
             EffectKind::BeltPlay,
             EffectKind::TireDahl,
+            EffectKind::CurrentDelay,
         ]
         .into_iter()
         .find(|k| k.name() == name)
@@ -347,6 +354,11 @@ impl EffectKind {
                 vec![spec("width_deg", 0.0, 4.0, 0.0, 0.1)]
             }
             (EffectKind::BeltPlay | EffectKind::TireDahl, _) => vec![],
+            // Up to ten 10 ms periods: a current older than that is no current to control by.
+            (EffectKind::CurrentDelay, RigModel::Paper(_)) => {
+                vec![spec("delay_ms", 0.0, 100.0, 0.0, 2.0)]
+            }
+            (EffectKind::CurrentDelay, _) => vec![],
         }
     }
 
@@ -387,6 +399,9 @@ impl EffectKind {
             // One step of the grid the log is resampled onto.
             (EffectKind::Delay, RigModel::Bam(m)) => 1e3 * m.ts_s,
             (EffectKind::TireGround | EffectKind::TireDahl, RigModel::Bam(_)) => f64::INFINITY,
+            // As the reference's delay: half a 10 ms period, within a logger's stamping.
+            (EffectKind::CurrentDelay, RigModel::Paper(_)) => 5.0,
+            (EffectKind::CurrentDelay, _) => f64::INFINITY,
         }
     }
 
@@ -402,6 +417,7 @@ impl EffectKind {
                 }
             }
             EffectKind::Delay => fx.delay_s = get(0) * 1e-3,
+            EffectKind::CurrentDelay => fx.effort_delay_s = get(0) * 1e-3,
             EffectKind::TireGround => {
                 fx.tire_force_n = get(0);
                 fx.tire_stiffness_n_per_mm = get(1);
@@ -420,11 +436,15 @@ impl EffectKind {
 
 /// The model of a rig with effects, simulated on a record.
 pub fn simulate(rig: &Rig, rec: &Record, fx: &Effects) -> SimOut {
-    match &rig.model {
+    let mut out = match &rig.model {
         RigModel::Paper(m) => model::simulate_paper(m, rec, fx),
         RigModel::Emps(m) => model::simulate_emps(m, rec, fx),
         RigModel::Bam(m) => model::simulate_bam(m, rec, fx),
+    };
+    if fx.effort_delay_s > 0.0 {
+        out.effort = model::delayed(&out.effort, fx.effort_delay_s, rec.dt);
     }
+    out
 }
 
 /// Eq. 11 per signal and combined, on a record against a simulation, from `skip` on.
@@ -975,6 +995,16 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             && gain > opts.min_share_of_reducible * reducible
             && gain > share * reference_cost
     };
+    // What a further explanation (a second effect, parameters beyond the table's tolerance)
+    // must remove from what the simpler one left: a share of it, a share of what is above the
+    // noise floor, and a share of the noise floor's own worth; otherwise it is fitting the
+    // noise (or the simpler fit's own error).
+    let removes_beyond = |simpler: f64, fuller: f64| {
+        let gain = simpler - fuller;
+        gain > opts.min_pair_improvement * simpler
+            && gain > opts.min_share_of_reducible * (simpler - floor).max(0.0)
+            && gain > opts.min_pair_share_of_floor * floor
+    };
     let mut verdict_candidate: Option<Candidate> = None;
     let mut reason;
     // Simulations of Table 4 refits, which do not tick `progress`.
@@ -1044,23 +1074,17 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             // The pair must remove a share of what the best left, a share of what is above
             // the noise floor, and a share of the noise floor's own worth: otherwise the
             // second effect is fitting the noise (or the first fit's own error).
-            let pair_removes = |single: f64, both: f64| {
-                let gain = single - both;
-                gain > opts.min_pair_improvement * single
-                    && gain > opts.min_share_of_reducible * (single - floor).max(0.0)
-                    && gain > opts.min_pair_share_of_floor * floor
-            };
             // What the pair removes may be the car's Table 4 being a few per cent off (every
             // car is) rather than a second effect: refit the table with the first effect in
             // place, and the pair must still remove as much from what that leaves.
-            let on_refit = if pair_removes(best.cost, pair.cost) {
+            let on_refit = if removes_beyond(best.cost, pair.cost) {
                 pair_on_refitted_table(rig, frec, fscorer, best, &pair, opts, &progress)
             } else {
                 None
             };
             refit_simulations += on_refit.map_or(0, |(_, _, n)| n);
             if let Some((c_single, c_pair, _)) = on_refit
-                && !pair_removes(c_single, c_pair)
+                && !removes_beyond(c_single, c_pair)
             {
                 reason.push_str(&format!(
                     "; the pair {} removes {:.0} % of what {} leaves, but with Table 4 refitted \
@@ -1074,7 +1098,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                     c_single - c_pair,
                     c_single
                 ));
-            } else if pair_removes(best.cost, pair.cost) {
+            } else if removes_beyond(best.cost, pair.cost) {
                 reason.push_str(&format!(
                     "; adding {} removes {:.0} % of what was left",
                     pair.effect.split('+').next().unwrap_or(""),
@@ -1129,12 +1153,34 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         parameters = Some((id, refit, c));
     }
     let effect_cost = verdict_candidate.as_ref().map_or(cost0, |c| c.cost);
-    // A refit that stays within the table's tolerance is no finding of its own, but when it
-    // explains the log as well as the effect verdict does, that effect was standing in for
-    // a car a few per cent off the table, and is not named.
+    // The car within the table's tolerance: the refit itself when it stayed within it, else
+    // the refit again with every parameter held within it. A refit that leaves the tolerance
+    // is a finding only when it explains clearly more than the bounded one (by the rule a
+    // second effect must meet): otherwise a weakly identified parameter wandered off while
+    // the others did the work, and the car is the table's.
     let within_tolerance = parameters
         .as_ref()
         .is_some_and(|(id, _, _)| identify::within_factor(rig, id, opts.parameter_tolerance));
+    let tolerant: Option<(Rig, f64)> = match &parameters {
+        Some((_, refit, c)) if within_tolerance => Some((refit.clone(), *c)),
+        Some(_) => identify::identify_within(
+            rig,
+            frec,
+            opts.parameter_iterations,
+            false,
+            &nominal,
+            opts.parameter_tolerance,
+        )
+        .ok()
+        .map(|id| {
+            refit_simulations += id.simulations;
+            let mut refit = rig.clone();
+            identify::apply(&mut refit, &id);
+            let c = cost(&fscorer.residual(frec, &simulate(&refit, frec, &nominal)));
+            (refit, c)
+        }),
+        None => None,
+    };
     let parameters_win = parameters.as_ref().is_some_and(|(_, _, c)| {
         let gain = cost0 - c;
         !within_tolerance
@@ -1142,13 +1188,26 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             && gain > opts.min_share_of_reducible * reducible
             && gain > opts.min_improvement * cost0
             && *c < opts.parameters_cost_share * effect_cost
+            && tolerant
+                .as_ref()
+                .is_none_or(|(_, c_tol)| removes_beyond(*c_tol, *c))
     });
-    if within_tolerance
-        && let (Some((_, refit, c)), Some(v)) = (&parameters, &verdict_candidate)
+    if !within_tolerance && let (Some((id, _, c)), Some((_, c_tol))) = (&parameters, &tolerant) {
+        reason.push_str(&format!(
+            "; Table 4 refitted freely moves {} and leaves {:.0}, held within x{:.1} {:.0}",
+            identify::outside_factor(rig, id, opts.parameter_tolerance).join(", "),
+            c,
+            opts.parameter_tolerance,
+            c_tol
+        ));
+    }
+    // A car within the table's tolerance that explains the log as well as the effect verdict
+    // does means the effect was standing in for it: the effect again, on top of that refit,
+    // is named only if it still removes what an effect must remove from what the refit leaves.
+    if !parameters_win
+        && let (Some((refit, c)), Some(v)) = (&tolerant, &verdict_candidate)
         && *c <= v.cost
     {
-        // The effect again, on top of the refitted table: named only if it still removes
-        // what an effect must remove from what the refit leaves.
         let (values, errs, c_both, evals) = fit_effects(
             refit,
             frec,
@@ -1246,10 +1305,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let parameter_simulations = parameters.as_ref().map_or(0, |(id, _, _)| id.simulations);
     // What the best explanation leaves: the nominal model, or the table refitted within its
     // tolerance (a car a few per cent off the table is no gap).
-    let left = parameters
-        .as_ref()
-        .filter(|_| within_tolerance)
-        .map_or(cost0, |(_, _, c)| c.min(cost0));
+    let left = tolerant.as_ref().map_or(cost0, |(_, c)| c.min(cost0));
     let unexplained = verdict_candidate.is_none()
         && left > opts.unexplained_ratio * floor
         && fit0.gof < opts.unexplained_below_gof;

@@ -31,8 +31,13 @@ pub struct Effects {
     pub stribeck_velocity: f64,
     /// Viscous coefficient replacing the nominal one (EMPS only, N s/m; NaN = nominal).
     pub viscous_override: f64,
-    /// Transport delay of the reference, s.
+    /// Transport delay of the reference, s. A delay of every measured signal alike is the
+    /// same thing to a log of a time-invariant loop (each logged signal is the undelayed one
+    /// shifted by it), so this one parameter stands for both places.
     pub delay_s: f64,
+    /// The measured effort (current) reaches the log this much later than the angles, s: a
+    /// drive's averaged current reported once per SYNC and forwarded a period later.
+    pub effort_delay_s: f64,
     /// Tyre scrub: largest force of the bristle at the rack (N) / at the load (N).
     pub tire_force_n: f64,
     /// Tyre scrub: bristle stiffness, N/mm at the rack (or load).
@@ -67,7 +72,7 @@ pub struct SimOut {
 }
 
 /// The reference delayed by `delay_s`, linearly interpolated on its own grid of step `dt`.
-fn delayed(reference: &[f64], delay_s: f64, dt: f64) -> Vec<f64> {
+pub(crate) fn delayed(reference: &[f64], delay_s: f64, dt: f64) -> Vec<f64> {
     if delay_s <= 0.0 || reference.is_empty() {
         return reference.to_vec();
     }

@@ -71,6 +71,7 @@ fn draw_effect(kind: EffectKind, rng: &mut Rng, fx: &mut Effects) {
         EffectKind::Backlash => fx.backlash = rng.range(0.6, 2.5),
         EffectKind::CoulombFriction => fx.coulomb = rng.range(0.06, 0.25),
         EffectKind::Delay => fx.delay_s = rng.range(0.015, 0.06),
+        EffectKind::CurrentDelay => fx.effort_delay_s = rng.range(0.015, 0.06),
         EffectKind::TireGround => {
             fx.tire_force_n = rng.range(300.0, 1500.0);
             fx.tire_stiffness_n_per_mm = rng.range(200.0, 1000.0);
@@ -247,10 +248,12 @@ pub struct SelftestReport {
     pub mean_gof_after: f64,
 }
 
-/// Run `cases` cases of `duration_s` each (the independent world's tracks are 120 s); `on_case` sees every result as it comes.
+/// Run the cases numbered `cases` (`0..N` for a run of N; one index reruns that case of the
+/// seed) of `duration_s` each (the independent world's tracks are 120 s); `on_case` sees
+/// every result as it comes.
 pub fn run(
     world: World,
-    cases: usize,
+    cases: &[usize],
     seed: u64,
     duration_s: f64,
     opts: &Options,
@@ -270,10 +273,10 @@ pub fn run(
                 s.spawn(|| {
                     let mut out = Vec::new();
                     loop {
-                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        if i >= cases {
+                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(&i) = cases.get(k) else {
                             break;
-                        }
+                        };
                         let (case, rec) = case_of(world, seed, i, duration_s, &rig);
                         let d = diagnose(&rig, &rec, None, &per_case);
                         let mut named = d.verdict.effects.clone();
