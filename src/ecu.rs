@@ -1396,6 +1396,7 @@ mod mutation_tests {
             .inc_from_motor(Gearing::PAPER.motor_from_steering(SteeringDeg(10.0).into()))
             .unwrap();
         assert_eq!(drive.targets.last(), Some(&(500 + want)));
+        assert_eq!(ecu.pending_overflow(), 0);
     }
 
     /// The CSP target for `deg` at the wheel, in the drive's increments from the origin.
@@ -1525,6 +1526,10 @@ mod mutation_tests {
             ecu.link().unwrap().error().is_some(),
             "reset while AS Driving"
         );
+        // A clear asked for in AS Driving is refused, and counted.
+        let f = vehicle.frame(AsState::Driving, 0.0, true);
+        let _ = ecu.on_reference_frame(t1, &f);
+        assert_eq!(ecu.clear_refusals(), 1);
         // AS Off: reset at once, the link is back in Standby within 100 ms.
         let t2 = t1 + 100 * MS;
         let _ = run(
@@ -1570,7 +1575,7 @@ mod mutation_tests {
         let f = vehicle.frame(AsState::Off, 0.0, true);
         let out = ecu.on_reference_frame(t3, &f);
         assert!(out.faults.is_empty(), "{:?}", out.faults);
-        assert_eq!(ecu.clear_refusals(), 0);
+        assert_eq!(ecu.clear_refusals(), 1);
     }
 
     /// EPOS4 mode: the enable ramp starts where the column is once the drive is in Operation
@@ -1647,6 +1652,154 @@ mod mutation_tests {
             5.0,
         );
         assert_eq!(ecu.output().state, EcuState::Tracking);
+        assert_eq!(drive.targets.last(), Some(&500));
+    }
+
+    /// Direct mode: the origin is the Hall count nearest to the column's angle through the
+    /// gearing, so the motor angle the ECU believes is within half a count of the column's.
+    #[test]
+    fn the_direct_origin_rounds_to_the_nearest_hall_count() {
+        let half_count = std::f32::consts::PI / HALL_COUNTS_PER_REV as f32;
+        for deg in [0.3f32, 1.0, 2.3, 5.55, -7.2, 13.1, -0.4] {
+            let mut ecu = Ecu::paper().unwrap();
+            let _ = ecu.position_tick(0);
+            let _ = ecu.on_encoder(0, SteeringDeg(deg));
+            let want = Gearing::PAPER.motor_from_steering(SteeringDeg(deg).into());
+            let got = ecu.motor_angle();
+            assert!(
+                (got.0 - want.0).abs() <= half_count + 1e-5,
+                "{deg} deg: motor {} rad, column says {} rad",
+                got.0,
+                want.0
+            );
+        }
+    }
+
+    /// Direct mode: the motor frame carries the mean of the current samples since the last
+    /// motor frame, and NaN when none came.
+    #[test]
+    fn the_motor_frame_carries_the_mean_current_since_the_last_one() {
+        let mut ecu = Ecu::paper().unwrap();
+        let protocol = ProtocolConfig::default();
+        for k in 0..20u64 {
+            let amps = if k < 10 { 2.0 } else { 4.0 };
+            let _ = ecu.current_tick(k * 50, Amps(amps));
+        }
+        let motor = protocol.decode_motor(&ecu.motor_frame()).unwrap();
+        assert!(
+            (motor.current_mean.0 - 3.0).abs() < 0.01,
+            "{:?}",
+            motor.current_mean
+        );
+        let motor = protocol.decode_motor(&ecu.motor_frame()).unwrap();
+        assert!(motor.current_mean.0.is_nan(), "{:?}", motor.current_mean);
+    }
+
+    /// Direct mode: the origin is taken from the column once (and at each enable), not on
+    /// every sample: a motor that turns 20 deg (at the wheel) while the column stands (a
+    /// broken belt) is a disagreement, latched 20 ms after it exceeds the window.
+    #[test]
+    fn a_motor_turning_without_the_column_is_a_disagreement() {
+        let mut ecu = Ecu::paper().unwrap();
+        let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(20.0).into());
+        let hall = hall_from_motor(f64::from(motor.0));
+        let _ = ecu.position_tick(0);
+        let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+        let _ = ecu.position_tick(hall);
+        let mut latched_at = None;
+        for k in 1..=30u64 {
+            let out = ecu.on_encoder(k * MS, SteeringDeg(0.0));
+            if latched_at.is_none() && out.faults.contains(Fault::EncoderMotorDisagreement) {
+                latched_at = Some(k * MS);
+            }
+        }
+        assert_eq!(latched_at, Some(21 * MS));
+    }
+
+    /// EPOS4 mode: a drive that does not follow its target (the motor stands while the
+    /// reference is 30 deg away) latches `TrackingError` through the ECU's encoder path.
+    #[test]
+    fn an_epos4_that_does_not_follow_latches_a_tracking_error() {
+        let (mut ecu, mut drive, _) = epos4_ecu(500);
+        let mut vehicle = Vehicle::new();
+        let _ = run(
+            &mut ecu,
+            &mut drive,
+            &mut vehicle,
+            0,
+            200 * MS,
+            AsState::Off,
+            f32::NAN,
+            0.0,
+        );
+        let _ = run(
+            &mut ecu,
+            &mut drive,
+            &mut vehicle,
+            200 * MS,
+            1200 * MS,
+            AsState::Driving,
+            30.0,
+            0.0,
+        );
+        assert!(
+            ecu.output().faults.contains(Fault::TrackingError),
+            "{:?}",
+            ecu.output()
+        );
+    }
+
+    /// The ECU-mode constructors: the direct one runs the ECU-mode cascade; over an EPOS4 the
+    /// drive gets Table 3's gains with the model's feedforward in mA (A x 1000), and the ECU
+    /// brings it up and steers it.
+    #[test]
+    fn ecu_mode_runs_its_cascade_direct_and_its_feedforward_on_the_epos4() {
+        let ecu = Ecu::ecu_direct().unwrap();
+        assert!(matches!(
+            ecu.drive(),
+            Drive::Direct(SteeringController::Ecu(_))
+        ));
+        let gains = Ecu::ecu_mode_epos4_gains();
+        assert!(
+            (gains.ff_velocity_ma_s_per_rad / 1000.0 - EcuTuning::PAPER.ff_velocity).abs() < 1e-6
+        );
+        assert!(
+            (gains.ff_acceleration_ma_s2_per_rad / 1000.0 - EcuTuning::PAPER.ff_acceleration).abs()
+                < 1e-9
+        );
+        assert!(gains.ff_velocity_ma_s_per_rad > 0.0 && gains.ff_acceleration_ma_s2_per_rad > 0.0);
+        let feedback_only = |g: EposGains| EposGains {
+            ff_velocity_ma_s_per_rad: 0.0,
+            ff_acceleration_ma_s2_per_rad: 0.0,
+            ..g
+        };
+        assert_eq!(feedback_only(gains), feedback_only(EposGains::PAPER));
+
+        let mut config = Epos4Config::paper(node());
+        config.gains = gains;
+        let mut ecu = Ecu::ecu_epos4(Epos4Link::new(config, 0).unwrap()).unwrap();
+        let mut drive = FakeEpos4::new(500);
+        for f in ecu.drive_start(0) {
+            let answers = drive.on_frame(&f);
+            drive.answers.extend(answers);
+        }
+        let mut vehicle = Vehicle::new();
+        let _ = run(
+            &mut ecu,
+            &mut drive,
+            &mut vehicle,
+            0,
+            400 * MS,
+            AsState::Driving,
+            0.0,
+            0.0,
+        );
+        assert_eq!(ecu.output().state, EcuState::Tracking);
+        let written = drive.od.get(&od::POSITION_FF_VELOCITY).copied();
+        assert_eq!(
+            written,
+            Some((gains.ff_velocity_ma_s_per_rad * 1000.0).round() as u32)
+        );
         assert_eq!(drive.targets.last(), Some(&500));
     }
 }

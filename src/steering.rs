@@ -1989,7 +1989,8 @@ mod mutation_tests {
 
     /// The runaway rule is symmetric and its current threshold is 18 A toward the
     /// reference: 18.5 A pushing down while the column runs up latches in 50 ms, 17.5 A
-    /// pushing up while the column runs down does not.
+    /// pushing up while the column runs down does not; a column running away from a
+    /// reference at the centre latches too.
     #[test]
     fn a_runaway_needs_18_a_toward_the_reference_in_either_direction() {
         let at = runaway_latch(-10.0, 2 * MS, |s| 100.0 * s, |_| -18.5);
@@ -1999,6 +2000,12 @@ mod mutation_tests {
         );
         let at = runaway_latch(10.0, 2 * MS, |s| -100.0 * s, |_| 17.5);
         assert_eq!(at, None, "17.5 A is below the saturated push");
+        // Away from a centred reference: the error is the reference less the column.
+        let at = runaway_latch(0.0, 2 * MS, |s| 100.0 * s, |_| -20.0);
+        assert!(
+            at.is_some_and(|at| (50 * MS..=52 * MS).contains(&at)),
+            "from the centre: {at:?}"
+        );
     }
 
     /// A push that stops for one sample and resumes is a new push: the runaway latches 50 ms
