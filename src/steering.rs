@@ -2135,4 +2135,27 @@ mod mutation_tests {
         assert!(demands.contains(&(130, DriveDemand::Hold)), "{demands:?}");
         assert_eq!(demands.last(), Some(&(135, DriveDemand::Disabled)));
     }
+
+    /// "Not slowing" is judged against the speed away when the push began, less one count
+    /// per window of slack: a column already running away at 100 deg/s when the push begins
+    /// and keeping that speed latches 50 ms later; one the push slows to 50 deg/s (still away,
+    /// but braked) does not.
+    #[test]
+    fn a_runaway_is_judged_against_its_speed_when_the_push_began() {
+        let current = |s: f32| if s < 0.03 { 10.0 } else { 20.0 };
+        let at = runaway_latch(10.0, 2 * MS, |s| -100.0 * s, current);
+        assert!(
+            at.is_some_and(|at| (80 * MS..=82 * MS).contains(&at)),
+            "kept its speed: {at:?}"
+        );
+        let braked = |s: f32| {
+            if s < 0.03 {
+                -100.0 * s
+            } else {
+                -3.0 - 50.0 * (s - 0.03)
+            }
+        };
+        let at = runaway_latch(10.0, 2 * MS, braked, current);
+        assert_eq!(at, None, "braked to half its speed away");
+    }
 }
