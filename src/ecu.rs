@@ -1802,4 +1802,50 @@ mod mutation_tests {
         );
         assert_eq!(drive.targets.last(), Some(&500));
     }
+
+    /// A frame whose angle breaks the rate rule is dropped; its AS state counts only when it
+    /// does not allow power. AS Driving from such a frame after AS Off powers nothing.
+    #[test]
+    fn a_dropped_driving_frame_powers_nothing() {
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        for k in 0..5u64 {
+            let _ = ecu.on_encoder(k * 10 * MS, SteeringDeg(0.0));
+            let _ = vehicle.send(&mut ecu, k * 10 * MS, AsState::Off, 0.0);
+        }
+        // 60 deg 10 ms after 0 deg: authentic and in sequence, but dropped by the rate rule.
+        let _ = ecu.on_encoder(50 * MS, SteeringDeg(0.0));
+        let out = vehicle.send(&mut ecu, 50 * MS, AsState::Driving, 60.0);
+        assert_eq!(out.demand, DriveDemand::Disabled);
+        assert_eq!(out.state, EcuState::Idle);
+        assert_eq!(ecu.machine().as_state(), Some(AsState::Off));
+    }
+
+    /// Direct mode, through the 20 kHz current tick: 20 consecutive samples above 22 A latch
+    /// `OverCurrent` and switch the bridge off; samples alternating above and within never do
+    /// (a sample within ends the run, fast path or not).
+    #[test]
+    fn the_current_tick_latches_only_a_run_of_over_current_samples() {
+        let mut ecu = Ecu::paper().unwrap();
+        let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+        let _ = Vehicle::new().send(&mut ecu, 0, AsState::Driving, 0.0);
+        let _ = ecu.position_tick(0);
+        // Over on odd samples, within on even ones, the last (the 200th) within.
+        for k in 1..=200u64 {
+            let amps = if k % 2 == 1 { 25.0 } else { 10.0 };
+            let _ = ecu.current_tick(k * 50, Amps(amps));
+        }
+        assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
+        let mut latched_at = None;
+        for k in 1..=40u64 {
+            let voltage = ecu.current_tick(10 * MS + k * 50, Amps(-25.0));
+            if latched_at.is_none() && ecu.output().faults.contains(Fault::OverCurrent) {
+                latched_at = Some(k);
+                assert_eq!(voltage, None, "bridge off in the latching call");
+            } else if latched_at.is_none() {
+                assert!(voltage.is_some(), "bridge on before the latch");
+            }
+        }
+        assert_eq!(latched_at, Some(20), "samples to latch");
+    }
 }
