@@ -1527,6 +1527,7 @@ mod mutation_tests {
             "reset while AS Driving"
         );
         // A clear asked for in AS Driving is refused, and counted.
+        assert_eq!(ecu.clear_refusals(), 0);
         let f = vehicle.frame(AsState::Driving, 0.0, true);
         let _ = ecu.on_reference_frame(t1, &f);
         assert_eq!(ecu.clear_refusals(), 1);
