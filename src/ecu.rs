@@ -1849,4 +1849,54 @@ mod mutation_tests {
         }
         assert_eq!(latched_at, Some(20), "samples to latch");
     }
+
+    /// The watchdog's progress counts: one per supervisor call (tick, reference frame,
+    /// encoder sample or error) and one per fast-loop period (`fast_loop_ran`, and each
+    /// EPOS4-mode drive poll); the supervisor's last call time never goes back.
+    #[test]
+    fn the_progress_counts_and_the_supervisors_time_follow_the_calls() {
+        let mut ecu = Ecu::paper().unwrap();
+        assert_eq!(ecu.supervisor_seen_us(), None);
+        assert_eq!((ecu.progress().supervisor, ecu.progress().fast), (0, 0));
+        let _ = ecu.tick(5 * MS);
+        let _ = ecu.on_encoder(3 * MS, SteeringDeg(0.0));
+        let _ = Vehicle::new().send(&mut ecu, 7 * MS, AsState::Off, 0.0);
+        let _ = ecu.on_encoder_error(6 * MS, 1);
+        assert_eq!(ecu.supervisor_seen_us(), Some(7 * MS));
+        ecu.fast_loop_ran();
+        ecu.fast_loop_ran();
+        assert_eq!((ecu.progress().supervisor, ecu.progress().fast), (4, 2));
+        let (mut ecu, mut drive, _) = epos4_ecu(0);
+        let _ = step(&mut ecu, &mut drive, MS);
+        let _ = step(&mut ecu, &mut drive, 2 * MS);
+        assert_eq!(ecu.progress().fast, 2);
+    }
+
+    /// Direct mode: after a stall (bridge off, cascade not stepped) the fast loop restarts
+    /// the cascade where the motor is now, in the column-aligned frame: the next position
+    /// tick's set-point is the motor's angle and it asks for no current.
+    #[test]
+    fn a_resync_restarts_the_cascade_at_the_motor() {
+        let mut ecu = Ecu::paper().unwrap();
+        let _ = ecu.position_tick(0);
+        let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+        let _ = Vehicle::new().send(&mut ecu, 0, AsState::Driving, 0.0);
+        // The wheels were turned to 10 deg while the loop stood.
+        let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(10.0).into());
+        let hall = hall_from_motor(f64::from(motor.0));
+        let _ = ecu.position_tick(hall);
+        ecu.resync_cascade();
+        let current = ecu.position_tick(hall);
+        assert!(current.0.abs() < 1.0, "{} A at the set-point", current.0);
+        let Drive::Direct(cascade) = ecu.drive() else {
+            panic!("direct mode")
+        };
+        let at = cascade.setpoint().position;
+        assert!(
+            (at.0 - motor_from_hall(hall).0).abs() < 1e-4,
+            "set-point {} rad, motor {} rad",
+            at.0,
+            motor_from_hall(hall).0
+        );
+    }
 }
