@@ -2158,4 +2158,15 @@ mod mutation_tests {
         let at = runaway_latch(10.0, 2 * MS, braked, current);
         assert_eq!(at, None, "braked to half its speed away");
     }
+
+    /// The not-slowing rule's slack is one encoder count per speed window: a runaway at
+    /// 40 deg/s seen through the 12-bit encoder reads 4 or 5 counts per 10 ms (35 or
+    /// 44 deg/s). Pushed from 60.5 ms, after a 5-count window, it latches 50 ms later even
+    /// though the window then read one count less.
+    #[test]
+    fn a_runaway_one_encoder_count_slower_than_at_the_push_still_latches_in_50_ms() {
+        let current = |s: f32| if s < 0.0603 { 10.0 } else { 20.0 };
+        let at = runaway_latch(10.0, 500, |s| quantised(-40.0 * s), current);
+        assert_eq!(at, Some(110_500), "push at 60.5 ms");
+    }
 }
