@@ -1899,4 +1899,77 @@ mod mutation_tests {
             motor_from_hall(hall).0
         );
     }
+
+    /// The drive's fault cause is gone exactly when the link is back up (Standby, Disabling
+    /// or Cyclic after the reset), not while it is still failed: a clear asked for before the reset is refused,
+    /// one asked for right after the call that brought the link up is granted.
+    #[test]
+    fn a_drive_fault_clears_only_once_the_link_is_back_up() {
+        let (mut ecu, mut drive, mut vehicle, t0) = tracking_epos4();
+        let emcy = crate::canopen::emcy::Emcy {
+            error_code: 0x3210,
+            error_register: 0x04,
+            vendor: [0; 5],
+        }
+        .to_frame(node())
+        .unwrap();
+        let _ = ecu.on_drive_frame(t0, &emcy);
+        // Still in AS Driving (no reset): the link stays failed for 20 ms of drive polls.
+        let t1 = t0 + 20 * MS;
+        let _ = run(
+            &mut ecu,
+            &mut drive,
+            &mut vehicle,
+            t0,
+            t1,
+            AsState::Driving,
+            0.0,
+            0.0,
+        );
+        assert!(ecu.link().unwrap().error().is_some());
+        // AS Off and a clear at once, before the next drive poll resets the link: refused.
+        let _ = vehicle.send(&mut ecu, t1, AsState::Off, 0.0);
+        let f = vehicle.frame(AsState::Off, 0.0, true);
+        let out = ecu.on_reference_frame(t1, &f);
+        assert!(
+            out.faults.contains(Fault::EposFault),
+            "cleared while failed"
+        );
+        // The bit low again, so the next request is a rising edge.
+        let _ = vehicle.send(&mut ecu, t1, AsState::Off, 0.0);
+        // Run the drive task until the call that brings the link up; clear right after it.
+        let up = |ecu: &Ecu| {
+            matches!(
+                ecu.link().unwrap().phase(),
+                Phase::Standby | Phase::Disabling | Phase::Cyclic
+            )
+        };
+        let mut t = t1;
+        'up: loop {
+            t += MS;
+            assert!(t < t1 + 500 * MS, "the link never came back");
+            if (t - t1).is_multiple_of(10 * MS) {
+                let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                let _ = vehicle.send(&mut ecu, t, AsState::Off, 0.0);
+            }
+            let mut sent = Vec::new();
+            for answer in std::mem::take(&mut drive.answers) {
+                sent.extend(ecu.on_drive_frame(t, &answer));
+                if up(&ecu) {
+                    break 'up;
+                }
+            }
+            sent.extend(ecu.drive_poll(t));
+            if up(&ecu) {
+                break;
+            }
+            for f in &sent {
+                let answers = drive.on_frame(f);
+                drive.answers.extend(answers);
+            }
+        }
+        let f = vehicle.frame(AsState::Off, 0.0, true);
+        let out = ecu.on_reference_frame(t, &f);
+        assert!(out.faults.is_empty(), "{:?}", out.faults);
+    }
 }
