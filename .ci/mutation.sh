@@ -4,11 +4,17 @@
 # be listed in the README with the reason it is equivalent.
 #
 # Needs cargo-mutants (`cargo install cargo-mutants`). Not in CI: each mutant rebuilds and runs
-# the library's tests (about 16 s on two cores), and these files give about 480.
+# the library's tests (about 16 s on two cores), and these files give about 500.
 #
 #   .ci/mutation.sh                          all four files, results in target/mutants
 #   FILES=src/faults.rs .ci/mutation.sh -j 1 one file, results in target/mutants/faults
 #   .ci/mutation.sh --list                   the mutants only
+#   FILES=src/steering.rs .ci/mutation.sh --re 'steering.rs:(5[89]\d|[6-9]\d\d):'
+#                                            part of a file: --re matches "file:line:col: ..."
+#
+# On shared cores run it under `nice -n 10`; two files can run side by side, each in its own
+# copy of the tree with `--in-place` (its own target directory: never a shared one; `-j` and
+# `--in-place` exclude each other).
 #
 # Extra arguments go to cargo-mutants (`-j 1`, `--list`, `--re REGEX`, `--in-place` in a copy
 # of the tree made for the run). Results: <output>/mutants.out/{caught,missed,timeout,

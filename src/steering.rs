@@ -1891,4 +1891,282 @@ mod mutation_tests {
         sm.fault_log_mut().clear();
         assert!(sm.fault_log().is_empty());
     }
+
+    const MS: u64 = 1_000;
+
+    /// The motor angle that reads as `deg` at the column through the paper's gears.
+    fn motor_at(deg: f32) -> MotorRad {
+        Gearing::PAPER.motor_from_steering(SteeringDeg(deg).into())
+    }
+
+    /// A machine tracking in AS Driving at `t = 10 ms`, column and motor at `deg`.
+    fn tracking_at(deg: f32) -> (SteeringStateMachine, u64) {
+        let mut sm = SteeringStateMachine::default();
+        let _ = sm.on_encoder(0, SteeringDeg(deg), motor_at(deg));
+        let _ = sm.on_reference(0, AsState::Driving);
+        let _ = sm.on_encoder(10 * MS, SteeringDeg(deg), motor_at(deg));
+        let out = sm.on_reference(10 * MS, AsState::Driving);
+        assert_eq!(out.demand, DriveDemand::Track);
+        (sm, 10 * MS)
+    }
+
+    /// The column as a 12-bit absolute encoder reports it (AMT20: 4096 counts a turn).
+    fn quantised(deg: f32) -> f32 {
+        let count = 360.0 / 4096.0;
+        (deg / count).round() * count
+    }
+
+    /// Drives the runaway check as the ECU does (references at 100 Hz, encoder samples every
+    /// `sample_us`, each followed by the effort check) for 200 ms with the column at
+    /// `column(s)` (s since the start) and the effort `current(s)`; the time since the start
+    /// at which `TrackingError` latched.
+    fn runaway_latch(
+        reference: f32,
+        sample_us: u64,
+        column: impl Fn(f32) -> f32,
+        current: impl Fn(f32) -> f32,
+    ) -> Option<u64> {
+        let (mut sm, t0) = tracking_at(column(0.0));
+        let mut t = t0;
+        while t < t0 + 200 * MS {
+            t += sample_us;
+            let s = (t - t0) as f32 * 1e-6;
+            let c = column(s);
+            if (t - t0).is_multiple_of(10 * MS) {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            let _ = sm.on_encoder(t, SteeringDeg(c), motor_at(c));
+            let out =
+                sm.on_drive_effort(t, SteeringDeg(reference), SteeringDeg(c), Amps(current(s)));
+            if out.faults.contains(Fault::TrackingError) {
+                return Some(t - t0);
+            }
+        }
+        None
+    }
+
+    /// A gap the column closes from above (negative error) at 35 deg/s, a little more than
+    /// the 30 deg/s of progress the check asks for, is no tracking error: the progress is
+    /// the motion toward the reference whichever side it is on, measured from where the
+    /// interval began.
+    #[test]
+    fn a_gap_closed_from_above_just_faster_than_the_progress_rule_is_no_fault() {
+        let (mut sm, t0) = tracking_at(40.0);
+        let mut t = t0;
+        // Reference 10 deg: 30 deg below; the column comes down to 30 deg (within the 20 deg
+        // window) after 286 ms, so at least one full 200 ms interval is judged.
+        while t < t0 + 280 * MS {
+            t += 2 * MS;
+            let column = 40.0 - 35.0 * (t - t0) as f32 * 1e-6;
+            if (t - t0).is_multiple_of(10 * MS) {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            let _ = sm.on_encoder(t, SteeringDeg(column), motor_at(column));
+            let out = sm.on_tracking(t, SteeringDeg(10.0), SteeringDeg(column));
+            assert!(
+                out.faults.is_empty(),
+                "at {} ms: {:?}",
+                (t - t0) / MS,
+                out.faults
+            );
+        }
+        // ... and the same column standing still 30 deg above the reference latches.
+        let (mut sm, t0) = tracking_at(40.0);
+        let mut latched = false;
+        for k in 1..=110u64 {
+            let t = t0 + k * 2 * MS;
+            if k % 5 == 0 {
+                let _ = sm.on_reference(t, AsState::Driving);
+            }
+            let _ = sm.on_encoder(t, SteeringDeg(40.0), motor_at(40.0));
+            latched |= sm
+                .on_tracking(t, SteeringDeg(10.0), SteeringDeg(40.0))
+                .faults
+                .contains(Fault::TrackingError);
+        }
+        assert!(latched, "a jammed column above the reference");
+    }
+
+    /// The runaway rule is symmetric and its current threshold is 18 A toward the
+    /// reference: 18.5 A pushing down while the column runs up latches in 50 ms, 17.5 A
+    /// pushing up while the column runs down does not; a column running away from a
+    /// reference at the centre latches too.
+    #[test]
+    fn a_runaway_needs_18_a_toward_the_reference_in_either_direction() {
+        let at = runaway_latch(-10.0, 2 * MS, |s| 100.0 * s, |_| -18.5);
+        assert!(
+            at.is_some_and(|at| (50 * MS..=52 * MS).contains(&at)),
+            "downward push: {at:?}"
+        );
+        let at = runaway_latch(10.0, 2 * MS, |s| -100.0 * s, |_| 17.5);
+        assert_eq!(at, None, "17.5 A is below the saturated push");
+        // Away from a centred reference: the error is the reference less the column.
+        let at = runaway_latch(0.0, 2 * MS, |s| 100.0 * s, |_| -20.0);
+        assert!(
+            at.is_some_and(|at| (50 * MS..=52 * MS).contains(&at)),
+            "from the centre: {at:?}"
+        );
+    }
+
+    /// A push that stops for one sample and resumes is a new push: the runaway latches 50 ms
+    /// after it resumed, not never.
+    #[test]
+    fn a_runaway_latches_50_ms_after_an_interrupted_push_resumes() {
+        // 20 A toward +10 deg, except 10 A at 30 ms; the column runs away at 100 deg/s.
+        let current = |s: f32| {
+            if (0.029..0.031).contains(&s) {
+                10.0
+            } else {
+                20.0
+            }
+        };
+        let at = runaway_latch(10.0, 2 * MS, |s| -100.0 * s, current);
+        assert!(
+            at.is_some_and(|at| (80 * MS..=82 * MS).contains(&at)),
+            "{at:?}"
+        );
+    }
+
+    /// The speed away is measured over 10 ms, not sample to sample: through a 12-bit encoder
+    /// sampled at 2 kHz, a column creeping away at 5 deg/s (below the 20 deg/s of a runaway)
+    /// shows as 0 or 176 deg/s between samples, and that must not latch; a real runaway at
+    /// 40 deg/s seen the same way does.
+    #[test]
+    fn a_creep_seen_through_the_encoders_counts_is_no_runaway() {
+        let creep = runaway_latch(10.0, 500, |s| quantised(-5.0 * s), |_| 20.0);
+        assert_eq!(creep, None, "5 deg/s away latched at {creep:?} us");
+        let runaway = runaway_latch(10.0, 500, |s| quantised(-40.0 * s), |_| 20.0);
+        assert!(
+            runaway.is_some_and(|at| (50 * MS..=55 * MS).contains(&at)),
+            "{runaway:?}"
+        );
+    }
+
+    /// `overcurrent_pending` says whether a run of over-current samples is open: the ECU's
+    /// 20 kHz fast path skips the machine only while it is false.
+    #[test]
+    fn an_over_current_run_is_pending_until_a_sample_within() {
+        let mut sm = SteeringStateMachine::default();
+        assert!(!sm.overcurrent_pending(), "fresh");
+        let _ = sm.on_current(0, Amps(10.0));
+        assert!(!sm.overcurrent_pending(), "within");
+        let _ = sm.on_current(50, Amps(-25.0));
+        assert!(sm.overcurrent_pending(), "one sample beyond");
+        let _ = sm.on_current(100, Amps(21.9));
+        assert!(!sm.overcurrent_pending(), "a sample within ends the run");
+    }
+
+    /// A sensor-reported encoder error is recorded as `0x1_0000 + code`.
+    #[test]
+    fn a_reported_encoder_error_records_its_code_above_the_base() {
+        let mut sm = SteeringStateMachine::default();
+        let _ = sm.on_encoder_fault(MS, 7);
+        assert_eq!(
+            sm.fault_log().get(0).map(|r| (r.fault, r.detail)),
+            Some((Fault::Encoder, 0x1_0007))
+        );
+    }
+
+    /// The encoder timeout's boundary: a sample exactly 30 ms old is still fresh (Track, no
+    /// fault); 1 µs later the encoder is stale and latches.
+    #[test]
+    fn an_encoder_sample_exactly_one_timeout_old_is_still_fresh() {
+        let (mut sm, t0) = tracking_at(0.0);
+        let _ = sm.on_reference(t0 + 20 * MS, AsState::Driving);
+        let out = sm.tick(t0 + 30 * MS);
+        assert_eq!(out.demand, DriveDemand::Track);
+        assert!(out.faults.is_empty(), "{:?}", out.faults);
+        let out = sm.tick(t0 + 30 * MS + 1);
+        assert_eq!(out.faults, FaultSet::from(Fault::Encoder));
+        assert_eq!(
+            sm.fault_log().get(0).map(|r| r.detail),
+            Some(EncoderFaultDetail::Stale as i32)
+        );
+    }
+
+    /// The jump limit is `floor + rate x dt`, the limit itself allowed: a late sample (dt 0)
+    /// may move by exactly the 1 deg floor, a 100 Hz sample by 10.5 deg (limit 11 deg).
+    #[test]
+    fn a_jump_up_to_the_floor_plus_the_rate_allowance_is_plausible() {
+        let mut sm = SteeringStateMachine::default();
+        let _ = sm.on_encoder(10 * MS, SteeringDeg(0.0), motor_at(0.0));
+        let out = sm.on_encoder(10 * MS, SteeringDeg(1.0), motor_at(1.0));
+        assert!(out.faults.is_empty(), "1 deg at dt 0: {:?}", out.faults);
+        let out = sm.on_encoder(20 * MS, SteeringDeg(11.5), motor_at(11.5));
+        assert!(out.faults.is_empty(), "10.5 deg in 10 ms: {:?}", out.faults);
+        let out = sm.on_encoder(20 * MS, SteeringDeg(12.6), motor_at(12.6));
+        assert!(out.faults.contains(Fault::EncoderJump), "1.1 deg at dt 0");
+    }
+
+    /// Faults clear with an AS Off frame up to one reference timeout old, the timeout itself
+    /// included; 1 µs later it is stale.
+    #[test]
+    fn a_clear_accepts_an_as_off_frame_exactly_one_timeout_old() {
+        let (mut sm, t0) = tracking_at(0.0);
+        let _ = sm.on_bus_off(t0 + MS, 255);
+        let _ = sm.on_bus_recovered(t0 + 2 * MS);
+        let _ = sm.on_reference(t0 + 3 * MS, AsState::Off);
+        assert_eq!(
+            sm.clone().request_clear_faults(t0 + 33 * MS + 1),
+            Err(ClearRefused::NotInAsOff {
+                as_state: Some(AsState::Off),
+                stale: true
+            })
+        );
+        assert_eq!(sm.request_clear_faults(t0 + 33 * MS), Ok(()));
+    }
+
+    /// The hold never outlasts 130 ms after the last valid reference, even when the AS state
+    /// allowed power later than that reference (here from an AS-state-only frame 10 ms
+    /// after it): at 135 ms the drive is off (Standby, the timeout not latched yet).
+    #[test]
+    fn the_hold_ends_130_ms_after_the_last_reference() {
+        let mut sm = SteeringStateMachine::default();
+        let _ = sm.on_encoder(0, SteeringDeg(0.0), motor_at(0.0));
+        let _ = sm.on_reference(0, AsState::Off);
+        let _ = sm.on_encoder(10 * MS, SteeringDeg(0.0), motor_at(0.0));
+        let out = sm.on_as_state(10 * MS, AsState::Driving);
+        assert_eq!(out.demand, DriveDemand::Track);
+        let mut demands = Vec::new();
+        for t in (12 * MS..=135 * MS).step_by(1_000) {
+            let _ = sm.on_encoder(t, SteeringDeg(0.0), motor_at(0.0));
+            demands.push((t / MS, sm.tick(t).demand));
+        }
+        assert!(demands.contains(&(130, DriveDemand::Hold)), "{demands:?}");
+        assert_eq!(demands.last(), Some(&(135, DriveDemand::Disabled)));
+    }
+
+    /// "Not slowing" is judged against the speed away when the push began, less one count
+    /// per window of slack: a column already running away at 100 deg/s when the push begins
+    /// and keeping that speed latches 50 ms later; one the push slows to 50 deg/s (still away,
+    /// but braked) does not.
+    #[test]
+    fn a_runaway_is_judged_against_its_speed_when_the_push_began() {
+        let current = |s: f32| if s < 0.03 { 10.0 } else { 20.0 };
+        let at = runaway_latch(10.0, 2 * MS, |s| -100.0 * s, current);
+        assert!(
+            at.is_some_and(|at| (80 * MS..=82 * MS).contains(&at)),
+            "kept its speed: {at:?}"
+        );
+        let braked = |s: f32| {
+            if s < 0.03 {
+                -100.0 * s
+            } else {
+                -3.0 - 50.0 * (s - 0.03)
+            }
+        };
+        let at = runaway_latch(10.0, 2 * MS, braked, current);
+        assert_eq!(at, None, "braked to half its speed away");
+    }
+
+    /// The not-slowing rule's slack is one encoder count per speed window: a runaway at
+    /// 40 deg/s seen through the 12-bit encoder reads 4 or 5 counts per 10 ms (35 or
+    /// 44 deg/s). Pushed from 60.5 ms, after a 5-count window, it latches 50 ms later even
+    /// though the window then read one count less.
+    #[test]
+    fn a_runaway_one_encoder_count_slower_than_at_the_push_still_latches_in_50_ms() {
+        let current = |s: f32| if s < 0.0603 { 10.0 } else { 20.0 };
+        let at = runaway_latch(10.0, 500, |s| quantised(-40.0 * s), current);
+        assert_eq!(at, Some(110_500), "push at 60.5 ms");
+    }
 }

@@ -1459,6 +1459,41 @@ mod tests {
         );
     }
 
+    /// A link that reaches the enable walk with power not wanted (the drive's start after
+    /// the configuration, or a reset) parks the drive: on the first statusword answer it goes
+    /// to Standby and sends no controlword at all. The random-frame property below almost
+    /// never forms that answer; the mutation run of this check found it untested.
+    #[test]
+    fn an_enable_walk_without_power_wanted_parks_the_drive_in_standby() {
+        let n = node();
+        let mut link = Epos4Link::new(Epos4Config::paper(n), 0).unwrap();
+        // Configured (no SDO transfer open), NMT start sent.
+        link.phase = Phase::Starting;
+        assert!(!link.power_wanted());
+        let heartbeat = nmt::heartbeat_frame(n, NmtState::Operational).unwrap();
+        let out = link.on_frame(&heartbeat, 1_000);
+        assert_eq!(link.phase(), Phase::Enabling);
+        assert!(out.iter().any(|f| {
+            super::super::sdo::parse_request(f, n)
+                == Some(super::super::sdo::ServerRequest::Upload {
+                    object: od::STATUSWORD,
+                })
+        }));
+        let answer =
+            super::super::sdo::upload_response_frame(n, od::STATUSWORD, 0x0040, Width::U16)
+                .unwrap();
+        let out = link.on_frame(&answer, 2_000);
+        assert_eq!(link.phase(), Phase::Standby);
+        let controlwords = out.iter().any(|f| {
+            matches!(
+                super::super::sdo::parse_request(f, n),
+                Some(super::super::sdo::ServerRequest::Download { object, .. })
+                    if object == od::CONTROLWORD
+            )
+        });
+        assert!(!controlwords, "{out:?}");
+    }
+
     fn any_frame() -> impl Strategy<Value = Frame> {
         (0u16..=0x7FF, proptest::collection::vec(any::<u8>(), 0..=8))
             .prop_map(|(id, data)| Frame::new(StandardId::new(id).unwrap(), &data).unwrap())
