@@ -99,7 +99,11 @@ pub fn identify_within(
                 ParamSpec {
                     name,
                     lo: 0.0,
-                    hi: if factor >= 10.0 { 0.1 } else { 0.01 },
+                    hi: if factor >= 10.0 {
+                        0.1
+                    } else {
+                        ZERO_PARAMETER_WITHIN
+                    },
                     start: 0.0,
                     step: 0.002,
                 }
@@ -186,6 +190,21 @@ impl Identified {
     }
 }
 
+/// The most a parameter the table gives as zero (beta_tb) may reach and still count as the
+/// table's: a tenth of the free fit's range.
+const ZERO_PARAMETER_WITHIN: f64 = 0.01;
+
+/// Whether one refitted value is within `factor` of the table's (either way); a parameter the
+/// table gives as zero counts as within below [`ZERO_PARAMETER_WITHIN`]. NaN is not within.
+fn is_within(v: f64, table: f64, factor: f64) -> bool {
+    if table > 0.0 {
+        let r = v / table;
+        r <= factor && r >= 1.0 / factor
+    } else {
+        v <= ZERO_PARAMETER_WITHIN
+    }
+}
+
 /// The refitted parameters that left `factor` of the rig's value, as `name xF` (F the ratio
 /// to the rig's value), for a verdict's reason.
 pub fn outside_factor(rig: &Rig, id: &Identified, factor: f64) -> Vec<String> {
@@ -196,13 +215,14 @@ pub fn outside_factor(rig: &Rig, id: &Identified, factor: f64) -> Vec<String> {
         .identified()
         .iter()
         .filter_map(|(name, table)| {
-            let v = id.params.get(*name)?;
-            if *table > 0.0 {
-                let r = v / table;
-                (r > factor || r < 1.0 / factor).then(|| format!("{name} x{r:.2}"))
-            } else {
-                (*v > 0.01).then(|| format!("{name} {v:.3}"))
-            }
+            let v = *id.params.get(*name)?;
+            (!is_within(v, *table, factor)).then(|| {
+                if *table > 0.0 {
+                    format!("{name} x{:.2}", v / table)
+                } else {
+                    format!("{name} {v:.3}")
+                }
+            })
         })
         .collect()
 }
@@ -210,18 +230,5 @@ pub fn outside_factor(rig: &Rig, id: &Identified, factor: f64) -> Vec<String> {
 /// Every refitted parameter within `factor` of the rig's value (either way); a parameter the
 /// table gives as zero (beta_tb) counts as within when it stays below a tenth of its range.
 pub fn within_factor(rig: &Rig, id: &Identified, factor: f64) -> bool {
-    let RigModel::Paper(m) = &rig.model else {
-        return true;
-    };
-    m.plant.identified().iter().all(|(name, table)| {
-        let Some(v) = id.params.get(*name) else {
-            return true;
-        };
-        if *table > 0.0 {
-            let r = v / table;
-            r <= factor && r >= 1.0 / factor
-        } else {
-            *v <= 0.01
-        }
-    })
+    outside_factor(rig, id, factor).is_empty()
 }

@@ -1141,15 +1141,20 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     progress.finish();
     // Parameters: Table 4 refitted on the fitting window, scored by the same likelihood. Only
     // worth its hundred simulations when the nominal model is well above the noise.
+    // A refit's rig and what it leaves on the fitting window.
+    let refit_cost = |id: &identify::Identified| -> (Rig, f64) {
+        let mut refit = rig.clone();
+        identify::apply(&mut refit, id);
+        let c = cost(&fscorer.residual(frec, &simulate(&refit, frec, &nominal)));
+        (refit, c)
+    };
     let mut parameters: Option<(identify::Identified, Rig, f64)> = None;
     if opts.parameter_iterations > 0
         && matches!(rig.model, RigModel::Paper(_))
         && cost0 > 2.0 * floor
         && let Ok(id) = identify::identify(rig, frec, opts.parameter_iterations, false)
     {
-        let mut refit = rig.clone();
-        identify::apply(&mut refit, &id);
-        let c = cost(&fscorer.residual(frec, &simulate(&refit, frec, &nominal)));
+        let (refit, c) = refit_cost(&id);
         parameters = Some((id, refit, c));
     }
     let effect_cost = verdict_candidate.as_ref().map_or(cost0, |c| c.cost);
@@ -1174,10 +1179,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         .ok()
         .map(|id| {
             refit_simulations += id.simulations;
-            let mut refit = rig.clone();
-            identify::apply(&mut refit, &id);
-            let c = cost(&fscorer.residual(frec, &simulate(&refit, frec, &nominal)));
-            (refit, c)
+            refit_cost(&id)
         }),
         None => None,
     };
