@@ -30,6 +30,10 @@ pub struct PlantEffects {
     pub stribeck_velocity_rad_s: f64,
     /// Coulomb friction at the rack, N.
     pub rack_coulomb_n: f64,
+    /// Rack speed over which the rack friction builds up, mm/s: the force is
+    /// `rack_coulomb_n tanh(v / rack_creep_mm_s)`, so below it the rack creeps under a force
+    /// short of the friction (grease, seals). 0 = sharp: the friction holds the rack still.
+    pub rack_creep_mm_s: f64,
     /// Tyre scrub: the largest force of the bristle at the rack, N.
     pub tire_force_n: f64,
     /// Tyre scrub: the bristle's stiffness at the rack, N/mm.
@@ -91,6 +95,7 @@ impl PlantEffects {
         motor_stribeck_nm: 0.0,
         stribeck_velocity_rad_s: 0.0,
         rack_coulomb_n: 0.0,
+        rack_creep_mm_s: 0.0,
         tire_force_n: 0.0,
         tire_stiffness_n_per_mm: 0.0,
         tire_dahl: false,
@@ -106,7 +111,7 @@ impl PlantEffects {
     };
 
     /// The keys of `--plant-effects`, with what each sets.
-    pub const KEYS: [(&'static str, &'static str); 9] = [
+    pub const KEYS: [(&'static str, &'static str); 10] = [
         (
             "backlash_deg",
             "play in the belt/nut, full width, deg at the wheel",
@@ -116,6 +121,10 @@ impl PlantEffects {
             "play between pinion and column encoder, deg at the wheel",
         ),
         ("coulomb_n", "Coulomb friction at the rack, N"),
+        (
+            "coulomb_creep_mm_s",
+            "rack speed over which the rack friction builds up (tanh), mm/s; 0 = sharp",
+        ),
         ("motor_coulomb_nm", "Coulomb friction at the motor, Nm"),
         (
             "motor_stribeck_nm",
@@ -172,6 +181,7 @@ impl PlantEffects {
                 "backlash_deg" => &mut fx.belt_play_deg,
                 "column_play_deg" => &mut fx.column_play_deg,
                 "coulomb_n" => &mut fx.rack_coulomb_n,
+                "coulomb_creep_mm_s" => &mut fx.rack_creep_mm_s,
                 "motor_coulomb_nm" => &mut fx.motor_coulomb_nm,
                 "motor_stribeck_nm" => &mut fx.motor_stribeck_nm,
                 "stribeck_rad_s" => &mut fx.stribeck_velocity_rad_s,
@@ -206,6 +216,7 @@ impl std::fmt::Display for PlantEffects {
             ("backlash_deg", self.belt_play_deg),
             ("column_play_deg", self.column_play_deg),
             ("coulomb_n", self.rack_coulomb_n),
+            ("coulomb_creep_mm_s", self.rack_creep_mm_s),
             ("motor_coulomb_nm", self.motor_coulomb_nm),
             ("motor_stribeck_nm", self.motor_stribeck_nm),
             ("stribeck_rad_s", self.stribeck_velocity_rad_s),
@@ -315,6 +326,16 @@ fn friction(fc: f64, fs: f64, vs: f64, w: f64, j: f64, dt: f64) -> f64 {
     -level * (w / w_eps).clamp(-1.0, 1.0)
 }
 
+/// Coulomb torque `fc` that builds up smoothly over the speed `w_creep`:
+/// `-fc tanh(w / w_creep)`, never steeper around zero than [`friction`]'s stable slope.
+fn creeping_friction(fc: f64, w_creep: f64, w: f64, j: f64, dt: f64) -> f64 {
+    let w_eps = 4.0 * fc * dt / j;
+    if w_creep <= w_eps {
+        return -fc * (w / w_eps).clamp(-1.0, 1.0);
+    }
+    -fc * (w / w_creep).tanh()
+}
+
 /// The paper's plant (eqs. 1-8) with [`PlantEffects`], one current-loop step at a time.
 #[derive(Debug, Clone)]
 pub struct EffectPlant {
@@ -417,6 +438,15 @@ impl EffectPlant {
             j_screw,
             dt,
         );
+        if fx.rack_creep_mm_s > 0.0 && screw != 0.0 {
+            screw = creeping_friction(
+                fx.rack_coulomb_n * p.tau_bs,
+                fx.rack_creep_mm_s * 1e-3 / p.tau_bs,
+                x[state::W_BS],
+                j_screw,
+                dt,
+            );
+        }
         screw -= self.tire.force(x[state::THETA_BS] * p.tau_bs) * p.tau_bs;
         if self.belt_half_nut_rad > 0.0 {
             // The linear model's belt pulls the nut with k_B s + beta_B s' (s = stretch at the
@@ -591,6 +621,31 @@ mod tests {
         let free = drift(PlantEffects::NONE);
         assert!(free > 1.0, "free pinion moved only {free} deg");
         assert!(held < 0.05 * free, "held {held} deg vs free {free} deg");
+        // With a creep speed the same friction only slows the push (about 100 N against 200:
+        // tanh(v / 2 mm/s) = 1/2 at 1.1 mm/s), so the rack creeps where the sharp one held.
+        let creeping = drift(PlantEffects::parse("coulomb_n=200,coulomb_creep_mm_s=2").unwrap());
+        assert!(
+            creeping > 10.0 * held && creeping < 0.9 * free,
+            "creeping {creeping} deg, held {held} deg, free {free} deg"
+        );
+    }
+
+    #[test]
+    fn a_creep_speed_below_the_stable_slope_is_the_sharp_friction() {
+        // 1e-6 mm/s is far below what one 50 us step can resolve: the same torque as none.
+        let run = |fx: PlantEffects| {
+            let mut p = EffectPlant::new(PlantParams::PAPER, fx, 5e-5).unwrap();
+            p.set_at_rest(0.0);
+            for k in 0..4000 {
+                p.step(if (k / 1000) % 2 == 0 { 3.0 } else { -3.0 });
+            }
+            p.state()
+        };
+        let sharp = run(PlantEffects::parse("coulomb_n=300").unwrap());
+        let tiny = run(PlantEffects::parse("coulomb_n=300,coulomb_creep_mm_s=1e-6").unwrap());
+        assert_eq!(sharp, tiny);
+        let fx = PlantEffects::parse("coulomb_n=300,coulomb_creep_mm_s=1.5").unwrap();
+        assert_eq!(fx.to_string(), "coulomb_n=300,coulomb_creep_mm_s=1.5");
     }
 
     #[test]

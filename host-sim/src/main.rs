@@ -153,7 +153,8 @@ struct Common {
     no_current_guard: bool,
     /// Effects the linear plant leaves out, as KEY=VALUE[,...]: backlash_deg (play in the
     /// belt/nut, deg at the wheel), column_play_deg, coulomb_n (rack friction, N),
-    /// motor_coulomb_nm, motor_stribeck_nm, stribeck_rad_s, tire_n with tire_n_per_mm.
+    /// coulomb_creep_mm_s (rack speed it builds up over, tanh; 0 = sharp), motor_coulomb_nm,
+    /// motor_stribeck_nm, stribeck_rad_s, tire_n with tire_n_per_mm, tire_dahl.
     /// E.g. `--plant-effects backlash_deg=1.5,coulomb_n=200`.
     #[arg(long, value_name = "LIST", default_value = "")]
     plant_effects: PlantEffects,

@@ -31,8 +31,9 @@ use steering_ecu::units::{Amps, SteeringDeg, Volts};
 /// What the world hides, in its own forms and units.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Truth {
-    /// The car's plant: Table 4 off by up to 10 % (more in the `parameters` class).
-    #[serde(skip)]
+    /// The car's plant: Table 4 off by up to 10 % (more in the `parameters` class). Written
+    /// as each identified parameter's factor against Table 4, so a miss can be read.
+    #[serde(rename = "table4_factors", serialize_with = "table4_factors")]
     pub plant: PlantParams,
     /// Smooth Coulomb friction at the rack, N (0 = none).
     pub rack_friction_n: f64,
@@ -43,6 +44,18 @@ pub struct Truth {
     pub dahl_stiffness_n_per_mm: f64,
     /// The reference reaches the ECU this late, s.
     pub reference_delay_s: f64,
+}
+
+fn table4_factors<S: serde::Serializer>(plant: &PlantParams, s: S) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeMap;
+    let table = PlantParams::PAPER.identified();
+    let mut map = s.serialize_map(Some(table.len()))?;
+    for ((name, car), (_, paper)) in plant.identified().iter().zip(table.iter()) {
+        // A parameter the table gives as zero has no factor: its value then.
+        let v = if *paper == 0.0 { *car } else { car / paper };
+        map.serialize_entry(name, &((v * 1e3).round() / 1e3))?;
+    }
+    map.end()
 }
 
 /// One generated case: what it hides and how its log is written.

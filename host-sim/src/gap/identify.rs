@@ -135,6 +135,9 @@ pub fn identify_within(
             scan: 0,
             iterations,
             polish: 0,
+            // Nine columns of a whole closed-loop run each: the refit is the diagnosis's
+            // longest stretch on one thread otherwise.
+            jacobian_threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
         },
         &residual,
         &|| bar.tick(),

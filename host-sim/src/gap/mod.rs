@@ -346,9 +346,14 @@ impl EffectKind {
                 vec![spec("supply_v", 8.0, 30.0, m.supply_v, 0.3)]
             }
             (EffectKind::SupplySag, _) => vec![],
-            (EffectKind::RackFriction, RigModel::Paper(_)) => {
-                vec![spec("force_n", 0.0, 2000.0, 0.0, 40.0)]
-            }
+            // The creep speed: how fast the rack must move before the friction is all there
+            // (the force is F tanh(v / v_creep)). Sharp (0) up to a few mm/s, against the
+            // rack's 5-250 mm/s in a sweep: grease and seals make real rack friction build up
+            // over a speed, and a sharp model then reads the creep as play or a larger force.
+            (EffectKind::RackFriction, RigModel::Paper(_)) => vec![
+                spec("force_n", 0.0, 2000.0, 0.0, 40.0),
+                spec("creep_mm_s", 0.0, 5.0, 0.0, 0.25),
+            ],
             (EffectKind::RackFriction, _) => vec![],
             (EffectKind::BeltPlay, RigModel::Paper(_)) => {
                 vec![spec("width_deg", 0.0, 4.0, 0.0, 0.1)]
@@ -423,7 +428,10 @@ impl EffectKind {
                 fx.tire_stiffness_n_per_mm = get(1);
             }
             EffectKind::SupplySag => fx.supply_v = get(0),
-            EffectKind::RackFriction => fx.rack_coulomb_n = get(0),
+            EffectKind::RackFriction => {
+                fx.rack_coulomb_n = get(0);
+                fx.rack_creep_mm_s = get(1);
+            }
             EffectKind::BeltPlay => fx.belt_play = get(0),
             EffectKind::TireDahl => {
                 fx.tire_force_n = get(0);

@@ -46,6 +46,8 @@ pub struct Effects {
     pub supply_v: f64,
     /// Coulomb friction at the rack, N (paper rig only).
     pub rack_coulomb_n: f64,
+    /// Rack speed over which that friction builds up (tanh), mm/s; 0 = sharp.
+    pub rack_creep_mm_s: f64,
     /// Play in the belt/nut, full width, deg at the wheel (paper rig only).
     pub belt_play: f64,
     /// The tyre follows Dahl's law instead of the elasto-plastic bristle (paper rig only).
@@ -99,6 +101,7 @@ impl Effects {
             motor_stribeck_nm: self.stribeck,
             stribeck_velocity_rad_s: self.stribeck_velocity,
             rack_coulomb_n: self.rack_coulomb_n,
+            rack_creep_mm_s: self.rack_creep_mm_s,
             tire_force_n: self.tire_force_n,
             tire_stiffness_n_per_mm: self.tire_stiffness_n_per_mm,
             tire_dahl: self.tire_dahl,

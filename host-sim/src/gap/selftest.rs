@@ -236,6 +236,11 @@ pub struct CaseResult {
     pub gof_after: f64,
     /// The verdict's reason, for the record.
     pub reason: String,
+    /// Each candidate fitted alone, best first (sizes, share removed, large enough), and the
+    /// Table 4 refit when one was tried: what a miss is read from.
+    pub ranking: Vec<super::Candidate>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub parameters: Option<super::identify::Identified>,
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -288,6 +293,8 @@ pub fn run(
                             gof_before: d.baseline_gof,
                             gof_after: d.verdict.gof_after,
                             reason: d.verdict.reason.clone(),
+                            ranking: d.ranking,
+                            parameters: d.parameters,
                             case,
                         };
                         on_case(&r);
@@ -383,6 +390,7 @@ pub fn default_options() -> Options {
             scan: 5,
             iterations: 5,
             polish: 2,
+            jacobian_threads: 1,
         },
         ..Options::default()
     }
