@@ -480,14 +480,19 @@ impl EffectPlant {
     }
 
     fn advance(&mut self, voltage_v: f64, t_motor: f64, t_screw: f64) {
-        let x = self.x;
-        for (i, (row, b)) in self.ad.iter().zip(self.bd.iter()).enumerate() {
-            let mut acc = b[0] * voltage_v + b[1] * t_motor + b[2] * t_screw;
-            for (a, xj) in row.iter().zip(x.iter()) {
-                acc += a * xj;
-            }
-            self.x[i] = acc;
+        // x' = Ad x + Bd u, column by column: the seven rows are seven independent sums the
+        // CPU runs side by side (row by row each waits on its previous add), each summed in
+        // the same order as a row-by-row loop, so the result is the same to the bit.
+        let mut next = [0.0; 7];
+        for (acc, b) in next.iter_mut().zip(self.bd.iter()) {
+            *acc = b[0] * voltage_v + b[1] * t_motor + b[2] * t_screw;
         }
+        for (j, xj) in self.x.iter().enumerate() {
+            for (acc, row) in next.iter_mut().zip(self.ad.iter()) {
+                *acc += row[j] * xj;
+            }
+        }
+        self.x = next;
         self.column_rad = self.column_play.step(self.pinion_rad());
     }
 }

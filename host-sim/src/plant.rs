@@ -382,14 +382,17 @@ impl Actuator for LinearPlant {
     }
 
     fn step(&mut self, voltage_v: f64) {
-        let x = self.x;
-        for (i, row) in self.ad.iter().enumerate() {
-            let mut acc = self.bd[i] * voltage_v;
-            for (a, xj) in row.iter().zip(x.iter()) {
-                acc += a * xj;
-            }
-            self.x[i] = acc;
+        // Column by column, each row summed in the same order (as `EffectPlant`'s step).
+        let mut next = [0.0; 7];
+        for (acc, b) in next.iter_mut().zip(self.bd.iter()) {
+            *acc = b * voltage_v;
         }
+        for (j, xj) in self.x.iter().enumerate() {
+            for (acc, row) in next.iter_mut().zip(self.ad.iter()) {
+                *acc += row[j] * xj;
+            }
+        }
+        self.x = next;
     }
 
     fn current_a(&self) -> f64 {

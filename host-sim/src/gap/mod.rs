@@ -944,28 +944,28 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let mut ranking: Vec<Candidate> = Vec::new();
     let jobs: Vec<EffectKind> = opts.effects.clone();
     let threads = opts.threads.max(1);
+    // From a queue, not in fixed chunks: the fits differ in length (a two-parameter effect
+    // takes longer), and a chunk of long ones would leave a core idle.
+    let next_job = AtomicUsize::new(0);
     let results: Vec<(EffectKind, FitOut)> = std::thread::scope(|s| {
         let mut out = Vec::new();
-        for chunk in jobs.chunks(jobs.len().div_ceil(threads).max(1)) {
+        for _ in 0..threads.min(jobs.len()) {
             let handle = s.spawn(|| {
-                chunk
-                    .iter()
-                    .map(|&k| {
-                        (
-                            k,
-                            fit_effects(
-                                rig,
-                                frec,
-                                fscorer,
-                                &[k],
-                                None,
-                                &nominal,
-                                opts.fit,
-                                &progress,
-                            ),
-                        )
-                    })
-                    .collect::<Vec<_>>()
+                let mut done = Vec::new();
+                while let Some(&k) = jobs.get(next_job.fetch_add(1, Ordering::Relaxed)) {
+                    let fitted = fit_effects(
+                        rig,
+                        frec,
+                        fscorer,
+                        &[k],
+                        None,
+                        &nominal,
+                        opts.fit,
+                        &progress,
+                    );
+                    done.push((k, fitted));
+                }
+                done
             });
             out.push(handle);
         }
@@ -975,6 +975,10 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
             .collect()
     });
+    // In the candidates' order whichever thread finished first, so equal costs (two effects
+    // both fitted to nothing) rank the same on every run.
+    let mut results = results;
+    results.sort_by_key(|(k, _)| jobs.iter().position(|j| j == k));
     for (k, (values, errs, c, evals)) in results {
         ranking.push(make_candidate(
             rig,
