@@ -24,10 +24,15 @@
 //!             |       | its middle, 5 ms before              | the period it averages)
 //! ```
 //!
-//! Without motor frames, in EPOS4 mode, the motor angle and current are the drive's TPDO1
-//! position (0x6064) and TPDO2 current (0x30D1), dated when they arrived (the drive samples
-//! them at the SYNC just before). Without either (an older firmware), `motor_rad` is `nan` and
-//! the current comes from the status frame (one sample, 20 mA). The notes say which.
+//! In EPOS4 mode the ECU measures neither: its motor frame forwards the drive's TPDO1 position
+//! (0x6064) and TPDO2 averaged current (0x30D1), which the drive sampled at the SYNC it
+//! answered, up to a period before the motor frame. When the recording holds those PDOs, each
+//! motor frame's angle and current are dated when the latest TPDO1 and TPDO2 arrived, not by
+//! the ages above (which, in a simulated EPOS4-mode car, put the motor angle 7 ms and the
+//! current 9 ms late against the column, and the diagnosis then read a 10.7 ms `delay_current`
+//! into a car with none). Without motor frames the PDOs themselves stand in, dated the same
+//! way. Without either (an older firmware), `motor_rad` is `nan` and the current comes from
+//! the status frame (one sample, 20 mA). The notes say which.
 
 use super::decode::{Decoded, Decoder};
 use super::{BringupError, Stamped};
@@ -123,6 +128,8 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
     let (mut motor, mut current) = (Series::default(), Series::default());
     // EPOS4 mode: the drive's own position (TPDO1) and current (TPDO2), if no motor frame.
     let (mut epos_motor, mut epos_current) = (Series::default(), Series::default());
+    // When the latest TPDO1 / TPDO2 were sent (EPOS4 mode): a motor frame forwards them.
+    let (mut tpdo1_sent, mut tpdo2_sent): (Option<u64>, Option<u64>) = (None, None);
     let mut invalid = 0;
     for f in frames {
         match decoder.decode(&f.frame) {
@@ -136,14 +143,24 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
             }
             Decoded::Motor(Ok(m)) => {
                 let sent = f.t_us.saturating_sub(BUS_LATENCY_US);
-                motor.push(sent, MOTOR_AGE_US, f64::from(m.angle.0));
-                current.push(sent, CURRENT_AGE_US, f64::from(m.current_mean.0));
+                match tpdo1_sent {
+                    Some(t) => motor.push(t, 0, f64::from(m.angle.0)),
+                    None => motor.push(sent, MOTOR_AGE_US, f64::from(m.angle.0)),
+                }
+                match tpdo2_sent {
+                    Some(t) => current.push(t, 0, f64::from(m.current_mean.0)),
+                    None => current.push(sent, CURRENT_AGE_US, f64::from(m.current_mean.0)),
+                }
             }
             Decoded::EposTpdo1 { motor_rad, .. } => {
-                epos_motor.push(f.t_us.saturating_sub(BUS_LATENCY_US), 0, motor_rad)
+                let sent = f.t_us.saturating_sub(BUS_LATENCY_US);
+                tpdo1_sent = Some(sent);
+                epos_motor.push(sent, 0, motor_rad)
             }
             Decoded::EposTpdo2 { current_a } => {
-                epos_current.push(f.t_us.saturating_sub(BUS_LATENCY_US), 0, current_a)
+                let sent = f.t_us.saturating_sub(BUS_LATENCY_US);
+                tpdo2_sent = Some(sent);
+                epos_current.push(sent, 0, current_a)
             }
             Decoded::Reference(Err(_)) | Decoded::Status(Err(_)) | Decoded::Motor(Err(_)) => {
                 invalid += 1
@@ -162,6 +179,13 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
         });
     }
     let mut notes = Vec::new();
+    if !motor.t.is_empty() && (tpdo1_sent.is_some() || tpdo2_sent.is_some()) {
+        notes.push(
+            "EPOS4 mode: the motor frames' angle and current are the drive's TPDO1 and TPDO2, \
+             dated when those arrived"
+                .to_string(),
+        );
+    }
     let from_epos = motor.t.is_empty() && !epos_motor.t.is_empty() && !epos_current.t.is_empty();
     if from_epos {
         notes.push(
@@ -256,8 +280,8 @@ mod tests {
     use steering_ecu::can::{Frame, StandardId};
     use steering_ecu::canopen::NodeId;
     use steering_ecu::canopen::epos4::PositionScale;
-    use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference, Status};
-    use steering_ecu::units::{Amps, SteeringDeg};
+    use steering_ecu::protocol::{AliveCounter, MotorStatus, ProtocolConfig, Reference, Status};
+    use steering_ecu::units::{Amps, MotorRad, SteeringDeg};
 
     fn frames(with_epos: bool) -> Vec<Stamped> {
         let cfg = ProtocolConfig::DEFAULT;
@@ -311,6 +335,61 @@ mod tests {
         for (m, i) in built.log.motor_rad.iter().zip(&built.log.current_a) {
             assert!((m - std::f64::consts::PI).abs() < 1e-6, "{m}");
             assert!((i - 1.5).abs() < 1e-6, "{i}"); // mA through f32
+        }
+    }
+
+    #[test]
+    fn in_epos4_mode_a_motor_frame_is_dated_by_the_pdos_it_forwards() {
+        // The drive answers each SYNC (1 ms into the period) with its position and current;
+        // the ECU forwards both in its motor frame 7 ms later. Both ramp by one unit a
+        // period, so a row's value tells the instant it was read at and the instant its
+        // sample was dated at.
+        let cfg = ProtocolConfig::DEFAULT;
+        let mut frames = frames(false);
+        for k in 0..20u64 {
+            let v = k as f64;
+            let mut tpdo1 = vec![0x37, 0x02];
+            // 84 inc/rev: 1 rad is 84 / 2 pi increments; whole increments only.
+            tpdo1.extend_from_slice(&(k as i32 * 84).to_le_bytes());
+            let tpdo2 = (k as i32 * 1000).to_le_bytes();
+            for (id, data) in [(0x181u16, &tpdo1[..]), (0x281, &tpdo2[..])] {
+                frames.push(Stamped {
+                    t_us: k * 10_000 + 1_000 + BUS_LATENCY_US,
+                    frame: Frame::new(StandardId::new(id).unwrap(), data).unwrap(),
+                });
+            }
+            frames.push(Stamped {
+                t_us: k * 10_000 + 8_000,
+                frame: cfg.encode_motor(&MotorStatus {
+                    angle: MotorRad((v * std::f64::consts::TAU) as f32),
+                    current_mean: Amps(v as f32),
+                    counter: AliveCounter::wrapping(k as u8),
+                }),
+            });
+        }
+        frames.sort_by_key(|f| f.t_us);
+        let built = build(&frames, &decoder(), Rows::Active).unwrap();
+        assert!(built.notes[0].contains("TPDO1"), "{:?}", built.notes);
+        // Row k: the period from the push at k x 10 ms + 130 us; the current is read at its
+        // middle (5.13 ms), the angle at its end (10.13 ms); samples dated 1 ms in: k + 0.413
+        // and k + 0.913. Dated by the motor frame's own ages they would read k + 0.226 and
+        // k + 0.251.
+        for (k, (m, i)) in built
+            .log
+            .motor_rad
+            .iter()
+            .zip(&built.log.current_a)
+            .enumerate()
+            .skip(1)
+            .take(15)
+        {
+            let k = k as f64;
+            assert!((i - (k + 0.413)).abs() < 0.01, "row {k}: current {i}");
+            let turns = m / std::f64::consts::TAU;
+            assert!(
+                (turns - (k + 0.913)).abs() < 0.01,
+                "row {k}: motor {turns} turns"
+            );
         }
     }
 
