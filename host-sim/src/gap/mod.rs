@@ -1056,16 +1056,45 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                             .map(|sp| sp.start)
                             .chain(best.values.iter().copied())
                             .collect();
-                        let (values, errs, c, evals) = fit_effects(
-                            rig,
-                            frec,
-                            fscorer,
-                            &kinds,
-                            Some(&start),
-                            &nominal,
-                            opts.fit,
-                            progress,
-                        );
+                        let fit_from = |start: &[f64]| {
+                            fit_effects(
+                                rig,
+                                frec,
+                                fscorer,
+                                &kinds,
+                                Some(start),
+                                &nominal,
+                                opts.fit,
+                                progress,
+                            )
+                        };
+                        let (mut values, mut errs, mut c, mut evals) = fit_from(&start);
+                        // The second effect collapsed below its minimum size although alone it
+                        // was large enough and removed most of the cost: the first may have
+                        // grown to stand in for it (play + rack friction on a sweep, case 109:
+                        // the friction at 1.5 times its size, the play at 0, 10 times the
+                        // floor). Again from a start where they share the work: the second
+                        // at its size alone, the first at half its own.
+                        let n_other = other.values.len();
+                        let collapsed = values
+                            .first()
+                            .is_some_and(|v| *v < other.kinds[0].min_size(rig));
+                        if collapsed && other.large_enough && other.improvement >= 0.5 {
+                            let mut shared: Vec<f64> = other
+                                .values
+                                .iter()
+                                .chain(best.values.iter())
+                                .copied()
+                                .collect();
+                            if let Some(lead) = shared.get_mut(n_other) {
+                                *lead *= 0.5;
+                            }
+                            let again = fit_from(&shared);
+                            evals += again.3;
+                            if again.2 < c {
+                                (values, errs, c) = (again.0, again.1, again.2);
+                            }
+                        }
                         make_candidate(rig, rec, scorer, &kinds, values, errs, c, evals, cost0, fov)
                     })
                 })
