@@ -1070,16 +1070,22 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                         };
                         let (mut values, mut errs, mut c, mut evals) = fit_from(&start);
                         // The second effect collapsed below its minimum size although alone it
-                        // was large enough and removed most of the cost: the first may have
-                        // grown to stand in for it (play + rack friction on a sweep, case 109:
-                        // the friction at 1.5 times its size, the play at 0, 10 times the
-                        // floor). Again from a start where they share the work: the second
-                        // at its size alone, the first at half its own.
+                        // ran to the end of its range (it stood in for more than itself) and
+                        // removed at least half of the cost: the first may have grown to stand
+                        // in for it (play + rack friction on a sweep, case 109: the friction
+                        // at 1.5 times its size, the play at 0, 10 times the floor; the play
+                        // alone at its 4 deg limit). Again from a start where they share the
+                        // work: the second at its size alone, the first at half its own.
                         let n_other = other.values.len();
                         let collapsed = values
                             .first()
                             .is_some_and(|v| *v < other.kinds[0].min_size(rig));
-                        if collapsed && other.large_enough && other.improvement >= 0.5 {
+                        let pinned = other.kinds[0]
+                            .specs(rig)
+                            .first()
+                            .zip(other.values.first())
+                            .is_some_and(|(sp, v)| *v >= sp.hi - 1e-3 * (sp.hi - sp.lo));
+                        if collapsed && pinned && other.large_enough && other.improvement >= 0.5 {
                             let mut shared: Vec<f64> = other
                                 .values
                                 .iter()
