@@ -308,8 +308,10 @@ impl Bristle {
 }
 
 /// Coulomb(+Stribeck) torque opposing `w`: saturated-linear around zero with a slope that one
-/// explicit step of inertia `j` at step `dt` cannot overshoot (c dt / j <= 1/4).
-fn friction(fc: f64, fs: f64, vs: f64, w: f64, j: f64, dt: f64) -> f64 {
+/// explicit step of inertia `j` at step `dt` cannot overshoot (c dt / j <= 1/4). With a creep
+/// speed `w_creep` above that slope's width it builds up smoothly instead, `tanh(w / w_creep)`
+/// (0 = sharp).
+fn friction(fc: f64, fs: f64, vs: f64, w_creep: f64, w: f64, j: f64, dt: f64) -> f64 {
     // Absent friction costs nothing: the simulation runs this twice per 50 us step.
     if fc == 0.0 && fs == 0.0 {
         return 0.0;
@@ -323,17 +325,11 @@ fn friction(fc: f64, fs: f64, vs: f64, w: f64, j: f64, dt: f64) -> f64 {
         return 0.0;
     }
     let w_eps = 4.0 * level * dt / j;
-    -level * (w / w_eps).clamp(-1.0, 1.0)
-}
-
-/// Coulomb torque `fc` that builds up smoothly over the speed `w_creep`:
-/// `-fc tanh(w / w_creep)`, never steeper around zero than [`friction`]'s stable slope.
-fn creeping_friction(fc: f64, w_creep: f64, w: f64, j: f64, dt: f64) -> f64 {
-    let w_eps = 4.0 * fc * dt / j;
-    if w_creep <= w_eps {
-        return -fc * (w / w_eps).clamp(-1.0, 1.0);
+    if w_creep > w_eps {
+        -level * (w / w_creep).tanh()
+    } else {
+        -level * (w / w_eps).clamp(-1.0, 1.0)
     }
-    -fc * (w / w_creep).tanh()
 }
 
 /// The paper's plant (eqs. 1-8) with [`PlantEffects`], one current-loop step at a time.
@@ -426,6 +422,7 @@ impl EffectPlant {
             } else {
                 1.0
             },
+            0.0,
             x[state::W_ROT],
             p.j_rot,
             dt,
@@ -434,19 +431,11 @@ impl EffectPlant {
             fx.rack_coulomb_n * p.tau_bs,
             0.0,
             1.0,
+            fx.rack_creep_mm_s * 1e-3 / p.tau_bs,
             x[state::W_BS],
             j_screw,
             dt,
         );
-        if fx.rack_creep_mm_s > 0.0 && screw != 0.0 {
-            screw = creeping_friction(
-                fx.rack_coulomb_n * p.tau_bs,
-                fx.rack_creep_mm_s * 1e-3 / p.tau_bs,
-                x[state::W_BS],
-                j_screw,
-                dt,
-            );
-        }
         screw -= self.tire.force(x[state::THETA_BS] * p.tau_bs) * p.tau_bs;
         if self.belt_half_nut_rad > 0.0 {
             // The linear model's belt pulls the nut with k_B s + beta_B s' (s = stretch at the
@@ -480,19 +469,12 @@ impl EffectPlant {
     }
 
     fn advance(&mut self, voltage_v: f64, t_motor: f64, t_screw: f64) {
-        // x' = Ad x + Bd u, column by column: the seven rows are seven independent sums the
-        // CPU runs side by side (row by row each waits on its previous add), each summed in
-        // the same order as a row-by-row loop, so the result is the same to the bit.
+        // x' = Bd u + Ad x.
         let mut next = [0.0; 7];
         for (acc, b) in next.iter_mut().zip(self.bd.iter()) {
             *acc = b[0] * voltage_v + b[1] * t_motor + b[2] * t_screw;
         }
-        for (j, xj) in self.x.iter().enumerate() {
-            for (acc, row) in next.iter_mut().zip(self.ad.iter()) {
-                *acc += row[j] * xj;
-            }
-        }
-        self.x = next;
+        self.x = crate::plant::add_ad_x(next, &self.ad, &self.x);
         self.column_rad = self.column_play.step(self.pinion_rad());
     }
 }
