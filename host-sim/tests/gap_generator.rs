@@ -77,3 +77,103 @@ fn play_in_the_belt_beside_rack_friction_is_named_on_a_sweep() {
     assert_eq!(case.case.hidden, ["backlash", "coulomb_friction"]);
     assert_eq!(case.named, case.case.hidden, "{}", case.reason);
 }
+
+/// The steering wheel hangs on the torsion bar and, in a driverless car, on nothing else: a
+/// column-angle and current log sees it only through the bar, reflected to the screw by
+/// g^2 = (tau_bs / tau_p)^2 (eq. 6 with printing error 2 mended). Its damping is 1/15 of the
+/// screw's own beta_bs and its inertia 1/60 of J*_bs (eq. 8). Measured in the independent
+/// world on a 1 kHz log of an 8 deg sweep, against the chatter two nearly equal cars already
+/// show (beta_bs x1.01): k_tb x3 changes the log less than that chatter; beta_sw x3 changes
+/// it more, and beta_bs raised by the reflected amount (x1.13) takes away only part of it
+/// (the bar's corner, k_tb / beta_sw = 104 rad/s, is near the sweep's top). The README's
+/// account of the selftest's `parameters` misses rests on these figures.
+#[test]
+fn the_steering_wheel_side_seen_through_the_torsion_bar() {
+    use host_sim::plant::PlantParams;
+    let p = PlantParams::PAPER;
+    let g2 = p.screw_to_pinion().powi(2);
+    let damping_share = g2 * p.beta_sw / p.beta_bs;
+    let inertia_share = g2 * p.j_sw / p.j_bs_equivalent();
+    println!(
+        "beta_sw at the screw: {damping_share:.4} of beta_bs; j_sw: {inertia_share:.5} of J*_bs"
+    );
+    assert!((damping_share - 0.065).abs() < 0.002, "{damping_share}");
+    assert!((inertia_share - 0.0168).abs() < 0.001, "{inertia_share}");
+
+    let log = |f: &dyn Fn(&mut PlantParams)| {
+        let mut case = GenCase::nominal(sweep(), 1000);
+        f(&mut case.truth.plant);
+        record_of(&case, 3)
+    };
+    let table = log(&|_| {});
+    let rms = |a: &[f64], b: &[f64]| {
+        (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
+    };
+    let apart = |r: &host_sim::gap::Record, o: &host_sim::gap::Record| {
+        (rms(&r.output, &o.output), rms(&r.effort, &o.effort))
+    };
+    let chatter = apart(&log(&|q| q.beta_bs *= 1.01), &table);
+    let bar = apart(&log(&|q| q.k_tb *= 3.0), &table);
+    let wheel_log = log(&|q| q.beta_sw *= 3.0);
+    let wheel = apart(&wheel_log, &table);
+    let reflected = apart(
+        &wheel_log,
+        &log(&|q| q.beta_bs *= 1.0 + 2.0 * damping_share),
+    );
+    println!(
+        "(column deg, current A) against the table: beta_bs x1.01 {chatter:.4?}, k_tb x3 \
+         {bar:.4?}, beta_sw x3 {wheel:.4?}; beta_sw x3 against beta_bs x{:.3}: {reflected:.4?}",
+        1.0 + 2.0 * damping_share
+    );
+    assert!(
+        bar.0 < chatter.0 && bar.1 < chatter.1,
+        "{bar:?} {chatter:?}"
+    );
+    assert!(wheel.0 > 3.0 * chatter.0, "{wheel:?} {chatter:?}");
+    assert!(
+        reflected.0 < 0.7 * wheel.0 && reflected.0 > 0.3 * wheel.0,
+        "{reflected:?} {wheel:?}"
+    );
+}
+
+/// Case 87 of the independent world (seed 1): J_W at x0.46 of Table 4 (the rest within 10 %),
+/// logged 2.6 ms late. A lighter wheel answers sooner, and the late stamps take that lead
+/// back: on the log as drawn the table's car leaves less than the true car does, and with
+/// the stamps on time the true car is at the noise and the table's far above it. The lag is
+/// the log's and unknown (0-3 ms in the world); this is why a lighter wheel is named
+/// `parameters` in so few of the selftest's cars (README, "Where it fails").
+#[test]
+fn a_lighter_wheel_hides_behind_late_stamps() {
+    use host_sim::gap::generator::draw;
+    use host_sim::gap::rig::RigModel;
+    let case = draw(1, 87, 12.0);
+    let jw = case.truth.plant.j_w / host_sim::plant::PlantParams::PAPER.j_w;
+    assert!(jw < 0.5 && case.skew_s > 2e-3, "{jw} {}", case.skew_s);
+    let rig = Rig::paper();
+    let mut car = rig.clone();
+    if let RigModel::Paper(m) = &mut car.model {
+        m.plant = case.truth.plant;
+    }
+    let costs = |case: &GenCase| {
+        let rec = record_of(case, 1);
+        let scorer =
+            Scorer::new(&rig, &rec).with_noise(&rec, &simulate(&rig, &rec, &Effects::nominal()));
+        let cost = |r: &Rig| -> f64 {
+            let res = scorer.residual(&rec, &simulate(r, &rec, &Effects::nominal()));
+            res.iter().map(|v| v * v).sum()
+        };
+        (cost(&rig), cost(&car), scorer.noise_floor_cost(&rec))
+    };
+    let (table_late, car_late, floor) = costs(&case);
+    let mut on_time = case.clone();
+    on_time.skew_s = 0.0;
+    let (table_on_time, car_on_time, _) = costs(&on_time);
+    println!(
+        "stamped {:.2} ms late: table {table_late:.0}, true car {car_late:.0}; on time: table \
+         {table_on_time:.0}, true car {car_on_time:.0}; noise floor {floor:.0}",
+        1e3 * case.skew_s
+    );
+    assert!(table_late < car_late, "{table_late} {car_late}");
+    assert!(car_on_time < floor, "{car_on_time} {floor}");
+    assert!(table_on_time > 5.0 * floor, "{table_on_time} {floor}");
+}
