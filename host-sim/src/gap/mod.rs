@@ -902,6 +902,51 @@ fn pair_on_refitted_table(
     Some((c_single, c_pair, id.simulations))
 }
 
+/// The most a log's stamps may lag the instants its rows were sampled at, s: half a 10 ms
+/// reference period, as the `delay` minimum (a logger stamps a row when it receives it).
+const LOG_LAG_MAX_S: f64 = 5e-3;
+
+/// The best single effect fitted again with the log's stamping lag beside it (0 to
+/// [`LOG_LAG_MAX_S`]): its cost and the lag, or `None` where a lag is the effect itself (a
+/// delay) or the rig's logs carry no such clock (EMPS and BAM are sampled on their own).
+fn best_with_log_lag(
+    rig: &Rig,
+    rec: &Record,
+    scorer: &Scorer,
+    best: &Candidate,
+    opts: &Options,
+    progress: &Progress,
+) -> Option<(f64, f64)> {
+    if !matches!(rig.model, RigModel::Paper(_)) || best.kinds.contains(&EffectKind::Delay) {
+        return None;
+    }
+    let mut specs: Vec<ParamSpec> = best.kinds.iter().flat_map(|k| k.specs(rig)).collect();
+    for (sp, v) in specs.iter_mut().zip(&best.values) {
+        sp.start = *v;
+    }
+    let n = specs.len();
+    specs.push(ParamSpec {
+        name: "log_lag_ms",
+        lo: 0.0,
+        hi: 1e3 * LOG_LAG_MAX_S,
+        start: 0.0,
+        step: 0.25,
+    });
+    let residual = |p: &[f64]| -> Vec<f64> {
+        let mut fx = Effects::nominal();
+        let mut i = 0;
+        for k in &best.kinds {
+            let m = k.specs(rig).len();
+            k.apply(&p[i..i + m], &mut fx);
+            i += m;
+        }
+        fx.delay_s = 1e-3 * p[n];
+        scorer.residual(rec, &simulate(rig, rec, &fx))
+    };
+    let res = fit::levenberg_marquardt(&specs, opts.fit, &residual, &|| progress.tick());
+    Some((res.cost.min(best.cost), 1e-3 * res.params[n]))
+}
+
 fn cost(r: &[f64]) -> f64 {
     r.iter().map(|v| v * v).sum()
 }
@@ -1124,13 +1169,45 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             // What the pair removes may be the car's Table 4 being a few per cent off (every
             // car is) rather than a second effect: refit the table with the first effect in
             // place, and the pair must still remove as much from what that leaves.
-            let on_refit = if removes_beyond(best.cost, pair.cost) {
+            // It may also be the log's own clock: a logger stamps its rows late, which the best
+            // effect alone cannot follow and a second effect can stand in for. The best again
+            // with the lag fitted beside it, and the pair must still remove as much from what
+            // that leaves.
+            let on_lag = if removes_beyond(best.cost, pair.cost) {
+                best_with_log_lag(rig, frec, fscorer, best, opts, &progress)
+            } else {
+                None
+            };
+            let on_refit = if removes_beyond(best.cost, pair.cost)
+                && on_lag.is_none_or(|(c_lag, _)| removes_beyond(c_lag, pair.cost))
+            {
                 pair_on_refitted_table(rig, frec, fscorer, best, &pair, opts, &progress)
             } else {
                 None
             };
             refit_simulations += on_refit.map_or(0, |(_, _, n)| n);
-            if let Some((c_single, c_pair, _)) = on_refit
+            if let Some((c_lag, lag_s)) = on_lag
+                && !removes_beyond(c_lag, pair.cost)
+            {
+                let share = if pair.cost < c_lag {
+                    format!(
+                        "removes only {:.0} % of that",
+                        100.0 * (c_lag - pair.cost) / c_lag.max(1e-300)
+                    )
+                } else {
+                    format!("leaves more ({:.0})", pair.cost)
+                };
+                reason.push_str(&format!(
+                    "; the pair {} removes {:.0} % of what {} leaves, but {} with the log's \
+                     stamps {:.1} ms late (fitted) leaves {:.0}, and the pair {share}: not named",
+                    pair.effect,
+                    100.0 * gain / best.cost,
+                    best.effect,
+                    best.effect,
+                    1e3 * lag_s,
+                    c_lag,
+                ));
+            } else if let Some((c_single, c_pair, _)) = on_refit
                 && !removes_beyond(c_single, c_pair)
             {
                 reason.push_str(&format!(
