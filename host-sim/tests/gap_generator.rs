@@ -55,6 +55,23 @@ fn belt_play_shows_in_the_column_angle() {
     assert!(b.rms_output > 3.0 * a.rms_output, "{a:?} {b:?}");
 }
 
+/// Case `index` of the independent world (seed 1), diagnosed as `host-sim gap selftest --case
+/// INDEX` diagnoses it.
+fn selftest_case(index: usize) -> host_sim::gap::selftest::CaseResult {
+    use host_sim::gap::selftest;
+    let mut opts = selftest::default_options();
+    opts.threads = 2;
+    let mut report = selftest::run(
+        selftest::World::Independent,
+        &[index],
+        1,
+        12.0,
+        &opts,
+        &|_| {},
+    );
+    report.cases.remove(0)
+}
+
 /// Case 109 of the independent world (seed 1): 2.0 deg of play in the belt and 1050 N of
 /// creeping friction at the rack under a 5 deg sweep. Fitted alone the friction grows to
 /// stand in for the play (1570 N, sharp), and a pair fit that starts there keeps the play at
@@ -62,18 +79,7 @@ fn belt_play_shows_in_the_column_angle() {
 /// diagnosis is run as `host-sim gap selftest --case 109` runs it.
 #[test]
 fn play_in_the_belt_beside_rack_friction_is_named_on_a_sweep() {
-    use host_sim::gap::selftest;
-    let mut opts = selftest::default_options();
-    opts.threads = 2;
-    let report = selftest::run(
-        selftest::World::Independent,
-        &[109],
-        1,
-        12.0,
-        &opts,
-        &|_| {},
-    );
-    let case = &report.cases[0];
+    let case = &selftest_case(109);
     assert_eq!(case.case.hidden, ["backlash", "coulomb_friction"]);
     assert_eq!(case.named, case.case.hidden, "{}", case.reason);
 }
@@ -85,11 +91,7 @@ fn play_in_the_belt_beside_rack_friction_is_named_on_a_sweep() {
 /// selftest --case 30` runs it.
 #[test]
 fn a_late_clock_is_not_named_as_a_second_effect() {
-    use host_sim::gap::selftest;
-    let mut opts = selftest::default_options();
-    opts.threads = 2;
-    let report = selftest::run(selftest::World::Independent, &[30], 1, 12.0, &opts, &|_| {});
-    let case = &report.cases[0];
+    let case = &selftest_case(30);
     assert_eq!(case.case.hidden, ["tire_ground"]);
     assert_eq!(case.named, case.case.hidden, "{}", case.reason);
     assert!(case.reason.contains("stamps"), "{}", case.reason);

@@ -832,24 +832,40 @@ fn fit_effects(
     opts: FitOptions,
     progress: &Progress,
 ) -> FitOut {
+    let (specs, lens) = specs_of(rig, kinds, start);
+    let residual = |p: &[f64]| -> Vec<f64> {
+        let mut fx = *base;
+        apply_all(kinds, &lens, p, &mut fx);
+        scorer.residual(rec, &simulate(rig, rec, &fx))
+    };
+    let res = fit::levenberg_marquardt(&specs, opts, &residual, &|| progress.tick());
+    (res.params, res.std_err, res.cost, res.evaluations)
+}
+
+/// The fitted parameters of `kinds` in order, started at `start` where given, and how many
+/// each effect has.
+fn specs_of(
+    rig: &Rig,
+    kinds: &[EffectKind],
+    start: Option<&[f64]>,
+) -> (Vec<ParamSpec>, Vec<usize>) {
     let mut specs: Vec<ParamSpec> = kinds.iter().flat_map(|k| k.specs(rig)).collect();
     if let Some(s) = start {
         for (sp, v) in specs.iter_mut().zip(s) {
             sp.start = *v;
         }
     }
-    let lens: Vec<usize> = kinds.iter().map(|k| k.specs(rig).len()).collect();
-    let residual = |p: &[f64]| -> Vec<f64> {
-        let mut fx = *base;
-        let mut i = 0;
-        for (k, n) in kinds.iter().zip(&lens) {
-            k.apply(&p[i..i + n], &mut fx);
-            i += n;
-        }
-        scorer.residual(rec, &simulate(rig, rec, &fx))
-    };
-    let res = fit::levenberg_marquardt(&specs, opts, &residual, &|| progress.tick());
-    (res.params, res.std_err, res.cost, res.evaluations)
+    let lens = kinds.iter().map(|k| k.specs(rig).len()).collect();
+    (specs, lens)
+}
+
+/// Write the values `p` of `kinds` (each `lens` long, as [`specs_of`] counts) into `fx`.
+fn apply_all(kinds: &[EffectKind], lens: &[usize], p: &[f64], fx: &mut Effects) {
+    let mut i = 0;
+    for (k, n) in kinds.iter().zip(lens) {
+        k.apply(&p[i..i + n], fx);
+        i += n;
+    }
 }
 
 /// The best single effect and the pair, each fitted again on Table 4 refitted with the single
@@ -920,10 +936,7 @@ fn best_with_log_lag(
     if !matches!(rig.model, RigModel::Paper(_)) || best.kinds.contains(&EffectKind::Delay) {
         return None;
     }
-    let mut specs: Vec<ParamSpec> = best.kinds.iter().flat_map(|k| k.specs(rig)).collect();
-    for (sp, v) in specs.iter_mut().zip(&best.values) {
-        sp.start = *v;
-    }
+    let (mut specs, lens) = specs_of(rig, &best.kinds, Some(&best.values));
     let n = specs.len();
     specs.push(ParamSpec {
         name: "log_lag_ms",
@@ -934,12 +947,7 @@ fn best_with_log_lag(
     });
     let residual = |p: &[f64]| -> Vec<f64> {
         let mut fx = Effects::nominal();
-        let mut i = 0;
-        for k in &best.kinds {
-            let m = k.specs(rig).len();
-            k.apply(&p[i..i + m], &mut fx);
-            i += m;
-        }
+        apply_all(&best.kinds, &lens, &p[..n], &mut fx);
         fx.delay_s = 1e-3 * p[n];
         scorer.residual(rec, &simulate(rig, rec, &fx))
     };
@@ -1173,12 +1181,13 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             // effect alone cannot follow and a second effect can stand in for. The best again
             // with the lag fitted beside it, and the pair must still remove as much from what
             // that leaves.
-            let on_lag = if removes_beyond(best.cost, pair.cost) {
+            let pair_removes = removes_beyond(best.cost, pair.cost);
+            let on_lag = if pair_removes {
                 best_with_log_lag(rig, frec, fscorer, best, opts, &progress)
             } else {
                 None
             };
-            let on_refit = if removes_beyond(best.cost, pair.cost)
+            let on_refit = if pair_removes
                 && on_lag.is_none_or(|(c_lag, _)| removes_beyond(c_lag, pair.cost))
             {
                 pair_on_refitted_table(rig, frec, fscorer, best, &pair, opts, &progress)
@@ -1222,7 +1231,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                     c_single - c_pair,
                     c_single
                 ));
-            } else if removes_beyond(best.cost, pair.cost) {
+            } else if pair_removes {
                 reason.push_str(&format!(
                     "; adding {} removes {:.0} % of what was left",
                     pair.effect.split('+').next().unwrap_or(""),
@@ -1502,12 +1511,8 @@ impl Candidate {
     /// The effect set of this candidate on a rig (the parameter count depends on the rig).
     pub fn effects_on(&self, rig: &Rig) -> Effects {
         let mut fx = Effects::nominal();
-        let mut i = 0;
-        for k in &self.kinds {
-            let n = k.specs(rig).len();
-            k.apply(&self.values[i..i + n], &mut fx);
-            i += n;
-        }
+        let (_, lens) = specs_of(rig, &self.kinds, None);
+        apply_all(&self.kinds, &lens, &self.values, &mut fx);
         fx
     }
 }
