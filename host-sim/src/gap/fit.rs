@@ -21,6 +21,14 @@ pub struct ParamSpec {
 }
 
 /// The result of a fit.
+impl ParamSpec {
+    /// This spec started at `start`, kept within its bounds.
+    pub fn started_at(mut self, start: f64) -> ParamSpec {
+        self.start = start.clamp(self.lo, self.hi);
+        self
+    }
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitResult {
     pub params: Vec<f64>,

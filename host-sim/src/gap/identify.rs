@@ -69,6 +69,20 @@ pub fn identify_within(
     fx: &Effects,
     factor: f64,
 ) -> Result<Identified, String> {
+    identify_from(rig, rec, iterations, progress, fx, factor, &[])
+}
+
+/// [`identify_within`] started with some parameters at a multiple of the rig's value
+/// (`(name, factor)`), the others at the rig's.
+pub fn identify_from(
+    rig: &Rig,
+    rec: &Record,
+    iterations: usize,
+    progress: bool,
+    fx: &Effects,
+    factor: f64,
+    start: &[(&str, f64)],
+) -> Result<Identified, String> {
     let RigModel::Paper(model) = &rig.model else {
         return Err(format!(
             "identify needs a paper-type rig (Table 4); rig {} is not one",
@@ -95,6 +109,12 @@ pub fn identify_within(
                     start: *v,
                     step: 0.05 * v,
                 }
+                .started_at(
+                    v * start
+                        .iter()
+                        .find(|(n, _)| n == name)
+                        .map_or(1.0, |(_, f)| *f),
+                )
             } else {
                 ParamSpec {
                     name,
