@@ -54,27 +54,15 @@ pub fn identify_with(
     progress: bool,
     fx: &Effects,
 ) -> Result<Identified, String> {
-    identify_within(rig, rec, iterations, progress, fx, 10.0)
+    identify_within(rig, rec, iterations, progress, fx, 10.0, &[])
 }
 
 /// Fit Table 4 with effects `fx` held in the plant, every parameter kept within `factor` of
 /// the rig's value (either way): the best a car within that tolerance of the table explains.
 /// Beside an unbounded fit it tells a car far off the table from one whose log leaves a
-/// weakly identified parameter free to wander.
+/// weakly identified parameter free to wander. The fit starts at the rig's values, but for
+/// the parameters `start` names, which start at the rig's value times its factor.
 pub fn identify_within(
-    rig: &Rig,
-    rec: &Record,
-    iterations: usize,
-    progress: bool,
-    fx: &Effects,
-    factor: f64,
-) -> Result<Identified, String> {
-    identify_from(rig, rec, iterations, progress, fx, factor, &[])
-}
-
-/// [`identify_within`] started with some parameters at a multiple of the rig's value
-/// (`(name, factor)`), the others at the rig's.
-pub fn identify_from(
     rig: &Rig,
     rec: &Record,
     iterations: usize,

@@ -1358,7 +1358,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         let fits: Vec<identify::Identified> = starts
             .iter()
             .filter_map(|st| {
-                identify::identify_from(
+                identify::identify_within(
                     rig,
                     frec,
                     opts.parameter_iterations,
@@ -1396,6 +1396,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             false,
             &nominal,
             opts.parameter_tolerance,
+            &[],
         )
         .ok()
         .map(|id| {
