@@ -20,7 +20,6 @@ pub struct ParamSpec {
     pub step: f64,
 }
 
-/// The result of a fit.
 impl ParamSpec {
     /// This spec started at `start`, kept within its bounds.
     pub fn started_at(mut self, start: f64) -> ParamSpec {
@@ -29,6 +28,7 @@ impl ParamSpec {
     }
 }
 
+/// The result of a fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitResult {
     pub params: Vec<f64>,

@@ -1128,15 +1128,14 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             let handles: Vec<_> = jobs
                 .iter()
                 .map(|&(seed, other)| {
-                    let (best, scorer, progress, fov) =
-                        (seed, &scorer, &progress, &fit_on_validation);
+                    let (scorer, progress, fov) = (&scorer, &progress, &fit_on_validation);
                     s.spawn(move || {
-                        let kinds = [other.kinds[0], best.kinds[0]];
+                        let kinds = [other.kinds[0], seed.kinds[0]];
                         let start: Vec<f64> = other.kinds[0]
                             .specs(rig)
                             .iter()
                             .map(|sp| sp.start)
-                            .chain(best.values.iter().copied())
+                            .chain(seed.values.iter().copied())
                             .collect();
                         let fit_from = |start: &[f64]| {
                             fit_effects(
@@ -1171,7 +1170,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                             let mut shared: Vec<f64> = other
                                 .values
                                 .iter()
-                                .chain(best.values.iter())
+                                .chain(seed.values.iter())
                                 .copied()
                                 .collect();
                             if let Some(lead) = shared.get_mut(n_other) {
