@@ -1261,11 +1261,9 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                 ));
             } else if pair_removes {
                 // The pair may have grown from the runner-up and hold no part of the best.
-                if let Some(added) = pair
-                    .kinds
-                    .iter()
-                    .find(|k| **k != best.kinds[0])
-                    .filter(|_| pair.kinds.contains(&best.kinds[0]))
+                let added = pair.kinds.iter().find(|k| **k != best.kinds[0]);
+                if pair.kinds.contains(&best.kinds[0])
+                    && let Some(added) = added
                 {
                     reason.push_str(&format!(
                         "; adding {} removes {:.0} % of what was left",
@@ -1350,30 +1348,28 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         && let Some((_, _, c_first)) = &parameters
         && *c_first > opts.unexplained_ratio * floor
     {
-        let starts: Vec<[(&str, f64); 1]> = ["j_w", "beta_sw"]
+        for start in ["j_w", "beta_sw"]
             .iter()
             .flat_map(|n| [[(*n, 0.4)], [(*n, 2.5)]])
-            .collect();
-        let fits: Vec<identify::Identified> = starts
-            .iter()
-            .filter_map(|st| {
-                identify::identify_within(
-                    rig,
-                    frec,
-                    opts.parameter_iterations,
-                    false,
-                    &nominal,
-                    10.0,
-                    st,
-                )
-                .ok()
-            })
-            .collect();
-        for id in fits {
-            refit_simulations += id.simulations;
+        {
+            let Ok(id) = identify::identify_within(
+                rig,
+                frec,
+                opts.parameter_iterations,
+                false,
+                &nominal,
+                10.0,
+                &start,
+            ) else {
+                continue;
+            };
             let (refit, c) = refit_cost(&id);
-            if parameters.as_ref().is_none_or(|(_, _, best)| c < *best) {
-                parameters = Some((id, refit, c));
+            // Every refit's simulations count once: the kept one's with `parameters`, each
+            // other one's here.
+            if parameters.as_ref().is_some_and(|(_, _, kept)| *kept <= c) {
+                refit_simulations += id.simulations;
+            } else if let Some((dropped, _, _)) = parameters.replace((id, refit, c)) {
+                refit_simulations += dropped.simulations;
             }
         }
     }
