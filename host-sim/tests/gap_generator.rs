@@ -72,6 +72,14 @@ fn selftest_case(index: usize) -> host_sim::gap::selftest::CaseResult {
     report.cases.remove(0)
 }
 
+/// [`selftest_case`] for a case whose hidden effects are `hidden`, checked to be named so.
+fn named_right(index: usize, hidden: &[&str]) -> host_sim::gap::selftest::CaseResult {
+    let case = selftest_case(index);
+    assert_eq!(case.case.hidden, hidden);
+    assert_eq!(case.named, case.case.hidden, "{}", case.reason);
+    case
+}
+
 /// Case 109 of the independent world (seed 1): 2.0 deg of play in the belt and 1050 N of
 /// creeping friction at the rack under a 5 deg sweep. Fitted alone the friction grows to
 /// stand in for the play (1570 N, sharp), and a pair fit that starts there keeps the play at
@@ -79,9 +87,7 @@ fn selftest_case(index: usize) -> host_sim::gap::selftest::CaseResult {
 /// diagnosis is run as `host-sim gap selftest --case 109` runs it.
 #[test]
 fn play_in_the_belt_beside_rack_friction_is_named_on_a_sweep() {
-    let case = &selftest_case(109);
-    assert_eq!(case.case.hidden, ["backlash", "coulomb_friction"]);
-    assert_eq!(case.named, case.case.hidden, "{}", case.reason);
+    named_right(109, &["backlash", "coulomb_friction"]);
 }
 
 /// Case 30 of the independent world (seed 1): a Dahl tyre alone, under a 5 deg sweep logged
@@ -91,9 +97,7 @@ fn play_in_the_belt_beside_rack_friction_is_named_on_a_sweep() {
 /// selftest --case 30` runs it.
 #[test]
 fn a_late_clock_is_not_named_as_a_second_effect() {
-    let case = &selftest_case(30);
-    assert_eq!(case.case.hidden, ["tire_ground"]);
-    assert_eq!(case.named, case.case.hidden, "{}", case.reason);
+    let case = named_right(30, &["tire_ground"]);
     assert!(case.reason.contains("stamps"), "{}", case.reason);
 }
 
@@ -103,9 +107,7 @@ fn a_late_clock_is_not_named_as_a_second_effect() {
 /// delay under one 10 ms period is within the frame's own jitter and the logger's clock.
 #[test]
 fn a_delay_under_one_reference_period_is_not_named() {
-    let case = &selftest_case(27);
-    assert_eq!(case.case.hidden, ["coulomb_friction"]);
-    assert_eq!(case.named, case.case.hidden, "{}", case.reason);
+    named_right(27, &["coulomb_friction"]);
 }
 
 /// Case 14 of the independent world (seed 1): a 52 ms late reference and a Dahl tyre under a
@@ -114,9 +116,7 @@ fn a_delay_under_one_reference_period_is_not_named() {
 /// The pairs grown from the runner-up (the delay) find the tyre beside it.
 #[test]
 fn a_pair_is_also_grown_from_the_runner_up() {
-    let case = &selftest_case(14);
-    assert_eq!(case.case.hidden, ["delay", "tire_ground"]);
-    assert_eq!(case.named, case.case.hidden, "{}", case.reason);
+    let case = named_right(14, &["delay", "tire_ground"]);
     assert!(case.reason.starts_with("backlash"), "{}", case.reason);
 }
 
@@ -126,9 +126,7 @@ fn a_pair_is_also_grown_from_the_runner_up() {
 /// the wheel far off the table it explains the log, and the verdict is `parameters`.
 #[test]
 fn a_car_far_off_the_table_is_not_called_unexplained() {
-    let case = &selftest_case(164);
-    assert_eq!(case.case.hidden, ["parameters"]);
-    assert_eq!(case.named, case.case.hidden, "{}", case.reason);
+    let case = named_right(164, &["parameters"]);
     assert!(case.reason.contains("j_w"), "{}", case.reason);
 }
 
