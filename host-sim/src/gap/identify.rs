@@ -18,6 +18,28 @@ pub struct Identified {
     pub gof_output: f64,
     pub gof_effort: f64,
     pub simulations: usize,
+    /// The log's stamping lag fitted beside the parameters, s (0 when not fitted).
+    pub log_lag_s: f64,
+}
+
+/// Where a refit looks: every parameter within `factor` of the rig's value (either way),
+/// starting from the rig's values but for the parameters `start` names, which start at the
+/// rig's value times the factor given; with `log_lag_max_s` above 0 the log's stamping lag
+/// (0 to that) is fitted beside them, as a delay of the reference.
+#[derive(Debug, Clone, Copy)]
+pub struct Search<'a> {
+    pub factor: f64,
+    pub start: &'a [(&'a str, f64)],
+    pub log_lag_max_s: f64,
+}
+
+impl Search<'_> {
+    /// The free fit: a decade either way, from the table, no lag.
+    pub const FREE: Search<'static> = Search {
+        factor: 10.0,
+        start: &[],
+        log_lag_max_s: 0.0,
+    };
 }
 
 fn set(p: &mut PlantParams, name: &str, v: f64) {
@@ -54,7 +76,7 @@ pub fn identify_with(
     progress: bool,
     fx: &Effects,
 ) -> Result<Identified, String> {
-    identify_within(rig, rec, iterations, progress, fx, 10.0, &[])
+    identify_within(rig, rec, iterations, progress, fx, Search::FREE)
 }
 
 /// Fit Table 4 with effects `fx` held in the plant, every parameter kept within `factor` of
@@ -68,9 +90,13 @@ pub fn identify_within(
     iterations: usize,
     progress: bool,
     fx: &Effects,
-    factor: f64,
-    start: &[(&str, f64)],
+    search: Search,
 ) -> Result<Identified, String> {
+    let Search {
+        factor,
+        start,
+        log_lag_max_s,
+    } = search;
     let RigModel::Paper(model) = &rig.model else {
         return Err(format!(
             "identify needs a paper-type rig (Table 4); rig {} is not one",
@@ -86,7 +112,7 @@ pub fn identify_within(
     }
     // Bounds `factor` either side of Table 4 (a decade for the free fit); beta_tb (0 in
     // Table 4) gets an absolute range, a tenth of it within a tolerance (as `within_factor`).
-    let specs: Vec<ParamSpec> = names
+    let mut specs: Vec<ParamSpec> = names
         .iter()
         .map(|(name, v)| {
             if *v > 0.0 {
@@ -118,6 +144,22 @@ pub fn identify_within(
             }
         })
         .collect();
+    let n = specs.len();
+    if log_lag_max_s > 0.0 {
+        specs.push(ParamSpec {
+            name: "log_lag_ms",
+            lo: 0.0,
+            hi: 1e3 * log_lag_max_s,
+            start: 0.0,
+            step: 0.25,
+        });
+    }
+    // The effects with the fitted lag on top of theirs.
+    let lagged = |p: &[f64]| -> Effects {
+        let mut f = *fx;
+        f.delay_s += p.get(n).map_or(0.0, |ms| 1e-3 * ms);
+        f
+    };
     // The likelihood of the diagnosis: each signal weighed by its noise, estimated from the
     // residual of Table 4 itself, so the column angle (where the belt and the column show)
     // is not drowned by the current's chatter.
@@ -134,7 +176,7 @@ pub fn identify_within(
     let bar = Progress::new(1 + iterations * (specs.len() + 2), progress);
     let residual = |p: &[f64]| -> Vec<f64> {
         let r = with(p);
-        scorer.residual(rec, &simulate(&r, rec, fx))
+        scorer.residual(rec, &simulate(&r, rec, &lagged(p)))
     };
     let before = scorer.fit(rec, &simulate(rig, rec, fx));
     let res = levenberg_marquardt(
@@ -146,12 +188,16 @@ pub fn identify_within(
             // Nine columns of a whole closed-loop run each: the refit is the diagnosis's
             // longest stretch on one thread otherwise.
             jacobian_threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            hold_at_bounds: true,
         },
         &residual,
         &|| bar.tick(),
     );
     bar.finish();
-    let after = scorer.fit(rec, &simulate(&with(&res.params), rec, fx));
+    let after = scorer.fit(
+        rec,
+        &simulate(&with(&res.params), rec, &lagged(&res.params)),
+    );
     Ok(Identified {
         params: names
             .iter()
@@ -163,6 +209,7 @@ pub fn identify_within(
         gof_output: after.gof_output,
         gof_effort: after.gof_effort,
         simulations: res.evaluations + 2,
+        log_lag_s: res.params.get(n).map_or(0.0, |ms| 1e-3 * ms),
     })
 }
 
@@ -197,6 +244,13 @@ impl Identified {
             100.0 * self.gof_output,
             100.0 * self.gof_effort
         );
+        if self.log_lag_s > 0.0 {
+            let _ = writeln!(
+                s,
+                "with the log's stamps {:.2} ms late (fitted beside the parameters)",
+                1e3 * self.log_lag_s
+            );
+        }
         s
     }
 }

@@ -754,6 +754,9 @@ pub struct Options {
     /// ...and some parameter moved more than this factor from Table 4: within it, the car
     /// is the table's within its tolerance.
     pub parameter_tolerance: f64,
+    /// Refit Table 4 with the log's stamping lag from starts far off the table on the wheel's
+    /// side when nothing else explains the log (see `diagnose`).
+    pub far_starts: bool,
     pub threads: usize,
     pub progress: bool,
     /// Logs longer than this are fitted on their worst window of this length, s (0 = all).
@@ -774,6 +777,7 @@ impl Default for Options {
             parameter_iterations: 6,
             parameters_cost_share: 0.6,
             parameter_tolerance: 1.5,
+            far_starts: true,
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             progress: false,
             max_fit_s: 30.0,
@@ -1321,11 +1325,29 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // Parameters: Table 4 refitted on the fitting window, scored by the same likelihood. Only
     // worth its hundred simulations when the nominal model is well above the noise.
     // A refit's rig and what it leaves on the fitting window.
+    // The nominal effects with a refit's stamping lag (none unless it fitted one).
+    let lagged = |id: &identify::Identified| -> Effects {
+        let mut fx = nominal;
+        fx.delay_s = id.log_lag_s;
+        fx
+    };
     let refit_cost = |id: &identify::Identified| -> (Rig, f64) {
         let mut refit = rig.clone();
         identify::apply(&mut refit, id);
-        let c = cost(&fscorer.residual(frec, &simulate(&refit, frec, &nominal)));
+        let c = cost(&fscorer.residual(frec, &simulate(&refit, frec, &lagged(id))));
         (refit, c)
+    };
+    // Table 4 refitted on the fitting window as `search` says.
+    let refit_by = |search: identify::Search| {
+        identify::identify_within(
+            rig,
+            frec,
+            opts.parameter_iterations,
+            false,
+            &nominal,
+            search,
+        )
+        .ok()
     };
     let mut parameters: Option<(identify::Identified, Rig, f64)> = None;
     if opts.parameter_iterations > 0
@@ -1352,15 +1374,10 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             .iter()
             .flat_map(|n| [[(*n, 0.4)], [(*n, 2.5)]])
         {
-            let Ok(id) = identify::identify_within(
-                rig,
-                frec,
-                opts.parameter_iterations,
-                false,
-                &nominal,
-                10.0,
-                &start,
-            ) else {
+            let Some(id) = refit_by(identify::Search {
+                start: &start,
+                ..identify::Search::FREE
+            }) else {
                 continue;
             };
             let (refit, c) = refit_cost(&id);
@@ -1384,23 +1401,17 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         .is_some_and(|(id, _, _)| identify::within_factor(rig, id, opts.parameter_tolerance));
     let tolerant: Option<(Rig, f64)> = match &parameters {
         Some((_, refit, c)) if within_tolerance => Some((refit.clone(), *c)),
-        Some(_) => identify::identify_within(
-            rig,
-            frec,
-            opts.parameter_iterations,
-            false,
-            &nominal,
-            opts.parameter_tolerance,
-            &[],
-        )
-        .ok()
+        Some(_) => refit_by(identify::Search {
+            factor: opts.parameter_tolerance,
+            ..identify::Search::FREE
+        })
         .map(|id| {
             refit_simulations += id.simulations;
             refit_cost(&id)
         }),
         None => None,
     };
-    let parameters_win = parameters.as_ref().is_some_and(|(_, _, c)| {
+    let mut parameters_win = parameters.as_ref().is_some_and(|(_, _, c)| {
         let gain = cost0 - c;
         !within_tolerance
             && reducible > 0.0
@@ -1475,6 +1486,79 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             verdict_candidate = None;
         }
     }
+    // Far starts. A car far off the table on the wheel's side (its inertia or damping, seen
+    // only through the torsion bar) is explained by a car within the tolerance whose other
+    // parameters lean the other way, once the log's stamps are a millisecond or two late:
+    // from the table's own values LM stays inside the tolerance, and no effect is named
+    // (independent cases 60, 77, 111, 134: j_w x0.37-0.47 or beta_sw x2.6, which the tolerant
+    // refit left at 1.5-3.2 times the floor, `none`). So, when nothing was named, Table 4 is
+    // refitted again with the log's lag beside it: once held within the tolerance, and free
+    // from each far start. A car off the table is a finding when it removes, from what the
+    // best car within the tolerance leaves (with the lag or without), what a second effect
+    // must remove.
+    // The wheel's damping is searched upwards only. On a track the wheel turns slowly, so its
+    // damping torque is small and a lower value costs the fit little: started at x0.4, the
+    // refit of an effect-free track stays there and takes 2-27 % off what the best car within
+    // the tolerance leaves (independent effect-free tracks 2, 42, 43, 63, 98, 150, 154, 156;
+    // case 2 beyond the 20 % a finding needs). A higher damping shows. The torsion bar's
+    // stiffness is not searched: it sets a mode near 36 Hz, far above what a sweep or a track
+    // excites (cases 34 and 38, k_tb x2.7-3.0, came back at x0.4 or x2.5 alike).
+    if !parameters_win && verdict_candidate.is_none() && opts.far_starts && parameters.is_some() {
+        let searches: [(f64, &[(&str, f64)]); 4] = [
+            (opts.parameter_tolerance, &[]),
+            (10.0, &[("j_w", 0.4)]),
+            (10.0, &[("j_w", 2.5)]),
+            (10.0, &[("beta_sw", 2.5)]),
+        ];
+        // The best car within the tolerance found so far, with the lag or without.
+        let mut c_near = tolerant.as_ref().map_or(f64::INFINITY, |(_, c)| *c);
+        let mut far: Option<(identify::Identified, Rig, f64)> = None;
+        let mut far_simulations = 0;
+        for (factor, start) in searches {
+            let Some(id) = refit_by(identify::Search {
+                factor,
+                start,
+                log_lag_max_s: LOG_LAG_MAX_S,
+            }) else {
+                continue;
+            };
+            far_simulations += id.simulations;
+            let (refit, c) = refit_cost(&id);
+            if identify::within_factor(rig, &id, opts.parameter_tolerance) {
+                c_near = c_near.min(c);
+            } else if far.as_ref().is_none_or(|(_, _, kept)| c < *kept) {
+                far = Some((id, refit, c));
+            }
+        }
+        refit_simulations += far_simulations;
+        if let Some((id, refit, c)) = far {
+            let gain = cost0 - c;
+            let wins = reducible > 0.0
+                && gain > opts.min_share_of_reducible * reducible
+                && gain > opts.min_improvement * cost0
+                && c < opts.parameters_cost_share * cost0
+                && removes_beyond(c_near, c);
+            reason.push_str(&format!(
+                "; Table 4 with the log's stamps late (fitted), from starts far off the table \
+                 (j_w x0.4 and x2.5, beta_sw x2.5), moves {} with the stamps {:.1} ms late and \
+                 leaves {:.0}; held within x{:.1} it leaves {:.0}{}",
+                identify::outside_factor(rig, &id, opts.parameter_tolerance).join(", "),
+                1e3 * id.log_lag_s,
+                c,
+                opts.parameter_tolerance,
+                c_near,
+                if wins { "" } else { ": not named" }
+            ));
+            if wins {
+                // Its simulations are counted with `parameters`, the replaced refit's here.
+                refit_simulations -= id.simulations;
+                if let Some((old, _, _)) = parameters.replace((id, refit, c)) {
+                    refit_simulations += old.simulations;
+                }
+                parameters_win = true;
+            }
+        }
+    }
     if let Some((_, _, c)) = &parameters {
         reason.push_str(&format!(
             "; a refit of Table 4 leaves {:.0} ({:.0} % of the nominal cost{})",
@@ -1488,11 +1572,12 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         ));
     }
     if parameters_win && let Some((id, refit, _)) = &parameters {
-        let fit_after = scorer.fit(rec, &simulate(refit, rec, &nominal));
+        let fx = lagged(id);
+        let fit_after = scorer.fit(rec, &simulate(refit, rec, &fx));
         let fit_validation = vscorer
             .as_ref()
-            .map(|(v, s)| s.fit(v, &simulate(refit, v, &nominal)));
-        let where_ = locate::locate(rig, rec, &scorer, &sim0, &simulate(refit, rec, &nominal));
+            .map(|(v, s)| s.fit(v, &simulate(refit, v, &fx)));
+        let where_ = locate::locate(rig, rec, &scorer, &sim0, &simulate(refit, rec, &fx));
         let verdict = Verdict {
             kind: VerdictKind::Parameters,
             effects: vec!["parameters".into()],

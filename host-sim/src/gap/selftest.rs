@@ -391,6 +391,7 @@ pub fn default_options() -> Options {
             iterations: 5,
             polish: 2,
             jacobian_threads: 1,
+            hold_at_bounds: false,
         },
         ..Options::default()
     }
