@@ -134,3 +134,34 @@ fn the_logs_stamping_lag_is_fitted_beside_table_4() {
     assert_eq!(on_time.log_lag_s, 0.0);
     assert!(lagged.gof > on_time.gof, "{} {}", lagged.gof, on_time.gof);
 }
+
+/// A search with no room to fit in (a bound factor of 1 or less, or not a number) or a lag
+/// range below zero or not a number is refused with what was given, before any simulation.
+#[test]
+fn a_search_out_of_range_is_refused() {
+    let rig = Rig::paper();
+    let case = Case {
+        index: 3,
+        scenario: "chirp".into(),
+        hidden: vec![],
+        effects: Effects::nominal(),
+        reference: chirp(5.0, 3.0, 2.0),
+    };
+    let rec = record_of(&rig, &case, 1);
+    for (factor, log_lag_max_s) in [
+        (1.0, 0.0),
+        (f64::NAN, 0.0),
+        (1.5, -1e-3),
+        (1.5, f64::NAN),
+        (1.5, f64::INFINITY),
+    ] {
+        let search = Search {
+            factor,
+            start: &[],
+            log_lag_max_s,
+        };
+        let err = identify_within(&rig, &rec, 6, false, &Effects::nominal(), search)
+            .expect_err("refused");
+        assert!(err.contains("identify:"), "{search:?}: {err}");
+    }
+}

@@ -79,11 +79,12 @@ pub fn identify_with(
     identify_within(rig, rec, iterations, progress, fx, Search::FREE)
 }
 
-/// Fit Table 4 with effects `fx` held in the plant, every parameter kept within `factor` of
-/// the rig's value (either way): the best a car within that tolerance of the table explains.
-/// Beside an unbounded fit it tells a car far off the table from one whose log leaves a
-/// weakly identified parameter free to wander. The fit starts at the rig's values, but for
-/// the parameters `start` names, which start at the rig's value times its factor.
+/// Fit Table 4 with effects `fx` held in the plant, where `search` says (every parameter
+/// within its `factor` of the rig's value, either way): the best a car within that tolerance
+/// of the table explains. Beside an unbounded fit it tells a car far off the table from one
+/// whose log leaves a weakly identified parameter free to wander. The fit starts at the rig's
+/// values, but for the parameters `search.start` names; with `search.log_lag_max_s` above 0
+/// the log's stamping lag is fitted beside them (`Identified::log_lag_s`).
 pub fn identify_within(
     rig: &Rig,
     rec: &Record,
@@ -108,6 +109,11 @@ pub fn identify_within(
     if !(factor.is_finite() && factor > 1.0) {
         return Err(format!(
             "identify: the bound factor must be above 1, got {factor}"
+        ));
+    }
+    if !(log_lag_max_s.is_finite() && log_lag_max_s >= 0.0) {
+        return Err(format!(
+            "identify: the most the log's stamps may lag must be 0 s or more, got {log_lag_max_s}"
         ));
     }
     // Bounds `factor` either side of Table 4 (a decade for the free fit); beta_tb (0 in
