@@ -160,12 +160,8 @@ pub fn identify_within(
             step: 0.25,
         });
     }
-    // The effects with the fitted lag on top of theirs.
-    let lagged = |p: &[f64]| -> Effects {
-        let mut f = *fx;
-        f.delay_s += p.get(n).map_or(0.0, |ms| 1e-3 * ms);
-        f
-    };
+    // The effects with the fitted lag (if any) on top of theirs.
+    let lagged = |p: &[f64]| fx.with_log_lag(p.get(n).map_or(0.0, |ms| 1e-3 * ms));
     // The likelihood of the diagnosis: each signal weighed by its noise, estimated from the
     // residual of Table 4 itself, so the column angle (where the belt and the column show)
     // is not drowned by the current's chatter.

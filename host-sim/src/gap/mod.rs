@@ -754,9 +754,6 @@ pub struct Options {
     /// ...and some parameter moved more than this factor from Table 4: within it, the car
     /// is the table's within its tolerance.
     pub parameter_tolerance: f64,
-    /// Refit Table 4 with the log's stamping lag from starts far off the table on the wheel's
-    /// side when nothing else explains the log (see `diagnose`).
-    pub far_starts: bool,
     pub threads: usize,
     pub progress: bool,
     /// Logs longer than this are fitted on their worst window of this length, s (0 = all).
@@ -777,7 +774,6 @@ impl Default for Options {
             parameter_iterations: 6,
             parameters_cost_share: 0.6,
             parameter_tolerance: 1.5,
-            far_starts: true,
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             progress: false,
             max_fit_s: 30.0,
@@ -958,8 +954,7 @@ fn best_with_log_lag(
     let residual = |p: &[f64]| -> Vec<f64> {
         let mut fx = Effects::nominal();
         apply_all(&best.kinds, &lens, &p[..n], &mut fx);
-        fx.delay_s = 1e-3 * p[n];
-        scorer.residual(rec, &simulate(rig, rec, &fx))
+        scorer.residual(rec, &simulate(rig, rec, &fx.with_log_lag(1e-3 * p[n])))
     };
     let res = fit::levenberg_marquardt(&specs, opts.fit, &residual, &|| progress.tick());
     Some((res.cost.min(best.cost), 1e-3 * res.params[n]))
@@ -1324,17 +1319,13 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     progress.finish();
     // Parameters: Table 4 refitted on the fitting window, scored by the same likelihood. Only
     // worth its hundred simulations when the nominal model is well above the noise.
-    // A refit's rig and what it leaves on the fitting window.
-    // The nominal effects with a refit's stamping lag (none unless it fitted one).
-    let lagged = |id: &identify::Identified| -> Effects {
-        let mut fx = nominal;
-        fx.delay_s = id.log_lag_s;
-        fx
-    };
+    // A refit's rig and what it leaves on the fitting window (with the log's lag, if the
+    // refit fitted one).
     let refit_cost = |id: &identify::Identified| -> (Rig, f64) {
         let mut refit = rig.clone();
         identify::apply(&mut refit, id);
-        let c = cost(&fscorer.residual(frec, &simulate(&refit, frec, &lagged(id))));
+        let fx = nominal.with_log_lag(id.log_lag_s);
+        let c = cost(&fscorer.residual(frec, &simulate(&refit, frec, &fx)));
         (refit, c)
     };
     // Table 4 refitted on the fitting window as `search` says.
@@ -1503,7 +1494,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // case 2 beyond the 20 % a finding needs). A higher damping shows. The torsion bar's
     // stiffness is not searched: it sets a mode near 36 Hz, far above what a sweep or a track
     // excites (cases 34 and 38, k_tb x2.7-3.0, came back at x0.4 or x2.5 alike).
-    if !parameters_win && verdict_candidate.is_none() && opts.far_starts && parameters.is_some() {
+    if !parameters_win && verdict_candidate.is_none() && parameters.is_some() {
         let searches: [(f64, &[(&str, f64)]); 4] = [
             (opts.parameter_tolerance, &[]),
             (10.0, &[("j_w", 0.4)]),
@@ -1513,7 +1504,6 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         // The best car within the tolerance found so far, with the lag or without.
         let mut c_near = tolerant.as_ref().map_or(f64::INFINITY, |(_, c)| *c);
         let mut far: Option<(identify::Identified, Rig, f64)> = None;
-        let mut far_simulations = 0;
         for (factor, start) in searches {
             let Some(id) = refit_by(identify::Search {
                 factor,
@@ -1522,7 +1512,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             }) else {
                 continue;
             };
-            far_simulations += id.simulations;
+            refit_simulations += id.simulations;
             let (refit, c) = refit_cost(&id);
             if identify::within_factor(rig, &id, opts.parameter_tolerance) {
                 c_near = c_near.min(c);
@@ -1530,7 +1520,6 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                 far = Some((id, refit, c));
             }
         }
-        refit_simulations += far_simulations;
         if let Some((id, refit, c)) = far {
             let gain = cost0 - c;
             let wins = reducible > 0.0
@@ -1572,7 +1561,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         ));
     }
     if parameters_win && let Some((id, refit, _)) = &parameters {
-        let fx = lagged(id);
+        let fx = nominal.with_log_lag(id.log_lag_s);
         let fit_after = scorer.fit(rec, &simulate(refit, rec, &fx));
         let fit_validation = vscorer
             .as_ref()

@@ -61,6 +61,14 @@ impl Effects {
             ..Effects::default()
         }
     }
+
+    /// These effects on a log whose stamps lag the instants its rows were sampled at by
+    /// `lag_s`: the model takes that as a reference later by as much (every logged signal
+    /// trails it), on top of any delay the effects hold.
+    pub fn with_log_lag(mut self, lag_s: f64) -> Effects {
+        self.delay_s += lag_s;
+        self
+    }
 }
 
 /// What one simulation gives on the record's time grid.
