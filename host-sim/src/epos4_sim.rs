@@ -26,10 +26,11 @@ use steering_ecu::canopen::nmt::{self, NmtCommand, NmtState};
 use steering_ecu::canopen::pdo::{COB_ID_INVALID, MappingEntry};
 use steering_ecu::canopen::sdo::{self, AbortCode, ServerRequest, Width};
 use steering_ecu::canopen::{NodeId, ObjectAddress, node_of};
-use steering_ecu::gains::EposGains;
+use steering_ecu::gains::{EposGains, GainError};
 use steering_ecu::paper_mode::{CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, Cascade};
+use steering_ecu::reference::ReferenceError;
 use steering_ecu::sensors::hall_from_motor;
-use steering_ecu::units::{Amps, MotorRad, SteeringDeg};
+use steering_ecu::units::{Amps, MotorRad, SteeringDeg, Volts};
 
 const TICK_US: u64 = 1_000_000 / CURRENT_LOOP_HZ as u64;
 /// Entries of the error history 0x1003.
@@ -95,11 +96,9 @@ pub struct Epos4Sim {
     state: State,
     last_controlword: u16,
     refusals: Vec<Refusal>,
-    cascade: Cascade,
-    plant: EffectPlant,
+    drive: DriveLoop,
     scale: PositionScale,
     now_us: u64,
-    tick: u64,
     booted: bool,
     next_heartbeat_us: u64,
     pending_rpdo: Option<Vec<u8>>,
@@ -108,7 +107,6 @@ pub struct Epos4Sim {
     rejected_targets: u64,
     limited_targets: u64,
     pdo_length_errors: u64,
-    current_avg_ma: f64,
     out: Vec<Frame>,
     /// Consumer heartbeat (0x1016 sub 1): when the watched node's heartbeat last came; the
     /// watch starts with the first one (CiA 301).
@@ -150,11 +148,9 @@ impl Epos4Sim {
             state: State::NotReadyToSwitchOn,
             last_controlword: 0,
             refusals: Vec::new(),
-            cascade: Cascade::paper(),
-            plant,
+            drive: DriveLoop::new(plant),
             scale,
             now_us: 0,
-            tick: 0,
             booted: false,
             next_heartbeat_us: u64::MAX,
             pending_rpdo: None,
@@ -163,7 +159,6 @@ impl Epos4Sim {
             rejected_targets: 0,
             limited_targets: 0,
             pdo_length_errors: 0,
-            current_avg_ma: 0.0,
             out: Vec::new(),
             consumer_last_us: None,
             origin_rad,
@@ -310,17 +305,17 @@ impl Epos4Sim {
     }
 
     pub fn motor_rad(&self) -> f64 {
-        self.plant.motor_rad()
+        self.drive.plant.motor_rad()
     }
 
     pub fn current_a(&self) -> f64 {
-        self.plant.current_a()
+        self.drive.plant.current_a()
     }
 
     /// The steering-column angle of the simulated actuator, rad (what the ECU's column
     /// encoder reads).
     pub fn column_rad(&self) -> f64 {
-        self.plant.column_rad()
+        self.drive.plant.column_rad()
     }
 
     /// Raw value of an object (for tests).
@@ -582,7 +577,7 @@ impl Epos4Sim {
     fn enter(&mut self, state: State) {
         if state == State::OperationEnabled && self.state != State::OperationEnabled {
             self.apply_gains();
-            self.cascade.reset(hall_from_motor(self.plant.motor_rad()));
+            self.drive.enable();
             // Hold where the target says: the ECU sets 0x607A to the actual position first.
             let target = self.get_raw(0x607A, 0) as i32;
             self.push_target(target);
@@ -606,7 +601,7 @@ impl Epos4Sim {
             ff_acceleration_ma_s2_per_rad: g(0x30A1, 5),
         };
         // Unsigned words are finite and >= 0: never refused.
-        let _ = self.cascade.set_gains(&gains);
+        let _ = self.drive.cascade.set_gains(&gains);
     }
 
     fn on_controlword(&mut self, cw: u16) {
@@ -671,14 +666,20 @@ impl Epos4Sim {
         self.set_raw(0x6061, 0, mode);
         let inc = self
             .scale
-            .inc_from_motor(MotorRad((self.plant.motor_rad() - self.origin_rad) as f32))
+            .inc_from_motor(MotorRad(
+                (self.drive.plant.motor_rad() - self.origin_rad) as f32,
+            ))
             .unwrap_or(0);
         self.set_raw(0x6064, 0, inc as u32);
-        self.set_raw(0x30D1, 1, (self.current_avg_ma.round() as i32) as u32);
+        self.set_raw(
+            0x30D1,
+            1,
+            (self.drive.averaged_current_ma().round() as i32) as u32,
+        );
         self.set_raw(
             0x30D1,
             2,
-            ((self.plant.current_a() * 1e3).round() as i32) as u32,
+            ((self.drive.plant.current_a() * 1e3).round() as i32) as u32,
         );
     }
 
@@ -705,8 +706,8 @@ impl Epos4Sim {
         // The cascade runs on the plant's true angle: the drive's increments count from the
         // power-up position.
         let motor = MotorRad(self.scale.motor_from_inc(inc).0 + self.origin_rad as f32);
-        let wheel = SteeringDeg::from(self.cascade.gearing().steering_from_motor(motor));
-        if self.cascade.push_reference(wheel).is_err() {
+        let wheel = SteeringDeg::from(self.drive.cascade.gearing().steering_from_motor(motor));
+        if self.drive.cascade.push_reference(wheel).is_err() {
             self.rejected_targets += 1;
         }
     }
@@ -790,6 +791,38 @@ impl Epos4Sim {
             self.enter(State::SwitchOnDisabled);
         }
         let running = self.state == State::OperationEnabled && self.csp();
+        self.drive.tick(running);
+    }
+}
+
+/// The drive's own closed loop in CSP, one current-loop tick at a time: the paper-mode cascade
+/// (position loop every [`CURRENT_TICKS_PER_POSITION_TICK`] ticks, on the drive's own motor
+/// angle, not Hall counts) driving the plant, and the averaged current the drive reports in
+/// 0x30D1 sub 1. [`Epos4Sim`] runs it behind its object dictionary and bus; the gap
+/// diagnosis's EPOS4 model (`gap::model::simulate_epos4`) runs the same loop from a log's
+/// reference, so the nominal model of an EPOS4 car is this code, not a second copy.
+#[derive(Debug)]
+pub struct DriveLoop {
+    pub(crate) cascade: Cascade,
+    pub(crate) plant: EffectPlant,
+    tick: u64,
+    current_avg_ma: f64,
+}
+
+impl DriveLoop {
+    /// The paper's cascade (Table 3) on `plant`, at rest.
+    pub fn new(plant: EffectPlant) -> DriveLoop {
+        DriveLoop {
+            cascade: Cascade::paper(),
+            plant,
+            tick: 0,
+            current_avg_ma: 0.0,
+        }
+    }
+
+    /// One current-loop tick (1 / [`CURRENT_LOOP_HZ`]); with `running` false the bridge is off
+    /// (0 V at the terminals) and the cascade does not run.
+    pub fn tick(&mut self, running: bool) {
         let voltage = if running {
             if self
                 .tick
@@ -803,7 +836,6 @@ impl Epos4Sim {
                 .voltage
                 .0 as f64
         } else {
-            // Bridge off; modelled as 0 V at the terminals.
             0.0
         };
         self.plant.step(voltage);
@@ -811,6 +843,36 @@ impl Epos4Sim {
         // documented in the EDS; only the object's existence and type are).
         self.current_avg_ma += (self.plant.current_a() * 1e3 - self.current_avg_ma) * 0.05;
         self.tick += 1;
+    }
+
+    /// Start the cascade from rest at the plant's motor angle (the drive entering Operation
+    /// enabled).
+    pub fn enable(&mut self) {
+        self.cascade.reset(hall_from_motor(self.plant.motor_rad()));
+    }
+
+    /// A CSP target at the wheel, as the drive's interpolator takes it at a SYNC.
+    pub fn push_target(&mut self, wheel: SteeringDeg) -> Result<(), ReferenceError> {
+        self.cascade.push_reference(wheel)
+    }
+
+    /// The drive's gains (0x30A0 / 0x30A1); refused as a whole if any is invalid.
+    pub fn set_gains(&mut self, gains: &EposGains) -> Result<(), GainError> {
+        self.cascade.set_gains(gains)
+    }
+
+    /// The current loop's voltage limit: the drive's supply, V.
+    pub fn set_voltage_limit(&mut self, volts: f64) {
+        self.cascade.set_voltage_limit(Volts(volts as f32));
+    }
+
+    /// 0x30D1 sub 1, mA.
+    pub fn averaged_current_ma(&self) -> f64 {
+        self.current_avg_ma
+    }
+
+    pub fn plant(&self) -> &EffectPlant {
+        &self.plant
     }
 }
 

@@ -34,7 +34,18 @@ const COLUMN_SAMPLE_TICKS: u64 =
 pub const SIM_EXTRA_COLUMNS: [&str; 3] = ["current_setpoint_a", "voltage_v", "setpoint_motor_rad"];
 
 /// Which steering controller closes the loop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Controller {
     /// The paper's EPOS4 cascade on the motor angle (Table 3), bit-exact with the firmware.
     #[default]
@@ -256,6 +267,11 @@ pub fn run_on<A: Actuator>(
         Some(_) => Log::with_extra_columns(&SIM_EXTRA_COLUMNS),
         None => Log::default(),
     };
+    // What the car is, for `gap`: this loop is the direct drive (the cascade on Hall counts).
+    log.comments =
+        crate::gap::drive::LogHeader::lines(crate::gap::rig::CarDrive::Direct, cfg.controller);
+    log.comments.push("current: interval-mean".into());
+    log.comments.push("reference: period-ending".into());
     let mut summary = RunSummary::default();
     let mut current_limited = 0u64;
     let mut voltage_limited = 0u64;

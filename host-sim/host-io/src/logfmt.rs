@@ -109,6 +109,9 @@ pub struct Log {
     pub current_a: Vec<f64>,
     /// Further columns, by name, in file order.
     pub extra: Vec<(String, Vec<f64>)>,
+    /// Comment lines before the header, without their `#`: what the writer says of the car
+    /// and the log (`drive: epos4`, `controller: paper`, `current: interval-mean`, ...).
+    pub comments: Vec<String>,
 }
 
 /// Everything that can go wrong reading or writing a log. Line numbers count every line of the
@@ -409,6 +412,10 @@ impl Log {
     pub fn write_to(&self, w: impl Write) -> Result<(), LogError> {
         self.check_writable()?;
         let mut w = BufWriter::new(w);
+        for c in &self.comments {
+            // One line each: a newline inside would end the comment and start a data line.
+            writeln!(w, "# {}", c.replace(['\r', '\n'], " ")).map_err(LogError::io)?;
+        }
         let mut header: Vec<&str> = REQUIRED_COLUMNS.to_vec();
         header.extend(self.extra_names());
         writeln!(w, "{}", header.join(",")).map_err(LogError::io)?;
@@ -455,6 +462,7 @@ impl Log {
             motor_rad,
             current_a,
             extra,
+            comments: table.comments,
         })
     }
 

@@ -1,5 +1,7 @@
 //! The `gap` and `identify` subcommands: arguments and what they print and write.
 
+use super::drive::{CarChoice, LogHeader, Source, controller_from_name};
+use super::rig::CarDrive;
 use super::rig::Rig;
 use super::{EffectKind, Options, diagnose, selftest};
 use crate::report_html::{HtmlReport, num};
@@ -60,6 +62,14 @@ pub struct GapArgs {
     /// world (a check of the search, not of the model).
     #[arg(long)]
     pub model_world: bool,
+    /// The car's drive (paper rig): an EPOS4 over CANopen, or the ECU's own bridge. Default:
+    /// the log's `# drive:` line, else the drive whose nominal model the log supports.
+    #[arg(long, value_name = "epos4|direct")]
+    pub drive: Option<String>,
+    /// The ECU's steering controller (paper rig). Default: the log's `# controller:` line,
+    /// else the one whose nominal model the log supports.
+    #[arg(long, value_name = "paper|ecu")]
+    pub controller: Option<String>,
 }
 
 #[derive(Args, Debug)]
@@ -81,11 +91,66 @@ pub struct IdentifyArgs {
 /// A log on the rig's grid; what the reader had to fill in (missing samples) goes to stderr, so
 /// the figures are never computed on a repaired log without a word.
 fn load_log(rig: &Rig, path: &Path) -> Result<super::Record> {
-    let (record, notes) = rig.load_record_noting(path)?;
-    for note in notes {
+    load_log_with_header(rig, path).map(|(record, _, _)| record)
+}
+
+/// [`load_log`] with what the log's header lines say of the car.
+fn load_log_with_header(
+    rig: &Rig,
+    path: &Path,
+) -> Result<(super::Record, LogHeader, super::LogTiming)> {
+    let loaded = rig.load_log(path)?;
+    for note in &loaded.notes {
         eprintln!("warning: {note}");
     }
-    Ok(record)
+    let header =
+        LogHeader::parse(&loaded.comments).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok((loaded.record, header, loaded.timing))
+}
+
+/// The car to diagnose against: the options, else the log's header, else fitted
+/// ([`super::drive::choose`]). A header that disagrees with an option is the option's.
+fn car_for(
+    args: &GapArgs,
+    rig: &Rig,
+    rec: &super::Record,
+    header: &LogHeader,
+    timing: super::LogTiming,
+    threads: usize,
+) -> Result<(Rig, super::Record, Option<CarChoice>)> {
+    let drive = match &args.drive {
+        Some(d) => Some((
+            CarDrive::from_name(d)
+                .ok_or_else(|| format!("--drive {d:?}: expected `epos4` or `direct`"))?,
+            Source::Option,
+        )),
+        None => header.drive.map(|d| (d, Source::Header)),
+    };
+    let controller = match &args.controller {
+        Some(c) => Some((
+            controller_from_name(c)
+                .ok_or_else(|| format!("--controller {c:?}: expected `paper` or `ecu`"))?,
+            Source::Option,
+        )),
+        None => header.controller.map(|c| (c, Source::Header)),
+    };
+    if !matches!(rig.model, super::rig::RigModel::Paper(_)) {
+        if args.drive.is_some() || args.controller.is_some() {
+            return Err(format!(
+                "--drive / --controller apply to the paper rig, not `{}`",
+                rig.name
+            )
+            .into());
+        }
+        return Ok((rig.clone(), rec.clone(), None));
+    }
+    let says = super::drive::LogSays {
+        reference_stated: header.reference.is_some(),
+        timing,
+    };
+    Ok(super::drive::choose(
+        rig, rec, drive, controller, says, threads,
+    ))
 }
 
 fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
@@ -169,16 +234,34 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         Some("bench") => return bench_cmd(args),
         _ => {}
     }
-    let mut rig = match &args.rig {
+    let rig = match &args.rig {
         Some(p) => Rig::load(p)?,
         None => Rig::paper(),
     };
-    let rec = load_log(&rig, log)?;
+    let (rec, header, timing) = load_log_with_header(&rig, log)?;
     let val = match &args.validate {
         Some(p) => Some(load_log(&rig, p)?),
         None => None,
     };
     let opts = options(args, &rig)?;
+    let (rig, rec, car) = car_for(args, &rig, &rec, &header, timing, opts.threads)?;
+    let mut rig = rig;
+    // The validation log is the same car's, written by the same logger.
+    let shift = car
+        .as_ref()
+        .and_then(|c| c.reference_shift_rows)
+        .unwrap_or(0);
+    let val = val.map(|v| super::drive::shifted_reference(&v, shift));
+    if let Some(car) = &car {
+        println!("{}", car.describe());
+    }
+    println!(
+        "log timing: {} rows {:.2} ms apart, stamp jitter {:.2} ms RMS, {} rows missing",
+        timing.rows,
+        1e3 * timing.row_dt_s,
+        1e3 * timing.jitter_s,
+        timing.missing_rows
+    );
     let mut refit = None;
     if args.refit_linear {
         let id = super::identify::identify(&rig, &rec, 10, true)?;
@@ -189,7 +272,11 @@ pub fn gap(args: &GapArgs) -> Result<()> {
     d.refit_linear = refit;
     let summary = d.summary();
     print!("{summary}");
-    let json = d.to_json();
+    let mut json = d.to_json();
+    if let Some(car) = &car {
+        json["car"] = serde_json::to_value(car)?;
+    }
+    json["log_timing"] = serde_json::to_value(timing)?;
     if let Some(path) = &args.json {
         write_json(path, &json)?;
     }

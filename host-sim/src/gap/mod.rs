@@ -18,6 +18,7 @@
 //! over the output and the effort, which is what the fits minimise.
 
 pub mod cli;
+pub mod drive;
 pub mod fit;
 pub mod generator;
 pub mod identify;
@@ -70,7 +71,7 @@ pub enum CurrentSamples {
 }
 
 /// Linear interpolation of `y(t)` at `tk`, held at the ends.
-fn interp_at(t: &[f64], y: &[f64], tk: f64) -> f64 {
+pub(crate) fn interp_at(t: &[f64], y: &[f64], tk: f64) -> f64 {
     let j = t.partition_point(|v| *v < tk);
     if j == 0 {
         y[0]
@@ -79,6 +80,97 @@ fn interp_at(t: &[f64], y: &[f64], tk: f64) -> f64 {
     } else {
         let s = (tk - t[j - 1]) / (t[j] - t[j - 1]).max(1e-12);
         y[j - 1] + s * (y[j] - y[j - 1])
+    }
+}
+
+/// A log's timing, as its stamps show it: the logger's, not the car's.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct LogTiming {
+    /// The typical row spacing (median), s.
+    pub row_dt_s: f64,
+    /// Where the row grid starts: one spacing before the first row's place on the grid that
+    /// fits every stamp best (median), s.
+    pub grid_origin_s: f64,
+    /// Stamp jitter around that grid: the RMS of the stamps' offsets (median absolute
+    /// deviation x 1.48, robust to a few far ones), s.
+    pub jitter_s: f64,
+    /// Rows missing from the grid (gaps of more than 1.5 spacings, counted in spacings).
+    pub missing_rows: usize,
+    pub rows: usize,
+}
+
+impl LogTiming {
+    /// From a log's (increasing) stamps. Each row is placed on the grid by its gap to the row
+    /// before (so a clock a little off the nominal rate does not drift the count), and the
+    /// grid is the least-squares line through those places.
+    pub fn of(t: &[f64]) -> LogTiming {
+        LogTiming::with_places(t).0
+    }
+
+    /// [`LogTiming::of`], with each row's place on the grid.
+    pub fn with_places(t: &[f64]) -> (LogTiming, Vec<u64>) {
+        if t.len() < 2 {
+            return (
+                LogTiming {
+                    rows: t.len(),
+                    ..LogTiming::default()
+                },
+                (0..t.len() as u64).collect(),
+            );
+        }
+        let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        gaps.sort_by(|a, b| a.total_cmp(b));
+        let median_gap = gaps[gaps.len() / 2].max(1e-9);
+        let mut places = Vec::with_capacity(t.len());
+        let mut place = 0u64;
+        places.push(0);
+        for w in t.windows(2) {
+            place += (((w[1] - w[0]) / median_gap).round() as u64).max(1);
+            places.push(place);
+        }
+        // t = a + b * place by least squares.
+        let n = t.len() as f64;
+        let mx = places.iter().map(|&p| p as f64).sum::<f64>() / n;
+        let my = t.iter().sum::<f64>() / n;
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for (&p, &tj) in places.iter().zip(t) {
+            let dx = p as f64 - mx;
+            sxy += dx * (tj - my);
+            sxx += dx * dx;
+        }
+        let b = if sxx > 0.0 { sxy / sxx } else { median_gap };
+        let b = if b.is_finite() && b > 0.0 {
+            b
+        } else {
+            median_gap
+        };
+        let a = my - b * mx;
+        let mut offsets: Vec<f64> = places
+            .iter()
+            .zip(t)
+            .map(|(&p, &tj)| tj - (a + b * p as f64))
+            .collect();
+        offsets.sort_by(|x, y| x.total_cmp(y));
+        let median = offsets[offsets.len() / 2];
+        let mut dev: Vec<f64> = offsets.iter().map(|o| (o - median).abs()).collect();
+        dev.sort_by(|x, y| x.total_cmp(y));
+        let missing_rows = (place + 1).saturating_sub(t.len() as u64) as usize;
+        (
+            LogTiming {
+                row_dt_s: b,
+                grid_origin_s: a + median - b,
+                jitter_s: 1.4826 * dev[dev.len() / 2],
+                missing_rows,
+                rows: t.len(),
+            },
+            places,
+        )
+    }
+
+    /// The stamps are a regular grid with jitter (not an irregular sampling): the jitter is
+    /// under a fifth of the spacing.
+    pub fn is_regular(&self) -> bool {
+        self.row_dt_s > 0.0 && self.jitter_s < 0.2 * self.row_dt_s
     }
 }
 
@@ -104,10 +196,34 @@ impl Record {
                 ..Record::default()
             };
         }
-        let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        gaps.sort_by(|a, b| a.total_cmp(b));
-        let row_dt = gaps[gaps.len() / 2].max(1e-9);
-        let origin = t[0] - row_dt;
+        let (timing, places) = LogTiming::with_places(t);
+        // A logger that stamps rows of a regular sampling with jitter (a CAN recording's
+        // receive times): each row is taken at its place on the grid, not at its stamp. Stamps
+        // already on a grid are kept as they are.
+        let snapped: Vec<f64>;
+        let t = if timing.is_regular() && timing.jitter_s > 1e-7 {
+            snapped = places
+                .iter()
+                .map(|&p| timing.grid_origin_s + timing.row_dt_s * (p + 1) as f64)
+                .collect();
+            &snapped[..]
+        } else {
+            t
+        };
+        let row_dt = if timing.is_regular() {
+            timing.row_dt_s
+        } else {
+            let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+            gaps.sort_by(|a, b| a.total_cmp(b));
+            gaps[gaps.len() / 2].max(1e-9)
+        };
+        // The grid from every row's stamp, not the first one's alone: a logger's stamps jitter,
+        // and the first row's jitter would shift every step of the log by as much.
+        let origin = if timing.is_regular() {
+            timing.grid_origin_s
+        } else {
+            t[0] - row_dt
+        };
         let last = t[t.len() - 1];
         // A millionth of a step for the rounding of binary fractions of 0.01 s.
         let n = (((last - origin) / dt + 1e-6).floor() as usize).max(1);
@@ -117,7 +233,14 @@ impl Record {
                 // The row whose interval holds the middle of the step.
                 let mid = origin + (k as f64 + 0.5) * dt;
                 let j = t.partition_point(|v| *v < mid).min(t.len() - 1);
-                reference[j]
+                // Rows missing before row j: its value is the reference of its own interval
+                // only; over the missing ones, the line from the row before.
+                if j > 0 && t[j] - t[j - 1] > 1.5 * row_dt && mid < t[j] - row_dt {
+                    let s = ((mid - t[j - 1]) / (t[j] - row_dt - t[j - 1])).clamp(0.0, 1.0);
+                    reference[j - 1] + s * (reference[j] - reference[j - 1])
+                } else {
+                    reference[j]
+                }
             })
             .collect();
         let effort = match current {
@@ -385,7 +508,9 @@ impl EffectKind {
             // second effect's phase: 5.2 and 5.8 ms fits named beside rack friction and a
             // tyre on logs with no delay at all (independent cases 27 and 7), where every
             // real delay came back at 17 ms or more.
-            (EffectKind::Delay, RigModel::Paper(_)) => 10.0,
+            // And never under what the log's own timing can explain (its stamps' jitter, a
+            // reference convention fitted from the log): that is the logger's, not the car's.
+            (EffectKind::Delay, RigModel::Paper(m)) => 10.0_f64.max(1e3 * m.timing_bound_s),
             // 150 N at the rack is 0.024 Nm at the motor through tau_bs and the belt (Table
             // 2): the friction minimum's size.
             (EffectKind::TireGround | EffectKind::TireDahl, RigModel::Paper(_)) => 150.0,
@@ -1599,12 +1724,48 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             }
         ));
     }
+    let base_validation = fit_on_validation(&nominal);
+    // An honest verdict: an explanation that leaves the log, or the validation log, further
+    // from the car than the nominal model (eq. 11) is no explanation, whatever the likelihood
+    // says (a likelihood weighs each signal by its own noise; the GoF is what a team reads).
+    let worse_than_nominal = |after: &Fit, validation: Option<&Fit>| -> Option<String> {
+        if after.gof < fit0.gof {
+            return Some(format!(
+                "leaves the GoF at {:.1} %, below the nominal {:.1} %",
+                100.0 * after.gof,
+                100.0 * fit0.gof
+            ));
+        }
+        match (validation, base_validation.as_ref()) {
+            (Some(v), Some(b)) if v.gof < b.gof => Some(format!(
+                "leaves the validation GoF at {:.1} %, below the nominal {:.1} %",
+                100.0 * v.gof,
+                100.0 * b.gof
+            )),
+            _ => None,
+        }
+    };
+    let mut parameters_checked = None;
     if parameters_win && let Some((id, refit, _)) = &parameters {
         let fx = nominal.with_log_lag(id.log_lag_s);
         let fit_after = scorer.fit(rec, &simulate(refit, rec, &fx));
         let fit_validation = vscorer
             .as_ref()
             .map(|(v, s)| s.fit(v, &simulate(refit, v, &fx)));
+        match worse_than_nominal(&fit_after, fit_validation.as_ref()) {
+            Some(why) => {
+                reason.push_str(&format!("; the refit {why}: not named"));
+                parameters_win = false;
+                refit_simulations += 1 + usize::from(fit_validation.is_some());
+            }
+            None => parameters_checked = Some((fit_after, fit_validation)),
+        }
+    }
+    if parameters_win
+        && let Some((id, refit, _)) = &parameters
+        && let Some((fit_after, fit_validation)) = parameters_checked
+    {
+        let fx = nominal.with_log_lag(id.log_lag_s);
         let where_ = locate::locate(rig, rec, &scorer, &sim0, &simulate(refit, rec, &fx));
         let verdict = Verdict {
             kind: VerdictKind::Parameters,
@@ -1633,7 +1794,12 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             elapsed_s: started.elapsed().as_secs_f64(),
         };
     }
-    let base_validation = fit_on_validation(&nominal);
+    if let Some(c) = &verdict_candidate
+        && let Some(why) = worse_than_nominal(&c.fit, c.fit_validation.as_ref())
+    {
+        reason.push_str(&format!("; {} {why}: not named", c.effect));
+        verdict_candidate = None;
+    }
     let parameter_simulations = parameters.as_ref().map_or(0, |(id, _, _)| id.simulations);
     // What the best explanation leaves: the nominal model, or the table refitted within its
     // tolerance (a car a few per cent off the table is no gap).

@@ -10,12 +10,20 @@
 //! is a play operator on the measured angle, and the delay shifts the reference.
 
 use super::Record;
-use super::rig::{BamModel, EmpsModel, PaperModel};
+use super::rig::{BamModel, CarDrive, DriveCurrent, EmpsModel, PaperModel};
 use crate::effect_plant::{Bristle, EffectPlant, PlantEffects, Play};
+use crate::epos4_sim::DriveLoop;
 use crate::plant::{Actuator, state};
+use crate::sim::Controller;
 use crate::sim::{self, RunConfig};
+use steering_ecu::canopen::epos4::PositionScale;
+use steering_ecu::ecu::Ecu;
+use steering_ecu::ecu_mode::{ColumnShaper, EcuTuning};
+use steering_ecu::gearing::Gearing;
 use steering_ecu::paper_mode::{CURRENT_LOOP_HZ, REFERENCE_HZ};
 use steering_ecu::sensors::ColumnEncoder;
+use steering_ecu::sensors::HALL_COUNTS_PER_REV;
+use steering_ecu::units::{SteeringDeg, SteeringRad};
 
 /// The candidate effects, each with its size; zero means absent.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
@@ -123,9 +131,13 @@ impl Effects {
 /// has its semantics ([`super::Record`]): angles at the end of each 10 ms period, the current
 /// averaged over it. An unusable model gives an empty output (the caller's cost is then NaN).
 pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
+    if m.drive == CarDrive::Epos4 {
+        return simulate_epos4(m, rec, fx);
+    }
     let p = m.plant;
     let reference = delayed(&rec.reference, fx.delay_s, 1.0 / REFERENCE_HZ as f64);
     let cfg = RunConfig {
+        controller: m.controller,
         plant: p,
         gains: m.gains.to_epos(),
         supply_v: if fx.supply_v > 0.0 {
@@ -149,6 +161,145 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
             .motor_rad
             .iter()
             .map(|m| (m / per_motor).to_degrees())
+            .collect(),
+    }
+}
+
+/// The paper's actuator behind an EPOS4 in CSP, from `rec.reference`: the chain the firmware's
+/// EPOS4 build runs and `steer-can convert` logs, on the drive's own loop ([`DriveLoop`], the
+/// one the simulated EPOS4 runs).
+///
+/// ```text
+///  row k's reference --(ECU, when it arrives: paper: the angle at the motor; ecu: the column
+///                       shaper on the newest column sample)--> CSP target, whole increments
+///  SYNC, `sync_after_push_s` later: the drive latches it (interpolated over one period) and
+///                       samples its position (increments) and current for TPDO1 / TPDO2
+///  row k: column at push + 10 ms, motor angle interpolated between the SYNC samples at
+///         push + 10 ms, current interpolated between them at push + 5 ms (logbuild's reading)
+/// ```
+pub fn simulate_epos4(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
+    let p = m.plant;
+    let period = 1.0 / REFERENCE_HZ as f64;
+    let reference = delayed(&rec.reference, fx.delay_s, period);
+    let dt = 1.0 / CURRENT_LOOP_HZ as f64;
+    let Some(&first) = reference.first() else {
+        return SimOut::default();
+    };
+    let Ok(mut plant) = EffectPlant::new(p, fx.plant_effects(), dt) else {
+        return SimOut::default();
+    };
+    let Some(gearing) = Gearing::new(p.belt_reduction as f32, p.tau_bs as f32, p.tau_p as f32)
+    else {
+        return SimOut::default();
+    };
+    let Some(scale) = PositionScale::new(HALL_COUNTS_PER_REV) else {
+        return SimOut::default();
+    };
+    plant.set_at_rest(first.to_radians());
+    let mut drive = DriveLoop::new(plant);
+    let gains = match m.controller {
+        Controller::Paper => m.gains.to_epos(),
+        Controller::Ecu => Ecu::ecu_mode_epos4_gains(),
+    };
+    if drive.set_gains(&gains).is_err() {
+        return SimOut::default();
+    }
+    drive.set_voltage_limit(if fx.supply_v > 0.0 {
+        fx.supply_v
+    } else {
+        m.supply_v
+    });
+    drive.enable();
+    let mut shaper = (m.controller == Controller::Ecu).then(|| {
+        let mut s = ColumnShaper::new(gearing, EcuTuning::PAPER, 1);
+        s.reset(gearing.motor_from_steering(SteeringRad::from(SteeringDeg(first as f32))));
+        s
+    });
+    let encoder = ColumnEncoder { zero_raw: 0 };
+    let column_deg = |d: &DriveLoop| {
+        f64::from(
+            encoder
+                .angle(encoder.raw_from_angle(d.plant().column_rad()))
+                .0,
+        )
+        .to_degrees()
+    };
+    let per_motor = p.motor_per_pinion();
+    let ticks_per_period = (period / dt).round() as u64;
+    // The SYNC as a whole tick within the period after each push, at least one tick.
+    let sync_tick = ((m.epos4.sync_after_push_s / dt).round() as u64).clamp(1, ticks_per_period);
+    let n = reference.len();
+    // SYNC samples: the tick they were taken at, the position (output units) and the current.
+    let mut at = Vec::with_capacity(n + 1);
+    let mut motor_s = Vec::with_capacity(n + 1);
+    let mut current_s = Vec::with_capacity(n + 1);
+    let mut column_rows = Vec::with_capacity(n);
+    let mut target = gearing.motor_from_steering(SteeringRad::from(SteeringDeg(first as f32)));
+    let mut tick: u64 = 0;
+    // The ECU's column encoder task samples every 2 ms, on its own phase; the shaper takes the
+    // newest sample.
+    let encoder_ticks = (steering_ecu::tasks::ENCODER_PERIOD.as_micros() as f64 * 1e-6 / dt)
+        .round()
+        .max(1.0) as u64;
+    let encoder_phase = ((m.epos4.encoder_phase_s / dt).round() as u64) % encoder_ticks;
+    let mut encoder_sample = column_deg(&drive);
+    let sample = |d: &DriveLoop| {
+        let inc = scale
+            .inc_from_motor(steering_ecu::units::MotorRad(d.plant().motor_rad() as f32))
+            .unwrap_or(0);
+        let motor = f64::from(scale.motor_from_inc(inc).0);
+        let current = match m.epos4.current {
+            DriveCurrent::Instantaneous => (d.plant().current_a() * 1e3).round() * 1e-3,
+            DriveCurrent::Averaged => d.averaged_current_ma().round() * 1e-3,
+        };
+        ((motor / per_motor).to_degrees(), current)
+    };
+    for &r in &reference {
+        // The ECU takes the sample at the push (tick k * ticks_per_period).
+        let angle = SteeringDeg(r as f32);
+        match &mut shaper {
+            None => {
+                if let Ok(m) = steering_ecu::paper_mode::reference_at_motor(gearing, angle) {
+                    target = m;
+                }
+            }
+            Some(s) => {
+                let _ = s.push_reference(angle);
+                let column = SteeringRad::from(SteeringDeg(encoder_sample as f32));
+                target = s.next_target(Some(column));
+            }
+        }
+        for j in 1..=ticks_per_period {
+            drive.tick(true);
+            tick += 1;
+            if tick % encoder_ticks == encoder_phase {
+                encoder_sample = column_deg(&drive);
+            }
+            if j == sync_tick {
+                // The target as whole increments of the drive, then back at the wheel, as the
+                // drive reads it. The increments count from where the motor stood at power-up;
+                // taken here as the column's zero (a car powered up straight).
+                if let Some(inc) = scale.inc_from_motor(target) {
+                    let motor = scale.motor_from_inc(inc);
+                    let _ =
+                        drive.push_target(SteeringDeg::from(gearing.steering_from_motor(motor)));
+                }
+                let (mo, cu) = sample(&drive);
+                at.push(tick as f64 * dt);
+                motor_s.push(mo);
+                current_s.push(cu);
+            }
+        }
+        column_rows.push(column_deg(&drive));
+    }
+    let interp = |t: f64, v: &[f64]| super::interp_at(&at, v, t);
+    SimOut {
+        output: column_rows,
+        effort: (0..n)
+            .map(|k| interp((k as f64 + 0.5) * period, &current_s))
+            .collect(),
+        motor: (0..n)
+            .map(|k| interp((k + 1) as f64 * period, &motor_s))
             .collect(),
     }
 }

@@ -87,6 +87,99 @@ pub struct PaperModel {
     pub gains: GainsFile,
     #[serde(default = "default_supply")]
     pub supply_v: f64,
+    /// Which drive closes the loops on the car (the firmware's build): the ECU's own bridge,
+    /// or an EPOS4 in CSP fed a target each SYNC.
+    #[serde(default)]
+    pub drive: CarDrive,
+    /// Which steering controller the ECU runs.
+    #[serde(default)]
+    pub controller: crate::sim::Controller,
+    /// EPOS4 mode: how the drive's frames are timed against the log (fitted from the log
+    /// when the diagnosis is not told).
+    #[serde(default)]
+    pub epos4: Epos4Timing,
+    /// A delay the log's own timing can explain (its stamps' jitter, a reference convention
+    /// the log does not state), s: a `delay` is named only beyond it.
+    #[serde(default)]
+    pub timing_bound_s: f64,
+}
+
+/// A log on the rig's grid, with what else its file says.
+#[derive(Debug, Clone)]
+pub struct LoadedLog {
+    pub record: Record,
+    /// What the reader had to fill in (missing samples), for the caller to show.
+    pub notes: Vec<String>,
+    /// The comment lines before the header, without their `#`: what the log says of the car
+    /// (`drive: epos4`, ...).
+    pub comments: Vec<String>,
+    /// The stamps' timing (the logger's).
+    pub timing: super::LogTiming,
+}
+
+/// The car's drive, as the firmware's `drive-epos4` / `drive-direct` builds have it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CarDrive {
+    /// The ECU's own bridge: the cascade on Hall counts at 2 kHz / 20 kHz, as `sim::run`.
+    #[default]
+    Direct,
+    /// A maxon EPOS4: the ECU's CSP target each SYNC, the drive's interpolation and loops on
+    /// its own motor angle, its position and current as its TPDOs report them.
+    Epos4,
+}
+
+impl CarDrive {
+    pub fn name(self) -> &'static str {
+        match self {
+            CarDrive::Direct => "direct",
+            CarDrive::Epos4 => "epos4",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<CarDrive> {
+        match name.trim().to_ascii_lowercase().as_str() {
+            "direct" => Some(CarDrive::Direct),
+            "epos4" => Some(CarDrive::Epos4),
+            _ => None,
+        }
+    }
+}
+
+/// Which current an EPOS4's TPDO carries (the link's `current_object`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DriveCurrent {
+    /// 0x30D1 sub 2, the current at the SYNC (the firmware's default mapping).
+    #[default]
+    Instantaneous,
+    /// 0x30D1 sub 1, the drive's ~1 ms average at the SYNC.
+    Averaged,
+}
+
+/// The timing of an EPOS4 car's log against its reference rows.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Epos4Timing {
+    /// From the instant the ECU takes a reference sample to the SYNC at which the drive
+    /// latches the target made from it (and samples the position and current it reports), s;
+    /// in (0, one reference period]. The ECU's SYNC grid runs on its own clock, so on a car
+    /// this phase is the log's, not a constant.
+    pub sync_after_push_s: f64,
+    pub current: DriveCurrent,
+    /// When, after each reference sample, the ECU's 2 ms column-encoder task samples, modulo
+    /// its period, s (the ECU controller's column terms take the newest sample).
+    #[serde(default)]
+    pub encoder_phase_s: f64,
+}
+
+impl Default for Epos4Timing {
+    fn default() -> Self {
+        Epos4Timing {
+            sync_after_push_s: 0.005,
+            current: DriveCurrent::Instantaneous,
+            encoder_phase_s: 0.0,
+        }
+    }
 }
 
 /// A 1-DOF axis (mass, viscous friction, offset) under a P-PD controller with a one-sample
@@ -231,6 +324,10 @@ impl Rig {
                 plant: PlantParams::PAPER,
                 gains: GainsFile::default(),
                 supply_v: 24.0,
+                drive: CarDrive::Direct,
+                controller: crate::sim::Controller::Paper,
+                epos4: Epos4Timing::default(),
+                timing_bound_s: 0.0,
             }),
             skip_s: 0.2,
         }
@@ -350,6 +447,12 @@ impl Rig {
     /// (`logfmt::Table`): time strictly increasing, values within physical bounds, errors with
     /// file and line.
     pub fn load_record_noting(&self, path: &Path) -> Result<(Record, Vec<String>), RigError> {
+        self.load_log(path).map(|l| (l.record, l.notes))
+    }
+
+    /// As [`Rig::load_record_noting`], with the log's comment lines before its header and its
+    /// stamps' timing.
+    pub fn load_log(&self, path: &Path) -> Result<LoadedLog, RigError> {
         let name = path.display().to_string();
         let table = Table::load(path, &self.columns.time).map_err(RigError::Log)?;
         let mut notes = Vec::new();
@@ -459,7 +562,12 @@ impl Rig {
                 },
             )?,
         };
-        Ok((record, notes))
+        Ok(LoadedLog {
+            record,
+            notes,
+            comments: table.comments.clone(),
+            timing: super::LogTiming::of(&t),
+        })
     }
 }
 

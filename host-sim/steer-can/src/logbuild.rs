@@ -255,6 +255,27 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
             ],
         );
     }
+    // What the diagnosis needs to know of the car: the drive shows on the bus (an EPOS4
+    // answers the ECU's SYNCs with TPDOs); the ECU's controller does not, and is left to the
+    // diagnosis to fit unless the caller knows it.
+    let drive = if tpdo1_sent.is_some() || tpdo2_sent.is_some() {
+        "epos4"
+    } else {
+        "direct"
+    };
+    log.comments.push(format!("drive: {drive}"));
+    // `sync-sample`: the drive's TPDO2 current at each SYNC, read at the middle of the row's
+    // period; `interval-mean`: the mean over the row's period (the ECU's own 0x102 current).
+    log.comments.push(format!(
+        "current: {}",
+        if drive == "epos4" {
+            "sync-sample"
+        } else {
+            "interval-mean"
+        }
+    ));
+    // The reference in force over the period that ends at the row's t.
+    log.comments.push("reference: period-ending".to_string());
     if log.is_empty() {
         return Err(BringupError::Log {
             reason: match rows {

@@ -1,0 +1,442 @@
+//! Which car wrote a log: its drive (an EPOS4 in CSP, or the ECU's own bridge), the ECU's
+//! controller, and on an EPOS4 car where the drive's SYNC falls after each reference sample.
+//!
+//! The nominal model must be the car's own chain: an EPOS4 latches the ECU's target at a SYNC
+//! and reports its position and current as sampled there, which a model of the direct drive
+//! reads as parameters off the table. The header lines `steer-can convert` and host-sim write
+//! say which car it was (`# drive: epos4`, `# controller: paper`); a log without them (a
+//! team's own logger) is run through every car the header leaves open, and the one whose
+//! nominal model leaves the least of the log (eq. 11) is taken, with the margin printed. The
+//! SYNC's phase is not in any header: the ECU's SYNC grid runs on its own clock, so it is
+//! searched on every EPOS4 log.
+
+use super::model::Effects;
+use super::rig::{CarDrive, Rig, RigModel};
+use super::{Fit, Record, Scorer, simulate};
+use crate::sim::Controller;
+
+/// What a log's comment lines before its header say of the car and the logger.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct LogHeader {
+    pub drive: Option<CarDrive>,
+    pub controller: Option<Controller>,
+    /// `# current: ...` as written (interval-mean, instantaneous, ...).
+    pub current: Option<String>,
+    /// `# reference: ...` as written.
+    pub reference: Option<String>,
+}
+
+impl LogHeader {
+    /// The `key: value` comment lines (without their `#`); other comments are ignored, and a
+    /// value this reader does not know is an error, not a guess.
+    pub fn parse(comments: &[String]) -> Result<LogHeader, String> {
+        let mut h = LogHeader::default();
+        for c in comments {
+            let Some((k, v)) = c.split_once(':') else {
+                continue;
+            };
+            let (k, v) = (k.trim(), v.trim());
+            match k {
+                "drive" => {
+                    h.drive = Some(CarDrive::from_name(v).ok_or_else(|| {
+                        format!("header `# drive: {v}`: expected `epos4` or `direct`")
+                    })?)
+                }
+                "controller" => {
+                    h.controller = Some(controller_from_name(v).ok_or_else(|| {
+                        format!("header `# controller: {v}`: expected `paper` or `ecu`")
+                    })?)
+                }
+                "current" => h.current = Some(v.to_string()),
+                "reference" => h.reference = Some(v.to_string()),
+                _ => {}
+            }
+        }
+        Ok(h)
+    }
+
+    /// The header lines of a log of this car (for the writers).
+    pub fn lines(drive: CarDrive, controller: Controller) -> Vec<String> {
+        vec![
+            format!("drive: {}", drive.name()),
+            format!("controller: {}", controller_name(controller)),
+        ]
+    }
+}
+
+pub fn controller_name(c: Controller) -> &'static str {
+    match c {
+        Controller::Paper => "paper",
+        Controller::Ecu => "ecu",
+    }
+}
+
+pub fn controller_from_name(name: &str) -> Option<Controller> {
+    match name.trim().to_ascii_lowercase().as_str() {
+        "paper" => Some(Controller::Paper),
+        "ecu" => Some(Controller::Ecu),
+        _ => None,
+    }
+}
+
+/// How the car was chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Source {
+    /// Given on the command line.
+    Option,
+    /// Read from the log's header lines.
+    Header,
+    /// Fitted: the nominal model the log supports best.
+    Fitted,
+}
+
+/// One car tried on the log.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Tried {
+    pub drive: CarDrive,
+    pub controller: Controller,
+    /// EPOS4 only: the SYNC after each reference sample, s.
+    pub sync_after_push_s: Option<f64>,
+    /// Rows the reference column was moved later by: 1 when the logger writes at each row
+    /// the reference that starts there (the ECU uses it from that instant), 0 when the one in
+    /// force over the period that ends there (host-sim's and steer-can's logs).
+    pub reference_shift_rows: usize,
+    /// The nominal model's GoF on the log (eq. 11, combined).
+    pub gof: f64,
+}
+
+/// The car the diagnosis runs, and how it was chosen.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct CarChoice {
+    pub drive: CarDrive,
+    pub controller: Controller,
+    pub drive_from: Source,
+    pub controller_from: Source,
+    pub sync_after_push_s: Option<f64>,
+    /// The reference convention: `None` when the header states it, else the rows the
+    /// reference column was moved by (see [`Tried::reference_shift_rows`]).
+    pub reference_shift_rows: Option<usize>,
+    /// A delay this log's timing can explain, s: `delay` is named only beyond it.
+    pub timing_bound_s: f64,
+    /// The best of each car tried (one entry when the car was given), best first.
+    pub tried: Vec<Tried>,
+}
+
+impl CarChoice {
+    /// One line for the report.
+    pub fn describe(&self) -> String {
+        let from = |s: Source| match s {
+            Source::Option => "given",
+            Source::Header => "from the log's header",
+            Source::Fitted => "fitted",
+        };
+        let mut line = format!(
+            "car: {} drive ({}), {} controller ({})",
+            self.drive.name(),
+            from(self.drive_from),
+            controller_name(self.controller),
+            from(self.controller_from),
+        );
+        if let Some(s) = self.sync_after_push_s {
+            line.push_str(&format!(
+                "; SYNC {:.2} ms after each reference sample (fitted)",
+                1e3 * s
+            ));
+        }
+        match self.reference_shift_rows {
+            Some(0) => line.push_str(
+                "; reference column: the period ending at each row (fitted; the header does not say)",
+            ),
+            Some(n) => line.push_str(&format!(
+                "; reference column: the period starting at each row (fitted, {n} row later; the \
+                 header does not say)"
+            )),
+            None => {}
+        }
+        line.push_str(&format!(
+            "; a delay is named only beyond {:.1} ms (what the log's timing can explain)",
+            1e3 * self.timing_bound_s.max(0.010)
+        ));
+        let others: Vec<String> = self
+            .tried
+            .iter()
+            .skip(1)
+            .map(|t| {
+                format!(
+                    "{} + {}{}: nominal GoF {:.1} %",
+                    t.drive.name(),
+                    controller_name(t.controller),
+                    if self.reference_shift_rows.is_some() {
+                        if t.reference_shift_rows == 0 {
+                            " (reference ending at the row)"
+                        } else {
+                            " (reference starting at the row)"
+                        }
+                    } else {
+                        ""
+                    },
+                    100.0 * t.gof
+                )
+            })
+            .collect();
+        if let Some(best) = self.tried.first()
+            && !others.is_empty()
+        {
+            line.push_str(&format!(
+                "; nominal GoF {:.1} % against {}",
+                100.0 * best.gof,
+                others.join(", ")
+            ));
+        }
+        line
+    }
+}
+
+/// SYNC phases tried on an EPOS4 log, s after each reference sample: every millisecond of the
+/// 10 ms period, then every current-loop tick (50 us) within half a millisecond of the best:
+/// the drive samples its current at the SYNC, and where that falls within the position
+/// loop's 0.5 ms cycle shows in the current it reports.
+const SYNC_COARSE_S: [f64; 10] = [
+    0.001, 0.002, 0.003, 0.004, 0.005, 0.006, 0.007, 0.008, 0.009, 0.010,
+];
+const SYNC_FINE_STEP_S: f64 = 1.0 / steering_ecu::paper_mode::CURRENT_LOOP_HZ as f64;
+const SYNC_FINE_STEPS: i32 = 10;
+/// The phase is searched on at most this much of the log, s (it is one number for the log).
+const SYNC_SEARCH_S: f64 = 20.0;
+
+fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, sync: f64) -> Rig {
+    let mut r = rig.clone();
+    if let RigModel::Paper(m) = &mut r.model {
+        m.drive = drive;
+        m.controller = controller;
+        m.epos4.sync_after_push_s = sync;
+    }
+    r
+}
+
+fn nominal_fit(rig: &Rig, rec: &Record) -> Fit {
+    let sim = simulate(rig, rec, &Effects::nominal());
+    let fit = Scorer::new(rig, rec).fit(rec, &sim);
+    Fit {
+        gof: if fit.gof.is_finite() {
+            fit.gof
+        } else {
+            f64::NEG_INFINITY
+        },
+        ..fit
+    }
+}
+
+/// The record with its reference column moved `rows` later (the first sample held).
+pub fn shifted_reference(rec: &Record, rows: usize) -> Record {
+    if rows == 0 || rec.is_empty() {
+        return rec.clone();
+    }
+    let n = rec.len();
+    let reference = (0..n)
+        .map(|k| rec.reference[k.saturating_sub(rows)])
+        .collect();
+    Record {
+        reference,
+        ..rec.clone()
+    }
+}
+
+/// The first `seconds` of a record.
+fn head(rec: &Record, seconds: f64) -> Record {
+    let n = ((seconds / rec.dt).round() as usize).min(rec.len());
+    if n >= rec.len() {
+        return rec.clone();
+    }
+    Record {
+        dt: rec.dt,
+        reference: rec.reference[..n].to_vec(),
+        output: rec.output[..n].to_vec(),
+        effort: rec.effort[..n].to_vec(),
+        motor: rec.motor.as_ref().map(|m| m[..n].to_vec()),
+        disturbance: rec.disturbance.as_ref().map(|d| d[..n].to_vec()),
+        supply_v: rec.supply_v.as_ref().map(|s| s[..n].to_vec()),
+    }
+}
+
+/// What the log's file says of its timing, for [`choose`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LogSays {
+    /// The header states the reference convention (`# reference: ...`).
+    pub reference_stated: bool,
+    pub timing: super::LogTiming,
+}
+
+/// The car for a log on the paper rig: `drive` and `controller` where given (the command line
+/// or the header), the rest fitted; and, for a log at the reference rate whose header does
+/// not say how its reference column is timed, that convention. Returns the rig with that car
+/// in its model and the record as the diagnosis must read it. Other rigs are returned as
+/// they are, with `None`.
+pub fn choose(
+    rig: &Rig,
+    rec: &Record,
+    drive: Option<(CarDrive, Source)>,
+    controller: Option<(Controller, Source)>,
+    says: LogSays,
+    threads: usize,
+) -> (Rig, Record, Option<CarChoice>) {
+    if !matches!(rig.model, RigModel::Paper(_)) {
+        return (rig.clone(), rec.clone(), None);
+    }
+    let drives: Vec<CarDrive> = match drive {
+        Some((d, _)) => vec![d],
+        None => vec![CarDrive::Epos4, CarDrive::Direct],
+    };
+    let controllers: Vec<Controller> = match controller {
+        Some((c, _)) => vec![c],
+        None => vec![Controller::Paper, Controller::Ecu],
+    };
+    // At the reference rate the two conventions are one row apart; at 200 Hz and faster the
+    // rows resolve the reference's steps and the binning places them.
+    let row_dt = says.timing.row_dt_s;
+    let at_reference_rate = row_dt > 0.75 * rec.dt && row_dt < 1.5 * rec.dt;
+    let shifts: Vec<usize> = if !says.reference_stated && at_reference_rate {
+        vec![0, 1]
+    } else {
+        vec![0]
+    };
+    let records: Vec<Record> = shifts.iter().map(|&k| shifted_reference(rec, k)).collect();
+    let shorts: Vec<Record> = records.iter().map(|r| head(r, SYNC_SEARCH_S)).collect();
+    type Job = (CarDrive, Controller, f64, usize);
+    let mut jobs: Vec<Job> = Vec::new();
+    for &d in &drives {
+        for &c in &controllers {
+            for &k in &shifts {
+                match d {
+                    CarDrive::Direct => jobs.push((d, c, 0.0, k)),
+                    CarDrive::Epos4 => jobs.extend(SYNC_COARSE_S.iter().map(|&s| (d, c, s, k))),
+                }
+            }
+        }
+    }
+    let index_of = |k: usize| shifts.iter().position(|x| *x == k).unwrap_or(0);
+    let run = |jobs: &[Job], on: &[Record]| -> Vec<Tried> {
+        parallel_map(jobs, threads, |&(d, c, s, k)| {
+            let fit = nominal_fit(&with_car(rig, d, c, s), &on[index_of(k)]);
+            Tried {
+                drive: d,
+                controller: c,
+                sync_after_push_s: (d == CarDrive::Epos4).then_some(s),
+                reference_shift_rows: k,
+                gof: fit.gof,
+            }
+        })
+    };
+    let coarse = run(&jobs, &shorts);
+    // The best phase of each EPOS4 car, refined around its best millisecond.
+    let mut best_of_car: Vec<Tried> = Vec::new();
+    for &d in &drives {
+        for &c in &controllers {
+            for &k in &shifts {
+                let Some(best) = coarse
+                    .iter()
+                    .filter(|t| t.drive == d && t.controller == c && t.reference_shift_rows == k)
+                    .max_by(|a, b| a.gof.total_cmp(&b.gof))
+                    .copied()
+                else {
+                    continue;
+                };
+                let best = match best.sync_after_push_s {
+                    Some(s) => {
+                        let fine: Vec<Job> = (-SYNC_FINE_STEPS..=SYNC_FINE_STEPS)
+                            .filter(|j| *j != 0)
+                            .map(|j| s + f64::from(j) * SYNC_FINE_STEP_S)
+                            .filter(|x| *x > 0.0 && *x <= 0.010 + 1e-9)
+                            .map(|x| (d, c, x, k))
+                            .collect();
+                        run(&fine, &shorts)
+                            .into_iter()
+                            .chain(std::iter::once(best))
+                            .max_by(|a, b| a.gof.total_cmp(&b.gof))
+                            .unwrap_or(best)
+                    }
+                    None => best,
+                };
+                best_of_car.push(best);
+            }
+        }
+    }
+    // The cars compared on the whole log.
+    let whole = parallel_map(&best_of_car, threads, |t| {
+        let fit = nominal_fit(
+            &with_car(
+                rig,
+                t.drive,
+                t.controller,
+                t.sync_after_push_s.unwrap_or(0.0),
+            ),
+            &records[index_of(t.reference_shift_rows)],
+        );
+        Tried { gof: fit.gof, ..*t }
+    });
+    let mut tried = whole;
+    tried.sort_by(|a, b| b.gof.total_cmp(&a.gof));
+    let Some(best) = tried.first().copied() else {
+        return (rig.clone(), rec.clone(), None);
+    };
+    let fitted_convention = shifts.len() > 1;
+    // What the log's timing can explain: three times its stamps' jitter, and one row more when
+    // its reference convention is fitted rather than stated (a late reference and a logger
+    // that writes it a row early are one row apart).
+    let timing_bound_s = 3.0 * says.timing.jitter_s + if fitted_convention { row_dt } else { 0.0 };
+    let choice = CarChoice {
+        drive: best.drive,
+        controller: best.controller,
+        drive_from: drive.map_or(Source::Fitted, |(_, s)| s),
+        controller_from: controller.map_or(Source::Fitted, |(_, s)| s),
+        sync_after_push_s: best.sync_after_push_s,
+        reference_shift_rows: fitted_convention.then_some(best.reference_shift_rows),
+        timing_bound_s,
+        tried,
+    };
+    let mut chosen = with_car(
+        rig,
+        best.drive,
+        best.controller,
+        best.sync_after_push_s.unwrap_or(0.0),
+    );
+    if let RigModel::Paper(m) = &mut chosen.model {
+        m.timing_bound_s = timing_bound_s;
+    }
+    let record = records[index_of(best.reference_shift_rows)].clone();
+    (chosen, record, Some(choice))
+}
+
+/// `f` over `items` on up to `threads` threads, results in the items' order.
+fn parallel_map<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    let threads = threads.clamp(1, items.len().max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut out: Vec<(usize, R)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(item) = items.get(i) else {
+                            break;
+                        };
+                        done.push((i, f(item)));
+                    }
+                    done
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    });
+    out.sort_by_key(|(i, _)| *i);
+    out.into_iter().map(|(_, r)| r).collect()
+}
