@@ -620,30 +620,57 @@ fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() 
     // The silence and the corrupted run each held the position 30 ms after the last good frame.
     assert_eq!(d.counter("hold entries"), Some(2));
     use steer_can::monitor::RecordPage;
+    // Every slot of the fault log came, oldest first.
     let records = d.records();
-    // The score that latched it.
-    assert_eq!(records[0], RecordPage::Fault(Ok(Fault::InvalidFrames), 5));
-    let RecordPage::Fault(older, age_ms) = records[1] else {
-        panic!("{records:?}")
+    assert!(
+        records.iter().all(|r| *r != RecordPage::NotSeen),
+        "{records:?}"
+    );
+    let RecordPage::Fault {
+        fault: older,
+        detail: age_ms,
+        acknowledged: true,
+        ..
+    } = records[0]
+    else {
+        panic!("the timeout, acknowledged by the clear at 50: {records:?}")
     };
     assert_eq!(older, Ok(Fault::ReferenceTimeout));
     assert!((130..=140).contains(&age_ms), "{age_ms} ms");
-    assert_eq!(records[2], RecordPage::Empty, "two faults, two records");
+    // The score that latched it, after the clear: not acknowledged.
+    assert!(matches!(
+        records[1],
+        RecordPage::Fault {
+            fault: Ok(Fault::InvalidFrames),
+            detail: 5,
+            acknowledged: false,
+            age_s: 0,
+        }
+    ));
+    assert!(
+        records[2..].iter().all(|r| *r == RecordPage::Empty),
+        "two faults, two records"
+    );
+    assert_eq!(d.counter("fault records held"), Some(2));
+    assert_eq!(d.counter("unacknowledged records"), Some(1));
     let text = monitor.summary();
     eprintln!("{text}");
     for words in [
         "dropped: CRC 6",
         "hold entries 2",
         "bus-off events 0",
-        "fault record 1 (newest): invalid reference frames: invalid-frame score 5",
-        "fault record 2: reference timeout: no valid reference for 1",
-        "fault record 3: none",
+        "fault record 2 (unacknowledged, 0 s ago): invalid reference frames: invalid-frame score 5",
+        "fault record 1 (acknowledged, 0 s ago): reference timeout: no valid reference for 1",
     ] {
         assert!(
             text.contains(words),
             "monitor summary lacks {words:?}:\n{text}"
         );
     }
+    assert!(
+        text.find("fault record 2 (unacknowledged") < text.find("fault record 1 (acknowledged"),
+        "the unacknowledged fault first:\n{text}"
+    );
 }
 
 /// Issue 12 defect 10: the watchdog is fed every feed period while the tasks and the fast loop
