@@ -148,6 +148,8 @@ pub struct Ecu {
     pending: heapless::Vec<Frame, PENDING_DEPTH>,
     /// Pending frames that did not fit (saturating); the link's supervision covers a lost one.
     pending_overflow: u16,
+    /// The firmware's stack high-water mark, as it last measured it (`None` off the chip).
+    stack: Option<crate::stack::StackUsage>,
     /// EPOS4 mode: the link was up (Standby, Disabling or Cyclic) at the last supervision.
     link_up: bool,
     link_error: Option<LinkError>,
@@ -215,6 +217,7 @@ impl Ecu {
             diagnostic_page: 0,
             pending: heapless::Vec::new(),
             pending_overflow: 0,
+            stack: None,
             link_up: false,
             link_error: None,
             last_link_reset_us: None,
@@ -386,6 +389,12 @@ impl Ecu {
 
     /// Clear requests (rising edges of the reference frame's bit) the state machine refused,
     /// saturating.
+    /// The stack's high-water mark for the diagnostic frame; the firmware measures it now and
+    /// then ([`crate::stack`]), host builds never do.
+    pub fn set_stack_usage(&mut self, usage: crate::stack::StackUsage) {
+        self.stack = Some(usage);
+    }
+
     pub fn clear_refusals(&self) -> u16 {
         self.clear_refusals
     }
@@ -814,7 +823,8 @@ impl Ecu {
 
     /// The next page of the diagnostic frame ([`crate::protocol::DiagnosticPage`]): the E2E
     /// drop counters per reason, early frames, bus-off events, refused clears, hold entries,
-    /// lost demand-change frames, the fault log's counts, then every slot of the fault log,
+    /// lost demand-change frames, the fault log's counts, the stack's high-water mark, then
+    /// every slot of the fault log,
     /// oldest first, with each record's age at `now_us`; one page per call, round robin, so a
     /// reader sees everything within [`crate::protocol::DIAGNOSTIC_ROUND`] calls.
     pub fn diagnostic_frame(&mut self, now_us: u64) -> Frame {
@@ -851,6 +861,11 @@ impl Ecu {
                     u16::try_from(log.dropped()).unwrap_or(u16::MAX),
                 ],
             ),
+            5 => {
+                // Not measured (a host build, or before the first measurement): all zero.
+                let [peak, size] = self.stack.map_or([0, 0], |u| u.words_u16());
+                counters(5, [peak, size, 0])
+            }
             _ => {
                 // Positions from COUNTER_PAGES on (the arms above take the others).
                 let slot = position.saturating_sub(COUNTER_PAGES);
@@ -1179,6 +1194,7 @@ mod tests {
             [2, 2, 0],
             "two records held, none acknowledged"
         );
+        assert_eq!(counters(5), [0, 0, 0], "the stack not measured");
         use crate::faults::Fault;
         let record = |slot: u8| match pages[usize::from(COUNTER_PAGES + slot)] {
             DiagnosticPage::Record { slot: s, record } if s == slot => {
@@ -1190,6 +1206,33 @@ mod tests {
         assert_eq!(record(0), Some((Fault::BusOff.bit(), 200, false)));
         assert_eq!(record(1), Some((Fault::EposFault.bit(), 0x3210, false)));
         assert!((2..16).all(|slot| record(slot).is_none()));
+    }
+
+    /// The stack's high-water mark goes out on counter page 5, in 4-byte words.
+    #[test]
+    fn the_stack_high_water_mark_goes_out_on_page_5() {
+        use crate::protocol::{DIAGNOSTIC_ROUND, DiagnosticPage};
+        use crate::stack::{PAINT, StackUsage};
+        let mut ecu = Ecu::paper().unwrap();
+        // A 1 KiB region of which the top 300 bytes were used.
+        let region: Vec<u32> = (0..256).map(|i| if i < 181 { PAINT } else { 7 }).collect();
+        ecu.set_stack_usage(StackUsage::measure(region.len(), |i| region[i]));
+        let protocol = ProtocolConfig::default();
+        let page5 = (0..DIAGNOSTIC_ROUND)
+            .map(|_| {
+                protocol
+                    .decode_diagnostic(&ecu.diagnostic_frame(0))
+                    .unwrap()
+                    .page
+            })
+            .find(|p| matches!(p, DiagnosticPage::Counters { page: 5, .. }));
+        assert_eq!(
+            page5,
+            Some(DiagnosticPage::Counters {
+                page: 5,
+                words: [75, 256, 0]
+            })
+        );
     }
 
     /// The root cause reaches the bus: with five faults latched (the first, a bus-off, the

@@ -62,7 +62,7 @@ pub const DIAGNOSTIC_FREE_SLOTS: usize = QUEUE_DEPTH / 2;
 
 /// The 100 Hz status sender: the status frame, then the motor frame, then one page of the
 /// diagnostic frame (0x103, [`Ecu::diagnostic_frame`]), so a reader has every counter and
-/// every fault record within 21 periods (210 ms) without asking: a request frame would be
+/// every fault record within 22 periods (220 ms) without asking: a request frame would be
 /// one more input to check, and a logger started after the fault still sees it. A full transmit
 /// queue drops this period's frame (the counter shows the gap to the vehicle computer) rather
 /// than delaying the next one; the diagnostic page, the least urgent, waits for a period with

@@ -156,7 +156,7 @@ pub const DIAGNOSTIC_ID: StandardId = match StandardId::new(0x103) {
     None => panic!("0x103 is an 11-bit ID"), // evaluated at compile time
 };
 /// Counter pages of the diagnostic frame, pages 0..COUNTER_PAGES; see [`DiagnosticPage`].
-pub const COUNTER_PAGES: u8 = 5;
+pub const COUNTER_PAGES: u8 = 6;
 /// Page code of a fault record; which record is in the page's payload.
 pub const RECORD_PAGE: u8 = 8;
 /// Frames in one round of the diagnostic frame: each counter page, then one per slot of the
@@ -189,11 +189,12 @@ pub struct DiagnosticRecord {
 
 /// What one diagnostic page carries.
 ///
-/// Counter pages (page code 0..=4) carry three saturating u16 counters at bits 16, 32 and 48:
+/// Counter pages (page code 0..=5) carry three saturating u16 counters at bits 16, 32 and 48:
 /// 0 = E2E drops for wrong length, CRC, stale counter; 1 = counter jump, unknown AS state,
 /// angle out of range; 2 = rate too high, early frames, bus-off events; 3 = refused clear
 /// requests, hold entries, lost demand-change frames; 4 = fault records held, of them not
-/// acknowledged, records dropped from the full ring. A record page (page code
+/// acknowledged, records dropped from the full ring; 5 = the stack's high-water mark and the
+/// stack's size, 4-byte words (both 0: not measured, as on the host), a reserved 0. A record page (page code
 /// [`RECORD_PAGE`]) carries one slot of the fault log: bits 16..19 the slot (0 = the oldest
 /// held), 20..23 the fault's bit ([`NO_RECORD`] = an empty slot), 24 acknowledged, 25..52
 /// the detail (signed), 53..63 the age, s.

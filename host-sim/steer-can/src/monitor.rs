@@ -17,7 +17,7 @@ use steering_ecu::protocol::{
     MotorStatus, Reference, Status,
 };
 
-/// The names of the diagnostic frame's counters, page by page (pages 0..=4, three each), as
+/// The names of the diagnostic frame's counters, page by page (pages 0..=5, three each), as
 /// `Ecu::diagnostic_frame` fills them and the DBC names them.
 pub const DIAGNOSTIC_COUNTERS: [[&str; 3]; COUNTER_PAGES as usize] = [
     [
@@ -40,6 +40,11 @@ pub const DIAGNOSTIC_COUNTERS: [[&str; 3]; COUNTER_PAGES as usize] = [
         "fault records held",
         "unacknowledged records",
         "records dropped",
+    ],
+    [
+        "stack peak, 4-byte words",
+        "stack size, 4-byte words",
+        "reserved",
     ],
 ];
 
@@ -155,6 +160,19 @@ impl Diagnostics {
                 })
                 .collect();
             out.push_str(&format!("    {}\n", line.join(", ")));
+        }
+        match (
+            self.counter("stack peak, 4-byte words"),
+            self.counter("stack size, 4-byte words"),
+        ) {
+            (Some(0), Some(0)) => out.push_str("    stack high-water: not measured\n"),
+            (Some(peak), Some(size)) => out.push_str(&format!(
+                "    stack high-water: {} B of {} B ({:.1} %)\n",
+                4 * u32::from(peak),
+                4 * u32::from(size),
+                100.0 * f64::from(peak) / f64::from(size.max(1))
+            )),
+            _ => {}
         }
         let unseen = self.records.iter().filter(|r| r.is_none()).count();
         if unseen > 0 {
@@ -564,6 +582,19 @@ mod tests {
                 page: DiagnosticPage::Record { slot, record: None },
             });
         }
+        d.on(Diagnostic {
+            counter: AliveCounter::wrapping(0),
+            page: DiagnosticPage::Counters {
+                page: 5,
+                words: [1234, 31_644, 0],
+            },
+        });
+        assert!(
+            d.summary()
+                .contains("stack high-water: 4936 B of 126576 B (3.9 %)"),
+            "{}",
+            d.summary()
+        );
         let order: Vec<usize> = d.records_by_urgency().iter().map(|(s, _)| *s).collect();
         assert_eq!(order, [1, 2, 0]);
         let text = d.summary();
