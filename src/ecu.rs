@@ -148,6 +148,8 @@ pub struct Ecu {
     pending: heapless::Vec<Frame, PENDING_DEPTH>,
     /// Pending frames that did not fit (saturating); the link's supervision covers a lost one.
     pending_overflow: u16,
+    /// The firmware's stack high-water mark, as it last measured it (`None` off the chip).
+    stack: Option<crate::stack::StackUsage>,
     /// EPOS4 mode: the link was up (Standby, Disabling or Cyclic) at the last supervision.
     link_up: bool,
     link_error: Option<LinkError>,
@@ -215,6 +217,7 @@ impl Ecu {
             diagnostic_page: 0,
             pending: heapless::Vec::new(),
             pending_overflow: 0,
+            stack: None,
             link_up: false,
             link_error: None,
             last_link_reset_us: None,
@@ -386,6 +389,12 @@ impl Ecu {
 
     /// Clear requests (rising edges of the reference frame's bit) the state machine refused,
     /// saturating.
+    /// The stack's high-water mark for the diagnostic frame; the firmware measures it now and
+    /// then ([`crate::stack`]), host builds never do.
+    pub fn set_stack_usage(&mut self, usage: crate::stack::StackUsage) {
+        self.stack = Some(usage);
+    }
+
     pub fn clear_refusals(&self) -> u16 {
         self.clear_refusals
     }
@@ -812,41 +821,68 @@ impl Ecu {
         })
     }
 
-    /// The next page of the diagnostic frame ([`crate::protocol::Diagnostic`]): the E2E drop
-    /// counters per reason, early frames, bus-off events, refused clears, hold entries, lost
-    /// demand-change frames and the four newest fault records, one page per call, round
-    /// robin, so a reader sees everything within [`crate::protocol::DIAGNOSTIC_PAGES`] calls.
-    pub fn diagnostic_frame(&mut self) -> Frame {
-        use crate::protocol::{DIAGNOSTIC_PAGES, Diagnostic, FIRST_RECORD_PAGE};
-        let page = self.diagnostic_page;
-        self.diagnostic_page = page.saturating_add(1) % DIAGNOSTIC_PAGES;
+    /// The next page of the diagnostic frame ([`crate::protocol::DiagnosticPage`]): the E2E
+    /// drop counters per reason, early frames, bus-off events, refused clears, hold entries,
+    /// lost demand-change frames, the fault log's counts, the stack's high-water mark, then
+    /// every slot of the fault log,
+    /// oldest first, with each record's age at `now_us`; one page per call, round robin, so a
+    /// reader sees everything within [`crate::protocol::DIAGNOSTIC_ROUND`] calls.
+    pub fn diagnostic_frame(&mut self, now_us: u64) -> Frame {
+        use crate::protocol::{
+            COUNTER_PAGES, DIAGNOSTIC_ROUND, Diagnostic, DiagnosticPage, DiagnosticRecord,
+        };
+        let position = self.diagnostic_page;
+        self.diagnostic_page = position.saturating_add(1) % DIAGNOSTIC_ROUND;
         self.diagnostic_counter = self.diagnostic_counter.next();
         let d = *self.e2e.drops();
-        let words = match page {
-            0 => [d.wrong_length, d.crc, d.stale],
-            1 => [d.counter_jump, d.unknown_as_state, d.angle_out_of_range],
-            2 => [d.rate_too_high, self.e2e.early_frames(), self.bus_offs],
-            3 => [
-                self.clear_refusals,
-                self.machine.hold_entries(),
-                self.pending_overflow,
-            ],
+        let log = self.machine.fault_log();
+        let saturated = |n: usize| u16::try_from(n).unwrap_or(u16::MAX);
+        let counters = |page: u8, words: [u16; 3]| DiagnosticPage::Counters { page, words };
+        let page = match position {
+            0 => counters(0, [d.wrong_length, d.crc, d.stale]),
+            1 => counters(
+                1,
+                [d.counter_jump, d.unknown_as_state, d.angle_out_of_range],
+            ),
+            2 => counters(2, [d.rate_too_high, self.e2e.early_frames(), self.bus_offs]),
+            3 => counters(
+                3,
+                [
+                    self.clear_refusals,
+                    self.machine.hold_entries(),
+                    self.pending_overflow,
+                ],
+            ),
+            4 => counters(
+                4,
+                [
+                    saturated(log.len()),
+                    saturated(log.unacknowledged()),
+                    u16::try_from(log.dropped()).unwrap_or(u16::MAX),
+                ],
+            ),
+            5 => {
+                // Not measured (a host build, or before the first measurement): all zero.
+                let [peak, size] = self.stack.map_or([0, 0], |u| u.words_u16());
+                counters(5, [peak, size, 0])
+            }
             _ => {
-                let log = self.machine.fault_log();
-                // Pages from FIRST_RECORD_PAGE on (the arms above take the others).
-                let newest = usize::from(page.saturating_sub(FIRST_RECORD_PAGE));
-                let record = log
-                    .len()
-                    .checked_sub(newest.saturating_add(1))
-                    .and_then(|i| log.get(i))
-                    .map(|r| (r.fault.bit(), r.detail));
-                Diagnostic::record_words(record)
+                // Positions from COUNTER_PAGES on (the arms above take the others).
+                let slot = position.saturating_sub(COUNTER_PAGES);
+                let index = usize::from(slot);
+                let record = log.get(index).map(|r| DiagnosticRecord {
+                    fault_bit: r.fault.bit(),
+                    acknowledged: log.is_acknowledged(index),
+                    detail: r.detail,
+                    age_s: u16::try_from(now_us.saturating_sub(r.at_us) / 1_000_000)
+                        .unwrap_or(u16::MAX),
+                });
+                DiagnosticPage::Record { slot, record }
             }
         };
         self.protocol.encode_diagnostic(&Diagnostic {
             counter: self.diagnostic_counter,
             page,
-            words,
         })
     }
 
@@ -1126,6 +1162,7 @@ mod tests {
 
     #[test]
     fn the_diagnostic_pages_carry_the_counters_and_the_newest_faults() {
+        use crate::protocol::{COUNTER_PAGES, DIAGNOSTIC_ROUND, DiagnosticPage};
         let mut ecu = Ecu::paper().unwrap();
         let mut vehicle = Vehicle::new();
         let _ = vehicle.send(&mut ecu, 0, AsState::Off, 0.0);
@@ -1138,21 +1175,131 @@ mod tests {
         let _ = ecu.on_bus_off(20 * MS, 200);
         let _ = ecu.machine_mut().on_epos_fault(30 * MS, 0x3210);
         let protocol = ProtocolConfig::default();
-        let pages: heapless::Vec<_, 8> = (0..8)
-            .map(|_| protocol.decode_diagnostic(&ecu.diagnostic_frame()).unwrap())
+        let pages: Vec<_> = (0..DIAGNOSTIC_ROUND)
+            .map(|_| {
+                protocol
+                    .decode_diagnostic(&ecu.diagnostic_frame(40 * MS))
+                    .unwrap()
+                    .page
+            })
             .collect();
-        assert_eq!(pages[0].words, [0, 1, 0], "one CRC drop");
-        assert_eq!(pages[2].words[2], 1, "one bus-off");
-        use crate::faults::Fault;
-        assert_eq!(pages[4].record(), Some((Fault::EposFault.bit(), 0x3210)));
-        assert_eq!(pages[5].record(), Some((Fault::BusOff.bit(), 200)));
-        assert_eq!(pages[6].record(), None);
-        assert!(
-            pages
-                .iter()
-                .enumerate()
-                .all(|(i, p)| usize::from(p.page) == i)
+        let counters = |i: usize| match pages[i] {
+            DiagnosticPage::Counters { page, words } if usize::from(page) == i => words,
+            p => panic!("page {i}: {p:?}"),
+        };
+        assert_eq!(counters(0), [0, 1, 0], "one CRC drop");
+        assert_eq!(counters(2)[2], 1, "one bus-off");
+        assert_eq!(
+            counters(4),
+            [2, 2, 0],
+            "two records held, none acknowledged"
         );
+        assert_eq!(counters(5), [0, 0, 0], "the stack not measured");
+        use crate::faults::Fault;
+        let record = |slot: u8| match pages[usize::from(COUNTER_PAGES + slot)] {
+            DiagnosticPage::Record { slot: s, record } if s == slot => {
+                record.map(|r| (r.fault_bit, r.detail, r.acknowledged))
+            }
+            p => panic!("slot {slot}: {p:?}"),
+        };
+        // Oldest first: the bus-off that came first is the first record.
+        assert_eq!(record(0), Some((Fault::BusOff.bit(), 200, false)));
+        assert_eq!(record(1), Some((Fault::EposFault.bit(), 0x3210, false)));
+        assert!((2..16).all(|slot| record(slot).is_none()));
+    }
+
+    /// The stack's high-water mark goes out on counter page 5, in 4-byte words.
+    #[test]
+    fn the_stack_high_water_mark_goes_out_on_page_5() {
+        use crate::protocol::{DIAGNOSTIC_ROUND, DiagnosticPage};
+        use crate::stack::{PAINT, StackUsage};
+        let mut ecu = Ecu::paper().unwrap();
+        // A 1 KiB region of which the top 300 bytes were used.
+        let region: Vec<u32> = (0..256).map(|i| if i < 181 { PAINT } else { 7 }).collect();
+        ecu.set_stack_usage(StackUsage::measure(region.len(), |i| region[i]));
+        let protocol = ProtocolConfig::default();
+        let page5 = (0..DIAGNOSTIC_ROUND)
+            .map(|_| {
+                protocol
+                    .decode_diagnostic(&ecu.diagnostic_frame(0))
+                    .unwrap()
+                    .page
+            })
+            .find(|p| matches!(p, DiagnosticPage::Counters { page: 5, .. }));
+        assert_eq!(
+            page5,
+            Some(DiagnosticPage::Counters {
+                page: 5,
+                words: [75, 256, 0]
+            })
+        );
+    }
+
+    /// The root cause reaches the bus: with five faults latched (the first, a bus-off, the
+    /// cause), one round of the diagnostic frame carries all five in the order they came,
+    /// each with its age, and a clear acknowledges them without removing them.
+    #[test]
+    fn every_record_and_its_age_reach_the_bus_in_one_round_oldest_first() {
+        use crate::faults::{FAULT_LOG_CAPACITY, Fault};
+        use crate::protocol::{DIAGNOSTIC_ROUND, DiagnosticPage, DiagnosticRecord};
+        const S: u64 = 1_000_000;
+        let mut ecu = Ecu::paper().unwrap();
+        let _ = ecu.on_bus_off(S, 200);
+        let _ = ecu.machine_mut().on_epos_fault(2 * S, 0x3210);
+        let _ = ecu.machine_mut().on_heartbeat_lost(3 * S);
+        let _ = ecu.on_encoder_error(4 * S, 1);
+        let _ = ecu.machine_mut().on_invalid_frames_fault(5 * S, 5);
+        let protocol = ProtocolConfig::default();
+        let round = |ecu: &mut Ecu, now_us: u64| -> Vec<Option<DiagnosticRecord>> {
+            (0..DIAGNOSTIC_ROUND)
+                .filter_map(|_| {
+                    match protocol
+                        .decode_diagnostic(&ecu.diagnostic_frame(now_us))
+                        .unwrap()
+                        .page
+                    {
+                        DiagnosticPage::Record { record, .. } => Some(record),
+                        p => {
+                            assert!(matches!(p, DiagnosticPage::Counters { .. }), "{p:?}");
+                            None
+                        }
+                    }
+                })
+                .collect()
+        };
+        let records = round(&mut ecu, 65 * S);
+        assert_eq!(records.len(), FAULT_LOG_CAPACITY);
+        let held: Vec<_> = records.iter().flatten().collect();
+        let bits: Vec<u8> = held.iter().map(|r| r.fault_bit).collect();
+        assert_eq!(
+            bits,
+            [
+                Fault::BusOff,
+                Fault::EposFault,
+                Fault::HeartbeatLost,
+                Fault::Encoder,
+                Fault::InvalidFrames
+            ]
+            .map(Fault::bit)
+        );
+        let ages: Vec<u16> = held.iter().map(|r| r.age_s).collect();
+        assert_eq!(ages, [64, 63, 62, 61, 60]);
+        assert!(held.iter().all(|r| !r.acknowledged));
+        // Acknowledged by an accepted clear (AS Off, every cause gone), still on the bus.
+        let mut vehicle = Vehicle::new();
+        let _ = ecu.machine_mut().on_epos_fault_gone(66 * S);
+        let _ = ecu.machine_mut().on_heartbeat(66 * S);
+        let _ = ecu.on_encoder(66 * S, SteeringDeg(0.0));
+        let _ = vehicle.send(&mut ecu, 66 * S, AsState::Off, 0.0);
+        let clear = vehicle.frame(AsState::Off, 0.0, true);
+        let out = ecu.on_reference_frame(66 * S + 10_000, &clear);
+        assert!(out.faults.is_empty(), "cleared: {:?}", out.faults);
+        let _ = ecu.on_bus_off(67 * S, 100);
+        let records = round(&mut ecu, 70 * S);
+        let held: Vec<_> = records.iter().flatten().collect();
+        assert_eq!(held.len(), 6);
+        assert!(held[..5].iter().all(|r| r.acknowledged));
+        assert!(!held[5].acknowledged && held[5].age_s == 3);
     }
 }
 

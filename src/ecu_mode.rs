@@ -64,6 +64,13 @@ const RESTING_RAD_PER_S: f32 = 0.017_453;
 /// step.
 const INTEGRAL_ZONE_RAD: f32 = 0.017_453;
 
+/// A column that has moved no more than one encoder count for this long has stopped, s: with
+/// the reference resting, what error is left then is a static offset (play, friction) that the
+/// proportional term alone cannot take back, however large, and the integral takes it on.
+/// Longer than a stick-slip pause of the catch-up after a step on the plant with play and
+/// friction; short against the integral's own time constant.
+const COLUMN_STILL_S: f32 = 0.1;
+
 /// Fastest change of the proportional column term, rad/s at the column (100 deg/s, as the
 /// enable ramp `ecu::ENABLE_RAMP_DPS`).
 const COLUMN_SLEW_RAD_PER_S: f32 = 1.745_33;
@@ -194,6 +201,10 @@ pub struct ColumnShaper {
     shaping: bool,
     /// The proportional column term as applied (slew-limited), rad at the motor.
     proportional: f32,
+    /// Where the column was when it last moved by more than one count, rad at the motor.
+    column_anchor: Option<f32>,
+    /// Time since then, s (saturating at [`COLUMN_STILL_S`]).
+    column_still_s: f32,
 }
 
 impl ColumnShaper {
@@ -219,6 +230,8 @@ impl ColumnShaper {
             column_error: 0.0,
             shaping: true,
             proportional: 0.0,
+            column_anchor: None,
+            column_still_s: 0.0,
         }
     }
 
@@ -283,8 +296,24 @@ impl ColumnShaper {
     /// return their correction of the motor target, rad at the motor.
     fn column_terms(&mut self, column: Option<SteeringRad>) -> f32 {
         let plain = self.plain.next_setpoint();
+        // Stillness counts from when the reference came to rest: before, the column standing
+        // still says nothing (the motor may still be crossing the play).
+        let reference_resting = plain.velocity.abs() <= self.gearing.ratio() * RESTING_RAD_PER_S;
+        self.column_still_s = if reference_resting {
+            (self.column_still_s + self.dt_s).min(COLUMN_STILL_S)
+        } else {
+            0.0
+        };
         if let Some(column) = column.filter(|c| c.is_finite()) {
             let column_motor = self.gearing.motor_from_steering(column).0;
+            let count = self.gearing.ratio() * COLUMN_COUNT_RAD;
+            if self
+                .column_anchor
+                .is_none_or(|anchor| (column_motor - anchor).abs() > count)
+            {
+                self.column_anchor = Some(column_motor);
+                self.column_still_s = 0.0;
+            }
             let error = plain.position.0 - column_motor;
             self.column_error = if error.is_finite() { error } else { 0.0 };
             let authority = self.gearing.ratio() * self.tuning.column_authority_rad;
@@ -294,10 +323,14 @@ impl ColumnShaper {
             // reference moves, the column's lag is the feedforward's business, and integrating
             // it would wind up and overshoot when the reference stops (0.7 deg after a 10 deg
             // ramp at 100 deg/s, seen through the firmware's tasks).
-            // And only near the reference: a large error is the proportional term's, and
-            // integrating the catch-up after a step would overshoot by as much again.
-            let resting = plain.velocity.abs() <= self.gearing.ratio() * RESTING_RAD_PER_S
-                && error.abs() <= self.gearing.ratio() * INTEGRAL_ZONE_RAD;
+            // And only near the reference or once the column has stopped: a large error while
+            // the column still moves is the catch-up after a step, the proportional term's, and
+            // integrating it would overshoot by as much again; a column stopped short (friction
+            // and play against the proportional term's pull: 1.1 deg on the plant with 1.5 deg
+            // of play and 200 N at the rack over the EPOS4) is an offset, the integral's.
+            let stopped = self.column_still_s >= COLUMN_STILL_S;
+            let resting = reference_resting
+                && (stopped || error.abs() <= self.gearing.ratio() * INTEGRAL_ZONE_RAD);
             if resting && next.is_finite() {
                 self.column_correction = saturate(next, authority).0;
             }
@@ -330,6 +363,8 @@ impl ColumnShaper {
         self.column_correction = 0.0;
         self.column_error = 0.0;
         self.proportional = 0.0;
+        self.column_anchor = None;
+        self.column_still_s = 0.0;
         self.history = [None; 2];
         self.target.reset_to(here);
         self.plain.reset_to(here);

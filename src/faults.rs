@@ -1,8 +1,8 @@
 //! The steering ECU's faults: what can go wrong ([`Fault`]), the latched set as it goes into the
 //! CAN status frame ([`FaultSet`]), and a fixed-size ring of fault records ([`FaultLog`]) that
 //! keeps the detail of each (the code, the value that tripped it) for the defmt log, the
-//! debugger and the diagnostic frame 0x103, which carries the four newest records
-//! ([`crate::protocol::Diagnostic`]).
+//! debugger and the diagnostic frame 0x103, which pages through every record with its age and
+//! whether a clear has acknowledged it ([`crate::protocol::Diagnostic`]).
 //!
 //! Detection, latching and clearing live in [`crate::steering`]; this module only names the
 //! faults and stores them. The bit positions below are the wire format of the status frame's
@@ -188,6 +188,8 @@ pub const FAULT_LOG_CAPACITY: usize = 16;
 pub struct FaultLog {
     records: Deque<FaultRecord, FAULT_LOG_CAPACITY>,
     dropped: u32,
+    /// The oldest this many records are acknowledged ([`FaultLog::acknowledge_all`]).
+    acknowledged: usize,
 }
 
 impl FaultLog {
@@ -195,7 +197,24 @@ impl FaultLog {
         FaultLog {
             records: Deque::new(),
             dropped: 0,
+            acknowledged: 0,
         }
+    }
+
+    /// Marks every record held as acknowledged: the latch its fault set was cleared on request.
+    /// Records pushed later are not.
+    pub fn acknowledge_all(&mut self) {
+        self.acknowledged = self.records.len();
+    }
+
+    /// Whether the `index`-th record (0 = oldest held) is acknowledged; false past the end.
+    pub fn is_acknowledged(&self, index: usize) -> bool {
+        index < self.acknowledged.min(self.records.len())
+    }
+
+    /// Records held that no clear has acknowledged.
+    pub fn unacknowledged(&self) -> usize {
+        self.records.len().saturating_sub(self.acknowledged)
     }
 
     /// Appends a record, dropping the oldest if the ring is full.
@@ -203,6 +222,7 @@ impl FaultLog {
         if self.records.is_full() && self.records.pop_front().is_some() {
             // Saturates: after 4 billion drops the exact count no longer matters.
             self.dropped = self.dropped.saturating_add(1);
+            self.acknowledged = self.acknowledged.saturating_sub(1);
         }
         // Cannot fail: there is room now (capacity is not zero).
         let _ = self.records.push_back(record);
@@ -234,13 +254,18 @@ impl FaultLog {
 
     /// Removes and returns the oldest record (for a read-out that consumes the log).
     pub fn pop_oldest(&mut self) -> Option<FaultRecord> {
-        self.records.pop_front()
+        let oldest = self.records.pop_front();
+        if oldest.is_some() {
+            self.acknowledged = self.acknowledged.saturating_sub(1);
+        }
+        oldest
     }
 
     /// Empties the ring and zeroes the drop count.
     pub fn clear(&mut self) {
         self.records.clear();
         self.dropped = 0;
+        self.acknowledged = 0;
     }
 }
 
@@ -311,6 +336,48 @@ mod tests {
         log.clear();
         assert!(log.is_empty());
         assert_eq!(log.dropped(), 0);
+    }
+}
+
+#[cfg(test)]
+mod acknowledge_tests {
+    use super::*;
+
+    fn record(at_us: u64) -> FaultRecord {
+        FaultRecord {
+            fault: Fault::Encoder,
+            at_us,
+            detail: 0,
+        }
+    }
+
+    #[test]
+    fn an_acknowledge_covers_the_records_held_then_and_follows_them_out_of_the_ring() {
+        let mut log = FaultLog::new();
+        log.push(record(0));
+        log.push(record(1));
+        log.acknowledge_all();
+        log.push(record(2));
+        assert_eq!(
+            (0..4).map(|i| log.is_acknowledged(i)).collect::<Vec<_>>(),
+            [true, true, false, false]
+        );
+        assert_eq!(log.unacknowledged(), 1);
+        // Filling the ring pushes the two acknowledged ones out, oldest first.
+        for t in 3..=FAULT_LOG_CAPACITY as u64 {
+            log.push(record(t));
+        }
+        assert_eq!(log.get(0).map(|r| r.at_us), Some(1));
+        assert!(log.is_acknowledged(0) && !log.is_acknowledged(1));
+        log.push(record(100));
+        assert!(!log.is_acknowledged(0));
+        assert_eq!(log.unacknowledged(), FAULT_LOG_CAPACITY);
+        log.acknowledge_all();
+        assert_eq!(log.pop_oldest().map(|r| r.at_us), Some(2));
+        assert_eq!(log.unacknowledged(), 0);
+        log.clear();
+        log.push(record(7));
+        assert!(!log.is_acknowledged(0));
     }
 }
 

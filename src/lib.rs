@@ -50,6 +50,7 @@ pub mod ports;
 pub mod protocol;
 pub mod reference;
 pub mod sensors;
+pub mod stack;
 pub mod steering;
 pub mod tasks;
 pub mod units;

@@ -57,6 +57,7 @@ mod firmware {
     #[cfg(feature = "drive-direct")]
     mod bridge;
     mod safety;
+    mod stack;
 
     /// The ECU's shared state, made once at start-up.
     static ECU: StaticCell<SharedEcu> = StaticCell::new();
@@ -251,6 +252,9 @@ mod firmware {
     // executor made `'static`) comes from an external crate, which the lint does not look into.
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
+        // Before anything else runs deeper than here: what the stack reaches from now on is
+        // what `stack_task` reports.
+        stack::paint();
         let peripherals = embassy_stm32::init(clock_config());
         let clocks = embassy_stm32::rcc::clocks(&peripherals.RCC);
         defmt::info!(
@@ -300,6 +304,7 @@ mod firmware {
         };
         spawner.spawn(defmt::unwrap!(reference_task(ecu)));
         spawner.spawn(defmt::unwrap!(status_task(ecu)));
+        spawner.spawn(defmt::unwrap!(stack_task(ecu)));
         #[cfg(feature = "drive-epos4")]
         spawner.spawn(defmt::unwrap!(drive_task(ecu)));
         #[cfg(feature = "drive-direct")]
@@ -388,6 +393,21 @@ mod firmware {
         loop {
             // Bus-off: stay here with the bus down; the state machine has the fault.
             Timer::after(Duration::from_secs(1)).await;
+        }
+    }
+
+    /// How often the stack's high-water mark is measured (a scan of the free stack).
+    const STACK_CHECK_PERIOD: Duration = Duration::from_secs(1);
+
+    /// Measures the stack's high-water mark every [`STACK_CHECK_PERIOD`] and hands it to the
+    /// ECU, which reports it on the diagnostic frame (0x103, counter page 5).
+    #[embassy_executor::task]
+    async fn stack_task(ecu: &'static SharedEcu) {
+        let mut ticker = Ticker::every(STACK_CHECK_PERIOD);
+        loop {
+            ticker.next().await;
+            let usage = stack::usage();
+            ecu.lock(|e| e.borrow_mut().set_stack_usage(usage));
         }
     }
 

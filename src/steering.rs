@@ -876,6 +876,7 @@ impl SteeringStateMachine {
         // is gone has already reset them; one that is building up (not latched yet) must keep
         // building, or a vehicle asking to clear every period would mask it for ever.
         self.latched = FaultSet::EMPTY;
+        self.log.acknowledge_all();
         Ok(())
     }
 

@@ -61,8 +61,8 @@ pub async fn reference_task(frames: FrameReceiver<'_>, ecu: &SharedEcu) -> ! {
 pub const DIAGNOSTIC_FREE_SLOTS: usize = QUEUE_DEPTH / 2;
 
 /// The 100 Hz status sender: the status frame, then the motor frame, then one page of the
-/// diagnostic frame (0x103, [`Ecu::diagnostic_frame`]), so a reader has every counter and the
-/// four newest fault records within 8 periods (80 ms) without asking: a request frame would be
+/// diagnostic frame (0x103, [`Ecu::diagnostic_frame`]), so a reader has every counter and
+/// every fault record within 22 periods (220 ms) without asking: a request frame would be
 /// one more input to check, and a logger started after the fault still sees it. A full transmit
 /// queue drops this period's frame (the counter shows the gap to the vehicle computer) rather
 /// than delaying the next one; the diagnostic page, the least urgent, waits for a period with
@@ -76,7 +76,7 @@ pub async fn status_task(tx: FrameSender<'_>, ecu: &SharedEcu) -> ! {
         let motor = ecu.lock(|e| e.borrow_mut().motor_frame());
         let _ = tx.try_send(motor);
         if tx.free_capacity() >= DIAGNOSTIC_FREE_SLOTS {
-            let diagnostic = ecu.lock(|e| e.borrow_mut().diagnostic_frame());
+            let diagnostic = ecu.lock(|e| e.borrow_mut().diagnostic_frame(now_us()));
             let _ = tx.try_send(diagnostic);
         }
     }

@@ -37,18 +37,20 @@ static SERIAL: StdMutex<()> = StdMutex::new(());
 
 const STEP_US: u64 = 50;
 /// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
-const RUNS: usize = 48;
+const RUNS: usize = 56;
 /// The controller the next scenario's ECU runs (both drive the same tests).
 static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Paper);
 /// Held by each test for its whole run, so no scenario starts with another test's choice.
 static SCENARIOS: StdMutex<()> = StdMutex::new(());
+/// The plant the next scenario runs, if not the controller's default (paper mode: the paper's
+/// linear plant; ECU mode: play and friction).
+static PLANT_EFFECTS: StdMutex<Option<PlantEffects>> = StdMutex::new(None);
 
 /// How far from a resting reference the column may settle, deg: `lag` on the paper's linear
 /// plant (paper mode), plus, for ECU mode on the plant with play and friction, half the belt
 /// play (0.75 deg) and the belt stretch the rack friction holds (200 N through tau_BS and
-/// k_B: 0.30 deg). Over the EPOS4, ECU mode's column feedback is proportional (gain 0.5) while
-/// the error exceeds the 1 deg its integral waits for, so it settles about 1.3 deg short of a
-/// step on that plant (README, ECU mode).
+/// k_B: 0.30 deg): the column integral takes that back to within 0.3 deg, but over up to 1.7 s
+/// (`ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant`), later than these checks.
 fn settle_tolerance_deg(lag: f64) -> f64 {
     let kind = CONTROLLER
         .lock()
@@ -123,6 +125,22 @@ enum Event {
     DriveFault(AsState, f32),
     /// The EPOS4 falls silent (no frame of it reaches the bus) from here on.
     SilenceDrive(AsState, f32),
+    /// The ECU resets without a panic (an IWDG reset, a brown-out): its tasks stop where they
+    /// are, and a fresh ECU starts at once; the drive keeps the state it was in. The vehicle
+    /// computer sends its previous frame again.
+    ResetEcu,
+}
+
+/// What the drive did across one [`Event::ResetEcu`].
+#[derive(Clone, Copy, Debug)]
+struct ResetTiming {
+    period: usize,
+    at_us: u64,
+    drive_at_reset: State,
+    /// When the fresh ECU put its first frame on the bus.
+    first_frame_us: Option<u64>,
+    /// When the drive was next in Switch on disabled (its power stage off).
+    power_off_us: Option<u64>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -149,6 +167,7 @@ struct Run {
     /// Targets the drive held at its software position limits.
     limited_targets: u64,
     refusals: usize,
+    resets: Vec<ResetTiming>,
     dropped: u64,
     corrupted: u64,
 }
@@ -169,9 +188,7 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
         .lock()
         .map(|c| *c)
         .unwrap_or(ControllerKind::Paper);
-    let (ecu, config) = epos4_ecu(kind, 0).unwrap();
-    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(ecu))));
-    let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
+    let (_, config) = epos4_ecu(kind, 0).unwrap();
     let protocol = ProtocolConfig::default();
     let mut bus = CanBus::new(seed, 130);
     let vehicle = bus.attach();
@@ -180,9 +197,10 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
     bus.set_random_faults(faults);
     // ECU mode drives the plant with issue 14's play and friction, as a car has them; paper
     // mode the paper's linear plant.
-    let effects = match kind {
-        ControllerKind::Paper => PlantEffects::NONE,
-        ControllerKind::Ecu => PlantEffects::PLAY_AND_FRICTION,
+    let effects = match (PLANT_EFFECTS.lock().map(|e| *e).unwrap_or(None), kind) {
+        (Some(effects), _) => effects,
+        (None, ControllerKind::Paper) => PlantEffects::NONE,
+        (None, ControllerKind::Ecu) => PlantEffects::PLAY_AND_FRICTION,
     };
     let mut sim = Epos4Sim::new_at_with(
         node(),
@@ -204,84 +222,139 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
     let mut tick: u64 = 0;
     let end = script.len() as u64 * PERIOD_STEPS;
     let script = script.to_vec();
-    executor.run_until(
-        |spawner: Spawner| {
-            spawner.spawn(reference(ecu).unwrap());
-            spawner.spawn(status(ecu).unwrap());
-            spawner.spawn(encoder(ecu).unwrap());
-            spawner.spawn(drive(ecu).unwrap());
-            spawner.spawn(keep_awake().unwrap());
-        },
-        || {
-            let now_us = tick * STEP_US;
-            if tick.is_multiple_of(PERIOD_STEPS) {
+    let mut resets = Vec::new();
+    // One pass per life of the ECU: a reset ends the pass, and the next one starts a fresh ECU
+    // with fresh tasks on a fresh executor at the same instant, the drive and the bus running on.
+    loop {
+        let now_us = tick * STEP_US;
+        let reset_at = resets.last().map(|r: &ResetTiming| r.period);
+        let ecu = epos4_ecu(kind, now_us).unwrap().0;
+        let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(ecu))));
+        let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
+        let mut reset = None;
+        executor.run_until(
+            |spawner: Spawner| {
+                spawner.spawn(reference(ecu).unwrap());
+                spawner.spawn(status(ecu).unwrap());
+                spawner.spawn(encoder(ecu).unwrap());
+                spawner.spawn(drive(ecu).unwrap());
+                spawner.spawn(keep_awake().unwrap());
+            },
+            || {
+                let now_us = tick * STEP_US;
                 let period = (tick / PERIOD_STEPS) as usize;
-                let o = ecu.lock(|e| e.borrow().output());
-                samples.push(Sample {
-                    demand: o.demand,
-                    state: o.state,
-                    faults: o.faults.bits(),
-                    drive: sim.cia402_state(),
-                    column_deg: sim.column_rad().to_degrees(),
-                    current_a: sim.current_a(),
-                    status_current_a: status_current,
-                    target_deg: {
-                        let inc = sim.object(od::TARGET_POSITION).unwrap_or(0) as i32;
-                        let motor = PositionScale::new(config.counts_per_rev)
-                            .unwrap()
-                            .motor_from_inc(inc);
-                        f64::from(SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0)
-                    },
-                });
-                let (as_state, deg, clear) = match script.get(period) {
-                    Some(Event::Ref(a, d)) => (*a, *d, false),
-                    Some(Event::Clear(a, d)) => (*a, *d, true),
-                    Some(Event::DriveFault(a, d)) => {
-                        sim.inject_fault(0x2310);
-                        (*a, *d, false)
-                    }
-                    Some(Event::SilenceDrive(a, d)) => {
-                        bus.silence(drive_port, true);
-                        (*a, *d, false)
-                    }
-                    None => (AsState::Off, 0.0, false),
-                };
-                counter = counter.next();
-                let f = protocol.encode_reference(&Reference {
-                    angle: SteeringDeg(deg),
-                    as_state,
-                    counter,
-                    clear_faults: clear,
-                });
-                bus.send(vehicle, f, now_us);
-            }
-            for f in sim.advance(now_us) {
-                bus.send(drive_port, f, now_us);
-            }
-            while let Ok(f) = TX_FRAMES.try_receive() {
-                bus.send(ecu_port, f, now_us);
-            }
-            for (to, f) in bus.deliver(now_us) {
-                if to == drive_port {
-                    for r in sim.on_frame(&f) {
-                        bus.send(drive_port, r, now_us);
-                    }
-                } else if to == ecu_port {
-                    route_to_ecu(f, &REFERENCE_FRAMES, &DRIVE_FRAMES);
-                } else if to == vehicle
-                    && let Ok(status) = protocol.decode_status(&f)
+                if tick.is_multiple_of(PERIOD_STEPS)
+                    && matches!(script.get(period), Some(Event::ResetEcu))
+                    && reset_at != Some(period)
                 {
-                    status_current = status.current.0;
+                    // What the dead ECU had queued never reaches the bus.
+                    while TX_FRAMES.try_receive().is_ok() {}
+                    while REFERENCE_FRAMES.try_receive().is_ok() {}
+                    while DRIVE_FRAMES.try_receive().is_ok() {}
+                    reset = Some(ResetTiming {
+                        period,
+                        at_us: now_us,
+                        drive_at_reset: sim.cia402_state(),
+                        first_frame_us: None,
+                        power_off_us: None,
+                    });
+                    return true;
                 }
-            }
-            if let Ok(mut c) = COLUMN_RAD.lock() {
-                *c = sim.column_rad();
-            }
-            MockDriver::get().advance(Duration::from_micros(STEP_US));
-            tick += 1;
-            tick >= end
-        },
-    );
+                if tick.is_multiple_of(PERIOD_STEPS) {
+                    let o = ecu.lock(|e| e.borrow().output());
+                    samples.push(Sample {
+                        demand: o.demand,
+                        state: o.state,
+                        faults: o.faults.bits(),
+                        drive: sim.cia402_state(),
+                        column_deg: sim.column_rad().to_degrees(),
+                        current_a: sim.current_a(),
+                        status_current_a: status_current,
+                        target_deg: {
+                            let inc = sim.object(od::TARGET_POSITION).unwrap_or(0) as i32;
+                            let motor = PositionScale::new(config.counts_per_rev)
+                                .unwrap()
+                                .motor_from_inc(inc);
+                            f64::from(
+                                SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0,
+                            )
+                        },
+                    });
+                    let (as_state, deg, clear) = match script.get(period) {
+                        Some(Event::Ref(a, d)) => (*a, *d, false),
+                        Some(Event::Clear(a, d)) => (*a, *d, true),
+                        Some(Event::DriveFault(a, d)) => {
+                            sim.inject_fault(0x2310);
+                            (*a, *d, false)
+                        }
+                        Some(Event::SilenceDrive(a, d)) => {
+                            bus.silence(drive_port, true);
+                            (*a, *d, false)
+                        }
+                        // The vehicle computer goes on as before across the ECU's reset.
+                        Some(Event::ResetEcu) => {
+                            match script[..period].iter().rev().find_map(|e| match e {
+                                Event::Ref(a, d) | Event::Clear(a, d) => Some((*a, *d)),
+                                _ => None,
+                            }) {
+                                Some((a, d)) => (a, d, false),
+                                None => (AsState::Off, 0.0, false),
+                            }
+                        }
+                        None => (AsState::Off, 0.0, false),
+                    };
+                    counter = counter.next();
+                    let f = protocol.encode_reference(&Reference {
+                        angle: SteeringDeg(deg),
+                        as_state,
+                        counter,
+                        clear_faults: clear,
+                    });
+                    bus.send(vehicle, f, now_us);
+                }
+                for f in sim.advance(now_us) {
+                    bus.send(drive_port, f, now_us);
+                }
+                while let Ok(f) = TX_FRAMES.try_receive() {
+                    if let Some(r) = resets.last_mut()
+                        && r.first_frame_us.is_none()
+                    {
+                        r.first_frame_us = Some(now_us);
+                    }
+                    bus.send(ecu_port, f, now_us);
+                }
+                for (to, f) in bus.deliver(now_us) {
+                    if to == drive_port {
+                        for r in sim.on_frame(&f) {
+                            bus.send(drive_port, r, now_us);
+                        }
+                    } else if to == ecu_port {
+                        route_to_ecu(f, &REFERENCE_FRAMES, &DRIVE_FRAMES);
+                    } else if to == vehicle
+                        && let Ok(status) = protocol.decode_status(&f)
+                    {
+                        status_current = status.current.0;
+                    }
+                }
+                if let Some(r) = resets.last_mut()
+                    && r.power_off_us.is_none()
+                    && sim.cia402_state() == State::SwitchOnDisabled
+                {
+                    r.power_off_us = Some(now_us);
+                }
+                if let Ok(mut c) = COLUMN_RAD.lock() {
+                    *c = sim.column_rad();
+                }
+                MockDriver::get().advance(Duration::from_micros(STEP_US));
+                tick += 1;
+                tick >= end
+            },
+        );
+        match reset {
+            Some(r) => resets.push(r),
+            None => break,
+        }
+    }
     let stats = bus.stats();
     let limits = [
         ObjectAddress::new(0x3001, 2),
@@ -297,6 +370,7 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
         position_limits,
         limited_targets: sim.limited_targets(),
         refusals: sim.refusals().len(),
+        resets,
         dropped: stats.dropped,
         corrupted: stats.corrupted,
     }
@@ -408,6 +482,109 @@ fn a_drive_fault_latches_and_clears_only_in_as_off_after_the_link_recovered_in()
         s[309].column_deg
     );
     assert_eq!(r.refusals, 0);
+}
+
+/// An MCU reset without a panic leaves the drive as it was, Operation enabled; the fresh
+/// firmware's first frames must switch its power stage off before the link configures it.
+#[test]
+fn an_ecu_reset_with_the_drive_enabled_switches_the_power_stage_off_first() {
+    in_both_modes(|_| an_ecu_reset_with_the_drive_enabled_switches_the_power_stage_off_first_in());
+}
+
+fn an_ecu_reset_with_the_drive_enabled_switches_the_power_stage_off_first_in() {
+    use AsState::*;
+    let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
+    script.extend(repeat(Event::Ref(Driving, 5.0), 50)); // 60-109: tracking
+    script.push(Event::ResetEcu); // 110
+    script.extend(repeat(Event::Ref(Driving, 5.0), 20)); // 111-130
+    let r = run(&script, RandomFaults::default(), 4);
+    let [reset] = r.resets[..] else {
+        panic!("one reset: {:?}", r.resets)
+    };
+    assert_eq!(reset.drive_at_reset, State::OperationEnabled, "{reset:?}");
+    let first = reset.first_frame_us.expect("the fresh ECU sent a frame");
+    let off = reset.power_off_us.expect("the power stage went off");
+    eprintln!(
+        "first frame {} us after the reset, power stage off {} us after it",
+        first - reset.at_us,
+        off.saturating_sub(first)
+    );
+    assert!(
+        off <= first + 2_000,
+        "the drive stayed in Operation enabled {} us after the fresh ECU's first frame",
+        off.saturating_sub(first)
+    );
+    assert_eq!(r.refusals, 0, "no illegal CiA 402 transition");
+}
+
+/// The resting steps of the settling test, deg at the wheel (from, to): both directions, small
+/// and large, across straight ahead and not.
+const STEPS_DEG: [(f32, f32); 6] = [
+    (0.0, 5.0),
+    (5.0, -5.0),
+    (-5.0, 10.0),
+    (10.0, -10.0),
+    (-10.0, -8.0),
+    (-8.0, 0.0),
+];
+/// How long each step of [`STEPS_DEG`] is held, periods of 10 ms.
+const HOLD_PERIODS: usize = 250;
+
+/// ECU mode settles a resting step within 0.3 deg, on the plant with 1.5 deg of belt play and
+/// 200 N of rack friction and on the paper's linear plant: the steps of [`STEPS_DEG`] at
+/// the protocol's rate, each held 2.5 s. Returns, per plant, the error left at the end of each hold
+/// and the time from the step's last frame until the column stayed within 0.3 deg.
+#[test]
+fn ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant() {
+    use AsState::*;
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Ok(mut c) = CONTROLLER.lock() {
+        *c = ControllerKind::Ecu;
+    }
+    let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
+    script.extend(repeat(Event::Ref(Driving, 0.0), 40)); // 60-99
+    let mut holds = Vec::new();
+    for (from, to) in STEPS_DEG {
+        // At 4 deg per frame, the rate the protocol allows.
+        let n = ((to - from).abs() / 4.0).ceil() as usize;
+        script
+            .extend((1..=n).map(|k| Event::Ref(Driving, from + (to - from) * k as f32 / n as f32)));
+        holds.push((script.len(), to));
+        script.extend(repeat(Event::Ref(Driving, to), HOLD_PERIODS));
+    }
+    for (name, effects) in [
+        ("play and friction", PlantEffects::PLAY_AND_FRICTION),
+        ("paper plant", PlantEffects::NONE),
+    ] {
+        if let Ok(mut e) = PLANT_EFFECTS.lock() {
+            *e = Some(effects);
+        }
+        let r = run(&script, RandomFaults::default(), 9);
+        if let Ok(mut e) = PLANT_EFFECTS.lock() {
+            *e = None;
+        }
+        let s = &r.samples;
+        assert!(s.iter().all(|x| x.faults == 0), "{name}: a fault");
+        for &(start, to) in &holds {
+            let end = start + HOLD_PERIODS - 1;
+            let error = |i: usize| s[i].column_deg - f64::from(to);
+            let settled = (start..=end)
+                .rev()
+                .take_while(|&i| error(i).abs() <= 0.3)
+                .last();
+            eprintln!(
+                "EPOS4, ECU mode, {name}: step to {to} deg: {:+.3} deg after 2.5 s, within 0.3 deg \
+                 from {} ms on",
+                error(end),
+                settled.map_or(-1, |i| ((i - start) * 10) as i64)
+            );
+            assert!(
+                error(end).abs() <= 0.3,
+                "{name}: the column settled {:+.2} deg from {to} deg",
+                error(end)
+            );
+        }
+    }
 }
 
 #[test]

@@ -34,6 +34,9 @@ static INJECT: StdMutex<Inject> = StdMutex::new(Inject::None);
 /// Tests that switch the controller hold this for their whole run, so no other test's
 /// scenario starts with their choice (tests that do not take it run paper mode).
 static SCENARIOS: StdMutex<()> = StdMutex::new(());
+/// The plant the next scenario runs, if not the controller's default (paper mode: the paper's
+/// linear plant; ECU mode: play and friction).
+static PLANT_EFFECTS: StdMutex<Option<PlantEffects>> = StdMutex::new(None);
 /// One scenario at a time: the mock clock and the queues are shared by the whole binary.
 static SERIAL: StdMutex<()> = StdMutex::new(());
 /// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
@@ -190,9 +193,10 @@ fn run_logged(
     let protocol = ProtocolConfig::default();
     // ECU mode runs against the plant with issue 14's play and friction, as a car has them;
     // paper mode against the paper's linear plant, its figures' own.
-    let effects = match kind {
-        ControllerKind::Paper => PlantEffects::NONE,
-        ControllerKind::Ecu => PlantEffects::PLAY_AND_FRICTION,
+    let effects = match (PLANT_EFFECTS.lock().map(|e| *e).unwrap_or(None), kind) {
+        (Some(effects), _) => effects,
+        (None, ControllerKind::Paper) => PlantEffects::NONE,
+        (None, ControllerKind::Ecu) => PlantEffects::PLAY_AND_FRICTION,
     };
     let mut plant = EffectPlant::new(PlantParams::PAPER, effects, 50e-6).unwrap();
     plant.set_at_rest(column_deg.to_radians());
@@ -620,29 +624,124 @@ fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() 
     // The silence and the corrupted run each held the position 30 ms after the last good frame.
     assert_eq!(d.counter("hold entries"), Some(2));
     use steer_can::monitor::RecordPage;
+    // Every slot of the fault log came, oldest first.
     let records = d.records();
-    // The score that latched it.
-    assert_eq!(records[0], RecordPage::Fault(Ok(Fault::InvalidFrames), 5));
-    let RecordPage::Fault(older, age_ms) = records[1] else {
-        panic!("{records:?}")
+    assert!(
+        records.iter().all(|r| *r != RecordPage::NotSeen),
+        "{records:?}"
+    );
+    let RecordPage::Fault {
+        fault: older,
+        detail: age_ms,
+        acknowledged: true,
+        ..
+    } = records[0]
+    else {
+        panic!("the timeout, acknowledged by the clear at 50: {records:?}")
     };
     assert_eq!(older, Ok(Fault::ReferenceTimeout));
     assert!((130..=140).contains(&age_ms), "{age_ms} ms");
-    assert_eq!(records[2], RecordPage::Empty, "two faults, two records");
+    // The score that latched it, after the clear: not acknowledged.
+    assert!(matches!(
+        records[1],
+        RecordPage::Fault {
+            fault: Ok(Fault::InvalidFrames),
+            detail: 5,
+            acknowledged: false,
+            age_s: 0,
+        }
+    ));
+    assert!(
+        records[2..].iter().all(|r| *r == RecordPage::Empty),
+        "two faults, two records"
+    );
+    assert_eq!(d.counter("fault records held"), Some(2));
+    assert_eq!(d.counter("unacknowledged records"), Some(1));
     let text = monitor.summary();
     eprintln!("{text}");
     for words in [
         "dropped: CRC 6",
         "hold entries 2",
         "bus-off events 0",
-        "fault record 1 (newest): invalid reference frames: invalid-frame score 5",
-        "fault record 2: reference timeout: no valid reference for 1",
-        "fault record 3: none",
+        "fault record 2 (unacknowledged, 0 s ago): invalid reference frames: invalid-frame score 5",
+        "fault record 1 (acknowledged, 0 s ago): reference timeout: no valid reference for 1",
     ] {
         assert!(
             text.contains(words),
             "monitor summary lacks {words:?}:\n{text}"
         );
+    }
+    assert!(
+        text.find("fault record 2 (unacknowledged") < text.find("fault record 1 (acknowledged"),
+        "the unacknowledged fault first:\n{text}"
+    );
+}
+
+/// The resting steps of the settling test, deg at the wheel (from, to): both directions, small
+/// and large, across straight ahead and not.
+const STEPS_DEG: [(f32, f32); 6] = [
+    (0.0, 5.0),
+    (5.0, -5.0),
+    (-5.0, 10.0),
+    (10.0, -10.0),
+    (-10.0, -8.0),
+    (-8.0, 0.0),
+];
+/// How long each step of [`STEPS_DEG`] is held, periods of 10 ms.
+const HOLD_PERIODS: usize = 250;
+
+/// ECU mode in direct drive settles a resting step within 0.3 deg, on the plant with 1.5 deg of
+/// belt play and 200 N of rack friction and on the paper's linear plant: the steps of [`STEPS_DEG`]
+/// at the protocol's rate, each held 2.5 s.
+#[test]
+fn ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant() {
+    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Ok(mut c) = CONTROLLER.lock() {
+        *c = ControllerKind::Ecu;
+    }
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
+    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 40]);
+    let mut holds = Vec::new();
+    for (from, to) in STEPS_DEG {
+        // At 4 deg per frame, the rate the protocol allows.
+        let n = ((to - from).abs() / 4.0).ceil() as usize;
+        script.extend(
+            (1..=n).map(|k| Send::Ref(AsState::Driving, from + (to - from) * k as f32 / n as f32)),
+        );
+        holds.push((script.len(), to));
+        script.extend(vec![Send::Ref(AsState::Driving, to); HOLD_PERIODS]);
+    }
+    for (name, effects) in [
+        ("play and friction", PlantEffects::PLAY_AND_FRICTION),
+        ("paper plant", PlantEffects::NONE),
+    ] {
+        if let Ok(mut e) = PLANT_EFFECTS.lock() {
+            *e = Some(effects);
+        }
+        let s = run(&script, |_, _, _| {});
+        if let Ok(mut e) = PLANT_EFFECTS.lock() {
+            *e = None;
+        }
+        assert!(s.iter().all(|x| x.faults == 0), "{name}: a fault");
+        for &(start, to) in &holds {
+            let end = start + HOLD_PERIODS - 1;
+            let error = |i: usize| s[i].column_deg - f64::from(to);
+            let settled = (start..=end)
+                .rev()
+                .take_while(|&i| error(i).abs() <= 0.3)
+                .last();
+            eprintln!(
+                "direct, ECU mode, {name}: step to {to} deg: {:+.3} deg after 2.5 s, within \
+                 0.3 deg from {} ms on",
+                error(end),
+                settled.map_or(-1, |i| ((i - start) * 10) as i64)
+            );
+            assert!(
+                error(end).abs() <= 0.3,
+                "{name}: the column settled {:+.2} deg from {to} deg",
+                error(end)
+            );
+        }
     }
 }
 

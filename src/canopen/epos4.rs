@@ -511,8 +511,8 @@ const MAX_START_ATTEMPTS: u8 = 3;
 /// Theory of operation:
 ///
 /// ```text
-///  Configuring (SDO script: gains -> read back -> limits -> read back -> 0x6060 = 8 ->
-///      |        0x60C2 -> 0x1017 -> PDOs)
+///  Configuring (SDO script: controlword "disable voltage" -> gains -> read back ->
+///      |        limits -> read back -> 0x6060 = 8 -> 0x60C2 -> 0x1017 -> PDOs)
 ///      |  every write confirmed, every read-back equal
 ///      v
 ///  Starting (NMT start; heartbeat must report Operational)
@@ -653,6 +653,16 @@ impl Epos4Link {
         let gains = gain_words(&config.gains).map_err(ConfigError::Gains)?;
         let mut s: heapless::Vec<ScriptStep, SCRIPT_LEN> = heapless::Vec::new();
         let mut push = |step: ScriptStep| s.push(step).map_err(|_| ConfigError::SdoAttempts);
+        // Power stage off before anything else: after an MCU reset without a panic (watchdog,
+        // brown-out) the drive may still be in Operation enabled, holding the last target of
+        // an ECU that no longer runs; its heartbeat consumer does not notice a reset that is
+        // shorter than the consumer time. "Disable voltage" is accepted in every CiA 402
+        // state (a no-op in Switch on disabled and in Fault), and confirmed like every step.
+        push(ScriptStep::Write(SdoWrite {
+            object: od::CONTROLWORD,
+            value: Command::DisableVoltage.controlword() as u32,
+            width: Width::U16,
+        }))?;
         for (object, value) in gains {
             push(ScriptStep::Write(SdoWrite {
                 object,
@@ -1400,9 +1410,9 @@ mod tests {
     #[test]
     fn pdo_layouts_are_valid() {
         let link = Epos4Link::new(Epos4Config::paper(node()), 0).unwrap();
-        // 7 gain writes + 7 read-backs + 3 limit writes + 3 read-backs + 4 mode/period/
-        // heartbeat + 1 consumer heartbeat + 6 + 7 + 6 PDO writes.
-        assert_eq!(link.script.len(), 44);
+        // 1 "disable voltage" + 7 gain writes + 7 read-backs + 3 limit writes + 3 read-backs
+        // + 4 mode/period/heartbeat + 1 consumer heartbeat + 6 + 7 + 6 PDO writes.
+        assert_eq!(link.script.len(), 45);
     }
 
     #[test]
@@ -1424,10 +1434,23 @@ mod tests {
         ));
     }
 
+    /// The first frame after any (re)start switches the power stage off ("disable voltage"
+    /// to the drive, as `disable_voltage_frame` has it), and only its confirmation lets the
+    /// configuration go on, starting with the current P gain.
     #[test]
-    fn first_frame_writes_the_current_p_gain() {
+    fn first_frame_disables_voltage_then_the_current_p_gain_follows() {
         let mut link = Epos4Link::new(Epos4Config::paper(node()), 0).unwrap();
         let out = link.start(0);
+        assert_eq!(out.len(), 1);
+        assert_eq!(Some(out[0]), disable_voltage_frame(node()));
+        assert_eq!(out[0].data()[..6], [0x2B, 0x40, 0x60, 0x00, 0x00, 0x00]);
+        assert!(link.poll(1_000).iter().all(|f| f.id().raw() != 0x601));
+        let confirm = Frame::new(
+            StandardId::new(0x581).unwrap(),
+            &[0x60, 0x40, 0x60, 0x00, 0, 0, 0, 0],
+        )
+        .unwrap();
+        let out = link.on_frame(&confirm, 1_500);
         assert_eq!(out.len(), 1);
         assert_eq!(out[0].id().raw(), 0x601);
         assert_eq!(out[0].data()[..4], [0x23, 0xA0, 0x30, 0x01]);
@@ -1453,7 +1476,7 @@ mod tests {
         assert_eq!(
             link.error(),
             Some(LinkError::SdoTimeout {
-                object: od::CURRENT_P,
+                object: od::CONTROLWORD,
                 attempts: 3
             })
         );

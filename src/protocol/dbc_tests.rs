@@ -205,37 +205,110 @@ fn diagnostic_pages_decode_as_the_dbc_says() {
     let m = message(&dbc, "EcuDiagnostics");
     assert_eq!(m.id, MessageId::Standard(DIAGNOSTIC_ID.raw()));
     let cfg = ProtocolConfig::DEFAULT;
-    for page in 0..DIAGNOSTIC_PAGES {
-        let words = if page >= FIRST_RECORD_PAGE {
-            Diagnostic::record_words(Some((page, -123_456 * i32::from(page))))
-        } else {
-            [1000 + u16::from(page), 2000 + u16::from(page), 65535]
-        };
-        let d = Diagnostic {
-            counter: AliveCounter::wrapping(page),
+    let mut pages: Vec<DiagnosticPage> = (0..COUNTER_PAGES)
+        .map(|page| DiagnosticPage::Counters {
             page,
-            words,
+            words: [1000 + u16::from(page), 2000 + u16::from(page), 65535],
+        })
+        .collect();
+    for (slot, detail, age_s) in [
+        (0, -123_456, 0),
+        (7, RECORD_DETAIL_MIN + 1, 1),
+        (14, RECORD_DETAIL_MAX - 1, RECORD_AGE_MAX_S),
+        (15, 0x1_0002, 61),
+    ] {
+        pages.push(DiagnosticPage::Record {
+            slot,
+            record: Some(DiagnosticRecord {
+                fault_bit: slot % 10,
+                acknowledged: slot % 2 == 1,
+                detail,
+                age_s,
+            }),
+        });
+    }
+    pages.push(DiagnosticPage::Record {
+        slot: 3,
+        record: None,
+    });
+    for (i, page) in pages.into_iter().enumerate() {
+        let d = Diagnostic {
+            counter: AliveCounter::wrapping(i as u8),
+            page,
         };
         let frame = cfg.encode_diagnostic(&d);
         assert_eq!(cfg.decode_diagnostic(&frame), Ok(d));
         let data = frame.data();
-        assert_eq!(raw(signal(m, "DIA_Page"), data), i64::from(page));
+        assert_eq!(raw(signal(m, "DIA_Page"), data), i64::from(page.code()));
         let on_page: Vec<&Signal> = m
             .signals
             .iter()
             .filter(|s| {
-                s.multiplexer_indicator == MultiplexIndicator::MultiplexedSignal(u64::from(page))
+                s.multiplexer_indicator
+                    == MultiplexIndicator::MultiplexedSignal(u64::from(page.code()))
             })
             .collect();
-        assert_eq!(on_page.len(), if page >= FIRST_RECORD_PAGE { 2 } else { 3 });
-        if let Some((fault, detail)) = d.record() {
-            assert_eq!(raw(on_page[0], data), i64::from(fault));
-            assert_eq!(raw(on_page[1], data), i64::from(detail));
-        } else {
-            for (s, w) in on_page.iter().zip(words) {
-                assert_eq!(raw(s, data), i64::from(w), "{}", s.name);
-            }
-        }
+        let expected: Vec<i64> = match page {
+            DiagnosticPage::Counters { words, .. } => words.map(i64::from).to_vec(),
+            DiagnosticPage::Unknown { .. } => unreachable!("only defined pages are sent"),
+            DiagnosticPage::Record { slot, record } => match record {
+                Some(r) => vec![
+                    i64::from(slot),
+                    i64::from(r.fault_bit),
+                    i64::from(r.acknowledged),
+                    i64::from(r.detail),
+                    i64::from(r.age_s),
+                ],
+                None => vec![i64::from(slot), i64::from(NO_RECORD), 0, 0, 0],
+            },
+        };
+        let found: Vec<i64> = on_page.iter().map(|s| raw(s, data)).collect();
+        assert_eq!(found, expected, "page {page:?}");
+    }
+    // A page code the layout does not define is refused, not read as some page.
+    for code in (COUNTER_PAGES..16).filter(|c| *c != RECORD_PAGE) {
+        let word = u64::from(code) << 12;
+        let frame = frame_with_crc(DIAGNOSTIC_ID, word);
+        assert_eq!(
+            cfg.decode_diagnostic(&frame).map(|d| d.page),
+            Ok(DiagnosticPage::Unknown { code, payload: 0 })
+        );
+    }
+}
+
+/// A record's detail beyond 28 bits saturates, and the saturated ends read back as the
+/// `i32` ends, so a current that was not a number (`i32::MIN`) still says so.
+#[test]
+fn a_record_detail_saturates_to_the_i32_ends() {
+    let cfg = ProtocolConfig::DEFAULT;
+    for (sent, read) in [
+        (i32::MIN, i32::MIN),
+        (RECORD_DETAIL_MIN - 5, i32::MIN),
+        (i32::MAX, i32::MAX),
+        (RECORD_DETAIL_MAX, i32::MAX),
+        (-1, -1),
+        (0xFF05, 0xFF05),
+    ] {
+        let d = Diagnostic {
+            counter: AliveCounter::wrapping(0),
+            page: DiagnosticPage::Record {
+                slot: 1,
+                record: Some(DiagnosticRecord {
+                    fault_bit: 5,
+                    acknowledged: false,
+                    detail: sent,
+                    age_s: u16::MAX,
+                }),
+            },
+        };
+        let back = cfg.decode_diagnostic(&cfg.encode_diagnostic(&d)).unwrap();
+        let DiagnosticPage::Record {
+            record: Some(r), ..
+        } = back.page
+        else {
+            panic!("{back:?}")
+        };
+        assert_eq!((r.detail, r.age_s), (read, RECORD_AGE_MAX_S), "{sent}");
     }
 }
 

@@ -155,48 +155,83 @@ pub const DIAGNOSTIC_ID: StandardId = match StandardId::new(0x103) {
     Some(id) => id,
     None => panic!("0x103 is an 11-bit ID"), // evaluated at compile time
 };
-/// Pages of the diagnostic frame: 0..=3 counters, 4..=7 the newest fault records.
-pub const DIAGNOSTIC_PAGES: u8 = 8;
-/// First fault-record page; page `FIRST_RECORD_PAGE + n` holds the n-th newest record.
-pub const FIRST_RECORD_PAGE: u8 = 4;
-/// Fault code of an empty record page.
-pub const NO_RECORD: u8 = 0xFF;
+/// Counter pages of the diagnostic frame, pages 0..COUNTER_PAGES; see [`DiagnosticPage`].
+pub const COUNTER_PAGES: u8 = 6;
+/// Page code of a fault record; which record is in the page's payload.
+pub const RECORD_PAGE: u8 = 8;
+/// Frames in one round of the diagnostic frame: each counter page, then one per slot of the
+/// fault log, oldest first, so every record and counter comes within this many periods.
+pub const DIAGNOSTIC_ROUND: u8 = COUNTER_PAGES + crate::faults::FAULT_LOG_CAPACITY as u8;
+/// Fault code of an empty record slot.
+pub const NO_RECORD: u8 = 0x0F;
+/// Bits of a record's detail on the bus (two's complement): the detail saturates at
+/// [`RECORD_DETAIL_MIN`] / [`RECORD_DETAIL_MAX`], which read back as `i32::MIN` / `i32::MAX`
+/// (the saturated values the fault docs name, such as a current that was not a number).
+pub const RECORD_DETAIL_BITS: u32 = 28;
+pub const RECORD_DETAIL_MIN: i32 = -(1 << (RECORD_DETAIL_BITS - 1));
+pub const RECORD_DETAIL_MAX: i32 = (1 << (RECORD_DETAIL_BITS - 1)) - 1;
+/// A record's age on the bus, s, saturating (11 bits: 34 min).
+pub const RECORD_AGE_MAX_S: u16 = 2047;
 
-/// One page of the diagnostic frame (0x103): byte 0 CRC, bits 8..11 counter, 12..15 page.
-/// Pages 0..=3 carry three saturating u16 counters at bits 16, 32 and 48:
+/// One record slot of the diagnostic frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DiagnosticRecord {
+    /// The fault's bit (as in the status frame), 0..=14.
+    pub fault_bit: u8,
+    /// A clear request was accepted since the fault latched.
+    pub acknowledged: bool,
+    /// The record's detail, saturated as [`RECORD_DETAIL_BITS`] says.
+    pub detail: i32,
+    /// Seconds since the fault latched when the page was sent, saturated at
+    /// [`RECORD_AGE_MAX_S`].
+    pub age_s: u16,
+}
+
+/// What one diagnostic page carries.
+///
+/// Counter pages (page code 0..=5) carry three saturating u16 counters at bits 16, 32 and 48:
 /// 0 = E2E drops for wrong length, CRC, stale counter; 1 = counter jump, unknown AS state,
 /// angle out of range; 2 = rate too high, early frames, bus-off events; 3 = refused clear
-/// requests, hold entries, lost demand-change frames. Pages 4..=7 carry a fault record, the
-/// newest first: the fault's bit at 16..23 ([`NO_RECORD`] = none), its detail (i32) at 24..55.
+/// requests, hold entries, lost demand-change frames; 4 = fault records held, of them not
+/// acknowledged, records dropped from the full ring; 5 = the stack's high-water mark and the
+/// stack's size, 4-byte words (both 0: not measured, as on the host), a reserved 0. A record page (page code
+/// [`RECORD_PAGE`]) carries one slot of the fault log: bits 16..19 the slot (0 = the oldest
+/// held), 20..23 the fault's bit ([`NO_RECORD`] = an empty slot), 24 acknowledged, 25..52
+/// the detail (signed), 53..63 the age, s.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DiagnosticPage {
+    Counters {
+        page: u8,
+        words: [u16; 3],
+    },
+    Record {
+        slot: u8,
+        record: Option<DiagnosticRecord>,
+    },
+    /// A page code this layout does not define (a newer ECU, a corrupted sender): its
+    /// payload, bits 16..63, untouched.
+    Unknown {
+        code: u8,
+        payload: u64,
+    },
+}
+
+impl DiagnosticPage {
+    /// The page code on the bus (bits 12..15).
+    pub fn code(&self) -> u8 {
+        match self {
+            DiagnosticPage::Counters { page, .. } => *page,
+            DiagnosticPage::Record { .. } => RECORD_PAGE,
+            DiagnosticPage::Unknown { code, .. } => *code,
+        }
+    }
+}
+
+/// One page of the diagnostic frame (0x103): byte 0 CRC, bits 8..11 counter, 12..15 page code.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Diagnostic {
     pub counter: AliveCounter,
-    pub page: u8,
-    /// Pages 0..=3: the three counters. Pages 4..=7: `[fault, low 16 bits, high 16 bits]`
-    /// of the record (use [`Diagnostic::record`]).
-    pub words: [u16; 3],
-}
-
-impl Diagnostic {
-    /// A record page's (fault bit, detail); `None` on a counter page or an empty record.
-    pub fn record(&self) -> Option<(u8, i32)> {
-        if self.page < FIRST_RECORD_PAGE || self.words[0] as u8 == NO_RECORD {
-            return None;
-        }
-        let detail = u32::from(self.words[1]) | u32::from(self.words[2]) << 16;
-        Some((self.words[0] as u8, detail as i32))
-    }
-
-    /// A record page's words for `(fault bit, detail)`.
-    pub fn record_words(record: Option<(u8, i32)>) -> [u16; 3] {
-        match record {
-            Some((fault, detail)) => {
-                let d = detail as u32;
-                [u16::from(fault), d as u16, (d >> 16) as u16]
-            }
-            None => [u16::from(NO_RECORD), 0, 0],
-        }
-    }
+    pub page: DiagnosticPage,
 }
 
 /// Motor-angle scale of the motor frame, rad per bit.
@@ -468,42 +503,81 @@ impl ProtocolConfig {
 }
 
 impl ProtocolConfig {
-    /// The diagnostic frame (ID [`DIAGNOSTIC_ID`]). The page is taken modulo 16 (4 bits); a
-    /// record page's first word keeps its low 8 bits (the fault bit) and packs the detail's
-    /// 32 bits after it.
+    /// The diagnostic frame (ID [`DIAGNOSTIC_ID`]) as [`DiagnosticPage`] lays it out. A
+    /// counter page's code is taken modulo 16 (4 bits), a slot modulo 16, a record's fault bit
+    /// keeps its low 4 bits, its detail and age saturate.
     pub fn encode_diagnostic(&self, d: &Diagnostic) -> Frame {
-        let payload = if d.page >= FIRST_RECORD_PAGE {
-            u64::from(d.words[0] & 0xFF) << 16
-                | u64::from(d.words[1]) << 24
-                | u64::from(d.words[2]) << 40
-        } else {
-            u64::from(d.words[0]) << 16 | u64::from(d.words[1]) << 32 | u64::from(d.words[2]) << 48
+        let payload = match d.page {
+            DiagnosticPage::Counters { words, .. } => {
+                u64::from(words[0]) << 16 | u64::from(words[1]) << 32 | u64::from(words[2]) << 48
+            }
+            DiagnosticPage::Record { slot, record } => {
+                let slot = u64::from(slot & 0x0F) << 16;
+                match record {
+                    None => slot | u64::from(NO_RECORD) << 20,
+                    Some(r) => {
+                        let detail = r.detail.clamp(RECORD_DETAIL_MIN, RECORD_DETAIL_MAX) as u32
+                            & ((1 << RECORD_DETAIL_BITS) - 1);
+                        slot | u64::from(r.fault_bit & 0x0F) << 20
+                            | u64::from(r.acknowledged) << 24
+                            | u64::from(detail) << 25
+                            | u64::from(r.age_s.min(RECORD_AGE_MAX_S)) << 53
+                    }
+                }
+            }
+            DiagnosticPage::Unknown { payload, .. } => payload << 16,
         };
-        let word = u64::from(d.counter.raw()) << 8 | u64::from(d.page & 0x0F) << 12 | payload;
+        let word =
+            u64::from(d.counter.raw()) << 8 | u64::from(d.page.code() & 0x0F) << 12 | payload;
         frame_with_crc(DIAGNOSTIC_ID, word)
     }
 
-    /// Decodes a diagnostic frame: ID, length, CRC.
+    /// Decodes a diagnostic frame: ID, length, CRC; a page code the layout does not define
+    /// comes back as [`DiagnosticPage::Unknown`], never as some other page.
     pub fn decode_diagnostic(&self, frame: &Frame) -> Result<Diagnostic, FrameError> {
         let word = checked_word(DIAGNOSTIC_ID, frame)?;
-        let page = field(word, 12, 4) as u8;
-        let words = if page >= FIRST_RECORD_PAGE {
-            [
-                field(word, 16, 8) as u16,
-                field(word, 24, 16) as u16,
-                field(word, 40, 16) as u16,
-            ]
+        let code = field(word, 12, 4) as u8;
+        let page = if code < COUNTER_PAGES {
+            DiagnosticPage::Counters {
+                page: code,
+                words: [
+                    field(word, 16, 16) as u16,
+                    field(word, 32, 16) as u16,
+                    field(word, 48, 16) as u16,
+                ],
+            }
+        } else if code == RECORD_PAGE {
+            let fault_bit = field(word, 20, 4) as u8;
+            let record = (fault_bit != NO_RECORD).then(|| {
+                let raw = field(word, 25, RECORD_DETAIL_BITS) as u32;
+                // Sign-extend the 28 bits; the saturated ends stand for beyond them.
+                let detail = match ((raw << (32 - RECORD_DETAIL_BITS)) as i32)
+                    >> (32 - RECORD_DETAIL_BITS)
+                {
+                    RECORD_DETAIL_MIN => i32::MIN,
+                    RECORD_DETAIL_MAX => i32::MAX,
+                    d => d,
+                };
+                DiagnosticRecord {
+                    fault_bit,
+                    acknowledged: field(word, 24, 1) != 0,
+                    detail,
+                    age_s: field(word, 53, 11) as u16,
+                }
+            });
+            DiagnosticPage::Record {
+                slot: field(word, 16, 4) as u8,
+                record,
+            }
         } else {
-            [
-                field(word, 16, 16) as u16,
-                field(word, 32, 16) as u16,
-                field(word, 48, 16) as u16,
-            ]
+            DiagnosticPage::Unknown {
+                code,
+                payload: word >> 16,
+            }
         };
         Ok(Diagnostic {
             counter: AliveCounter::wrapping(field(word, 8, 4) as u8),
             page,
-            words,
         })
     }
 }

@@ -1,7 +1,7 @@
 //! Live decode of the bus: counts per frame kind, CRC and length errors, alive-counter gaps of
 //! the ECU's frames, the last value of everything and the ECU's own diagnostics (0x103: drop
-//! counters per reason, bus-offs, the newest fault records), as a block of text for the
-//! terminal.
+//! counters per reason, bus-offs, every fault record with its age, the oldest unacknowledged
+//! first), as a block of text for the terminal.
 
 use super::Stamped;
 use super::decode::{
@@ -10,15 +10,16 @@ use super::decode::{
 };
 use std::collections::BTreeMap;
 use steering_ecu::canopen::nmt::NmtState;
+use steering_ecu::faults::FAULT_LOG_CAPACITY;
 use steering_ecu::faults::Fault;
 use steering_ecu::protocol::{
-    AliveCounter, DIAGNOSTIC_PAGES, Diagnostic, FIRST_RECORD_PAGE, FrameError, MotorStatus,
-    Reference, Status,
+    AliveCounter, COUNTER_PAGES, Diagnostic, DiagnosticPage, DiagnosticRecord, FrameError,
+    MotorStatus, Reference, Status,
 };
 
-/// The names of the diagnostic frame's counters, page by page (pages 0..=3, three each), as
+/// The names of the diagnostic frame's counters, page by page (pages 0..=5, three each), as
 /// `Ecu::diagnostic_frame` fills them and the DBC names them.
-pub const DIAGNOSTIC_COUNTERS: [[&str; 3]; 4] = [
+pub const DIAGNOSTIC_COUNTERS: [[&str; 3]; COUNTER_PAGES as usize] = [
     [
         "dropped: wrong length",
         "dropped: CRC",
@@ -35,30 +36,59 @@ pub const DIAGNOSTIC_COUNTERS: [[&str; 3]; 4] = [
         "hold entries",
         "lost drive-demand frames",
     ],
+    [
+        "fault records held",
+        "unacknowledged records",
+        "records dropped",
+    ],
+    [
+        "stack peak, 4-byte words",
+        "stack size, 4-byte words",
+        "reserved",
+    ],
 ];
 
-/// One fault-record page of the diagnostic frame as last received.
+/// One slot of the ECU's fault log as its diagnostic page last came.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RecordPage {
-    /// The page has not come yet.
+    /// The slot's page has not come yet.
     NotSeen,
-    /// The ECU has fewer records than this page's place.
+    /// The ECU has fewer records than this slot.
     Empty,
-    /// The fault (`Err`: a bit no fault has) and its detail.
-    Fault(Result<Fault, u8>, i32),
+    /// The fault (`Err`: a bit no fault has), its detail, whether a clear acknowledged it,
+    /// and its age when the page was sent, s.
+    Fault {
+        fault: Result<Fault, u8>,
+        detail: i32,
+        acknowledged: bool,
+        age_s: u16,
+    },
 }
 
-/// The newest page of each number the ECU's diagnostic frame has sent.
+/// The newest page of each counter page and record slot the ECU's diagnostic frame has sent.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Diagnostics {
-    pages: [Option<Diagnostic>; DIAGNOSTIC_PAGES as usize],
+    counters: [Option<[u16; 3]>; COUNTER_PAGES as usize],
+    records: [Option<Option<DiagnosticRecord>>; FAULT_LOG_CAPACITY],
+    /// Pages with a code the layout does not define.
+    pub unknown_pages: u64,
 }
 
 impl Diagnostics {
-    /// Keeps a page; a page number beyond the layout is ignored.
+    /// Keeps a page.
     pub fn on(&mut self, d: Diagnostic) {
-        if let Some(slot) = self.pages.get_mut(usize::from(d.page)) {
-            *slot = Some(d);
+        match d.page {
+            DiagnosticPage::Counters { page, words } => {
+                if let Some(slot) = self.counters.get_mut(usize::from(page)) {
+                    *slot = Some(words);
+                }
+            }
+            DiagnosticPage::Record { slot, record } => {
+                if let Some(s) = self.records.get_mut(usize::from(slot)) {
+                    *s = Some(record);
+                }
+            }
+            DiagnosticPage::Unknown { .. } => self.unknown_pages += 1,
         }
     }
 
@@ -69,36 +99,58 @@ impl Diagnostics {
             .enumerate()
             .find_map(|(page, names)| {
                 let i = names.iter().position(|n| *n == name)?;
-                self.pages.get(page)?.as_ref()?.words.get(i).copied()
+                self.counters.get(page)?.as_ref()?.get(i).copied()
             })
     }
 
-    /// The fault records received, newest first.
+    /// The fault log's slots as received, oldest first.
     pub fn records(&self) -> Vec<RecordPage> {
-        self.pages
+        self.records
             .iter()
-            .skip(usize::from(FIRST_RECORD_PAGE))
-            .map(|p| match p.map(|d| d.record()) {
+            .map(|p| match p {
                 None => RecordPage::NotSeen,
                 Some(None) => RecordPage::Empty,
-                Some(Some((bit, detail))) => {
-                    RecordPage::Fault(Fault::from_bit(bit).ok_or(bit), detail)
-                }
+                Some(Some(r)) => RecordPage::Fault {
+                    fault: Fault::from_bit(r.fault_bit).ok_or(r.fault_bit),
+                    detail: r.detail,
+                    acknowledged: r.acknowledged,
+                    age_s: r.age_s,
+                },
             })
             .collect()
     }
 
+    /// The slots holding a record, in the order the summary lists them: the unacknowledged
+    /// ones first, oldest first (the first is the root cause still latched), then the
+    /// acknowledged ones, oldest first. Each with its slot number.
+    pub fn records_by_urgency(&self) -> Vec<(usize, RecordPage)> {
+        let held: Vec<(usize, RecordPage)> = self
+            .records()
+            .into_iter()
+            .enumerate()
+            .filter(|(_, r)| matches!(r, RecordPage::Fault { .. }))
+            .collect();
+        let acknowledged = |r: &RecordPage| {
+            matches!(
+                r,
+                RecordPage::Fault {
+                    acknowledged: true,
+                    ..
+                }
+            )
+        };
+        let (done, open): (Vec<_>, Vec<_>) = held.into_iter().partition(|(_, r)| acknowledged(r));
+        open.into_iter().chain(done).collect()
+    }
+
     /// The block of text `summary` shows; empty if no page came.
     pub fn summary(&self) -> String {
-        if self.pages.iter().all(Option::is_none) {
+        if self.counters.iter().all(Option::is_none) && self.records.iter().all(Option::is_none) {
             return String::new();
         }
-        let mut out = String::from(
-            "  diagnostics (0x103):
-",
-        );
+        let mut out = String::from("  diagnostics (0x103):\n");
         for (page, names) in DIAGNOSTIC_COUNTERS.iter().enumerate() {
-            let words = self.pages.get(page).copied().flatten().map(|d| d.words);
+            let words = self.counters.get(page).copied().flatten();
             let line: Vec<String> = names
                 .iter()
                 .enumerate()
@@ -107,30 +159,64 @@ impl Diagnostics {
                     None => format!("{name} (not seen yet)"),
                 })
                 .collect();
+            out.push_str(&format!("    {}\n", line.join(", ")));
+        }
+        match (
+            self.counter("stack peak, 4-byte words"),
+            self.counter("stack size, 4-byte words"),
+        ) {
+            (Some(0), Some(0)) => out.push_str("    stack high-water: not measured\n"),
+            (Some(peak), Some(size)) => out.push_str(&format!(
+                "    stack high-water: {} B of {} B ({:.1} %)\n",
+                4 * u32::from(peak),
+                4 * u32::from(size),
+                100.0 * f64::from(peak) / f64::from(size.max(1))
+            )),
+            _ => {}
+        }
+        let unseen = self.records.iter().filter(|r| r.is_none()).count();
+        if unseen > 0 {
             out.push_str(&format!(
-                "    {}
-",
-                line.join(", ")
+                "    fault log: {unseen} of {FAULT_LOG_CAPACITY} slots not seen yet\n"
             ));
         }
-        for (n, record) in self.records().iter().enumerate() {
-            let text = match record {
-                RecordPage::NotSeen => "not seen yet".to_string(),
-                RecordPage::Empty => "none".to_string(),
-                RecordPage::Fault(Ok(fault), detail) => format!(
-                    "{}: {}",
-                    fault_words(*fault),
-                    fault_detail_words(*fault, *detail)
-                ),
-                RecordPage::Fault(Err(bit), detail) => {
-                    format!("unknown fault bit {bit}: detail {detail}")
-                }
+        for (slot, record) in self.records_by_urgency() {
+            let RecordPage::Fault {
+                fault,
+                detail,
+                acknowledged,
+                age_s,
+            } = record
+            else {
+                continue;
             };
-            let age = if n == 0 { " (newest)" } else { "" };
+            let text = match fault {
+                Ok(fault) => format!(
+                    "{}: {}",
+                    fault_words(fault),
+                    fault_detail_words(fault, detail)
+                ),
+                Err(bit) => format!("unknown fault bit {bit}: detail {detail}"),
+            };
+            let state = if acknowledged {
+                "acknowledged"
+            } else {
+                "unacknowledged"
+            };
+            let age = if age_s >= steering_ecu::protocol::RECORD_AGE_MAX_S {
+                format!("{age_s} s or more ago")
+            } else {
+                format!("{age_s} s ago")
+            };
             out.push_str(&format!(
-                "    fault record {}{age}: {text}
-",
-                n + 1
+                "    fault record {} ({state}, {age}): {text}\n",
+                slot + 1
+            ));
+        }
+        if self.unknown_pages > 0 {
+            out.push_str(&format!(
+                "    pages of an unknown layout: {}\n",
+                self.unknown_pages
             ));
         }
         out
@@ -413,22 +499,47 @@ impl Monitor {
 
 /// One diagnostic page in words (the `--each` view).
 fn diagnostic_line(p: &Diagnostic) -> String {
-    let body = match DIAGNOSTIC_COUNTERS.get(usize::from(p.page)) {
-        Some(names) => names
-            .iter()
-            .zip(p.words)
-            .map(|(name, n)| format!("{name} {n}"))
-            .collect::<Vec<_>>()
-            .join(", "),
-        None => match p.record() {
-            None => "no fault record".into(),
-            Some((bit, detail)) => match Fault::from_bit(bit) {
-                Some(f) => format!("{}: {}", fault_words(f), fault_detail_words(f, detail)),
-                None => format!("unknown fault bit {bit}: detail {detail}"),
-            },
-        },
+    let body = match p.page {
+        DiagnosticPage::Counters { page, words } => {
+            match DIAGNOSTIC_COUNTERS.get(usize::from(page)) {
+                Some(names) => names
+                    .iter()
+                    .zip(words)
+                    .map(|(name, n)| format!("{name} {n}"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                None => format!("counters {words:?}"),
+            }
+        }
+        DiagnosticPage::Record { slot, record } => {
+            let text = match record {
+                None => "empty".into(),
+                Some(r) => {
+                    let what = match Fault::from_bit(r.fault_bit) {
+                        Some(f) => {
+                            format!("{}: {}", fault_words(f), fault_detail_words(f, r.detail))
+                        }
+                        None => format!("unknown fault bit {}: detail {}", r.fault_bit, r.detail),
+                    };
+                    let state = if r.acknowledged {
+                        "acknowledged"
+                    } else {
+                        "unacknowledged"
+                    };
+                    format!("{what} ({state}, {} s ago)", r.age_s)
+                }
+            };
+            format!("fault record {}: {text}", usize::from(slot) + 1)
+        }
+        DiagnosticPage::Unknown { payload, .. } => {
+            format!("unknown page layout, payload 0x{payload:012X}")
+        }
     };
-    format!("page {}  {body}  counter {:2}", p.page, p.counter.raw())
+    format!(
+        "page {}  {body}  counter {:2}",
+        p.page.code(),
+        p.counter.raw()
+    )
 }
 
 fn hex(data: &[u8]) -> String {
@@ -441,6 +552,60 @@ fn hex(data: &[u8]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn record(slot: u8, fault: Fault, acknowledged: bool, age_s: u16) -> Diagnostic {
+        Diagnostic {
+            counter: AliveCounter::wrapping(0),
+            page: DiagnosticPage::Record {
+                slot,
+                record: Some(DiagnosticRecord {
+                    fault_bit: fault.bit(),
+                    acknowledged,
+                    detail: 200,
+                    age_s,
+                }),
+            },
+        }
+    }
+
+    /// The summary lists the oldest unacknowledged record first (the root cause still
+    /// latched), then the newer unacknowledged ones, then the acknowledged ones.
+    #[test]
+    fn the_oldest_unacknowledged_fault_comes_first() {
+        let mut d = Diagnostics::default();
+        d.on(record(0, Fault::EposFault, true, 90));
+        d.on(record(1, Fault::BusOff, false, 40));
+        d.on(record(2, Fault::HeartbeatLost, false, 39));
+        for slot in 3..FAULT_LOG_CAPACITY as u8 {
+            d.on(Diagnostic {
+                counter: AliveCounter::wrapping(0),
+                page: DiagnosticPage::Record { slot, record: None },
+            });
+        }
+        d.on(Diagnostic {
+            counter: AliveCounter::wrapping(0),
+            page: DiagnosticPage::Counters {
+                page: 5,
+                words: [1234, 31_644, 0],
+            },
+        });
+        assert!(
+            d.summary()
+                .contains("stack high-water: 4936 B of 126576 B (3.9 %)"),
+            "{}",
+            d.summary()
+        );
+        let order: Vec<usize> = d.records_by_urgency().iter().map(|(s, _)| *s).collect();
+        assert_eq!(order, [1, 2, 0]);
+        let text = d.summary();
+        let bus_off = text.find("fault record 2 (unacknowledged, 40 s ago): CAN bus-off");
+        let heartbeat = text.find("fault record 3 (unacknowledged, 39 s ago)");
+        let epos = text.find("fault record 1 (acknowledged, 90 s ago)");
+        assert!(
+            bus_off.is_some() && bus_off < heartbeat && heartbeat < epos,
+            "{text}"
+        );
+    }
 
     #[test]
     fn counter_gaps_and_repeats_are_counted() {
