@@ -203,7 +203,10 @@ const SYNC_COARSE_S: [f64; 10] = [
 const SYNC_FINE_STEP_S: f64 = 1.0 / steering_ecu::paper_mode::CURRENT_LOOP_HZ as f64;
 const SYNC_FINE_STEPS: i32 = 10;
 /// The phase is searched on at most this much of the log, s (it is one number for the log).
-const SYNC_SEARCH_S: f64 = 20.0;
+const SYNC_SEARCH_S: f64 = 10.0;
+/// A car whose best coarse phase leaves the log this far (GoF, combined) below the best car's
+/// is not refined: a phase moves the GoF by less.
+const PRUNE_GOF: f64 = 0.15;
 
 fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, sync: f64) -> Rig {
     let mut r = rig.clone();
@@ -329,6 +332,10 @@ pub fn choose(
         })
     };
     let coarse = run(&jobs, &shorts);
+    let best_coarse = coarse
+        .iter()
+        .map(|t| t.gof)
+        .fold(f64::NEG_INFINITY, f64::max);
     // The best phase of each EPOS4 car, refined around its best millisecond.
     let mut best_of_car: Vec<Tried> = Vec::new();
     for &d in &drives {
@@ -342,6 +349,9 @@ pub fn choose(
                 else {
                     continue;
                 };
+                if best.gof < best_coarse - PRUNE_GOF {
+                    continue;
+                }
                 let best = match best.sync_after_push_s {
                     Some(s) => {
                         let fine: Vec<Job> = (-SYNC_FINE_STEPS..=SYNC_FINE_STEPS)

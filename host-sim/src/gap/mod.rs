@@ -1754,7 +1754,13 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             .map(|(v, s)| s.fit(v, &simulate(refit, v, &fx)));
         match worse_than_nominal(&fit_after, fit_validation.as_ref()) {
             Some(why) => {
-                reason.push_str(&format!("; the refit {why}: not named"));
+                // Nor the effect it beat: the refit explains the log better by the likelihood,
+                // so that effect is not what is left (a car off the table the model does not
+                // reach stands behind both).
+                reason.push_str(&format!(
+                    "; the refit {why}: not named, nor the effect it explains better"
+                ));
+                verdict_candidate = None;
                 parameters_win = false;
                 refit_simulations += 1 + usize::from(fit_validation.is_some());
             }
