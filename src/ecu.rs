@@ -591,9 +591,10 @@ impl Ecu {
                 .machine
                 .on_invalid_frames_fault(now_us, u16::from(invalid_in_row)),
         };
-        // A dropped frame whose ID, length, CRC and counter were good carries the AS state
-        // the vehicle did send: any state that does not allow power disables at once, whatever
-        // the angle. (Ready/Driving from it refresh nothing: the reference was not accepted.)
+        // A dropped frame whose ID, length and CRC were good carries the AS state the vehicle
+        // did send: any state that does not allow power disables at once, whatever the
+        // counter (a frame lost before it) and the angle. Only more authority needs a frame
+        // that passed every rule: Ready/Driving from it refresh nothing.
         let out = match self.e2e.authentic_as_state() {
             Some(as_state) if !self.machine.config().actuation().allows(as_state) => {
                 self.machine.on_as_state(now_us, as_state)
@@ -1061,6 +1062,76 @@ mod tests {
             assert_eq!(out.demand, DriveDemand::Disabled, "{deg} deg");
             assert_eq!(out.state, crate::steering::EcuState::Emergency, "{deg} deg");
         }
+    }
+
+    /// Issue 24, item 5: after one lost frame the next frame (CRC good) fails the counter
+    /// check, but a frame that asks for less authority is honoured whatever its counter:
+    /// AS Emergency, Finished, Off and Manual (and Ready under the DrivingOnly rule) disable in
+    /// that very frame, 10 ms after the last one, not a period later.
+    #[test]
+    fn a_disabling_as_state_is_honoured_in_a_frame_that_fails_only_its_counter() {
+        use crate::as_state::Actuation;
+        let cases = [
+            (Actuation::ReadyOrDriving, AsState::Emergency),
+            (Actuation::ReadyOrDriving, AsState::Finished),
+            (Actuation::ReadyOrDriving, AsState::Off),
+            (Actuation::ReadyOrDriving, AsState::Manual),
+            (Actuation::DrivingOnly, AsState::Ready),
+        ];
+        for (actuation, as_state) in cases {
+            for repeat in [false, true] {
+                let config = Config::DEFAULT.with_actuation(actuation);
+                let mut ecu =
+                    Ecu::new(ProtocolConfig::default(), config, Cascade::paper()).unwrap();
+                let mut vehicle = Vehicle::new();
+                let mut t = 0;
+                for _ in 0..5 {
+                    let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                    let _ = vehicle.send(&mut ecu, t, AsState::Driving, 0.0);
+                    t += 10 * MS;
+                }
+                assert_eq!(ecu.output().demand, DriveDemand::Track);
+                let f = if repeat {
+                    // The counter of the last frame again (a repeat, but new content).
+                    vehicle.counter = AliveCounter::wrapping(vehicle.counter.raw().wrapping_sub(1));
+                    vehicle.frame(as_state, 0.0, false)
+                } else {
+                    // One frame lost on the bus: the next one jumps the counter.
+                    let _lost = vehicle.frame(AsState::Driving, 0.0, false);
+                    vehicle.frame(as_state, 0.0, false)
+                };
+                let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                let drops = *ecu.e2e().drops();
+                let out = ecu.on_reference_frame(t, &f);
+                let after = *ecu.e2e().drops();
+                assert_eq!(
+                    (
+                        after.stale - drops.stale,
+                        after.counter_jump - drops.counter_jump
+                    ),
+                    if repeat { (1, 0) } else { (0, 1) },
+                    "the frame fails its counter"
+                );
+                assert_eq!(
+                    out.demand,
+                    DriveDemand::Disabled,
+                    "{as_state:?} ({actuation:?}, repeat {repeat})"
+                );
+            }
+        }
+        // A frame asking for more authority (AS Driving) with a bad counter is not taken.
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+        let _ = vehicle.send(&mut ecu, 0, AsState::Off, 0.0);
+        let _lost = vehicle.frame(AsState::Ready, 0.0, false);
+        let _ = ecu.on_encoder(10 * MS, SteeringDeg(0.0));
+        let out = vehicle.send(&mut ecu, 10 * MS, AsState::Ready, 0.0);
+        assert_eq!(
+            out.demand,
+            DriveDemand::Disabled,
+            "Ready with a jumped counter"
+        );
     }
 
     #[test]
