@@ -1064,7 +1064,7 @@ mod tests {
         }
     }
 
-    /// Issue 24, item 5: after one lost frame the next frame (CRC good) fails the counter
+    /// After one lost frame the next frame (CRC good) fails the counter
     /// check, but a frame that asks for less authority is honoured whatever its counter:
     /// AS Emergency, Finished, Off and Manual (and Ready under the DrivingOnly rule) disable in
     /// that very frame, 10 ms after the last one, not a period later.

@@ -317,7 +317,7 @@ impl E2eChecker {
     /// good, a known AS code), whether or not its counter, angle and rate passed; `None`
     /// otherwise. Such a frame is not accepted, but its AS state is the vehicle's word: one
     /// that asks for less authority (AS Emergency, Finished, Off, Manual) must disable the drive
-    /// at once, a lost frame before it or not (issue 24). Only a frame that asks for more
+    /// at once, a lost frame before it or not. Only a frame that asks for more
     /// authority (power) needs every rule, the counter included: act on this only to disable.
     pub fn authentic_as_state(&self) -> Option<AsState> {
         self.authentic_as_state

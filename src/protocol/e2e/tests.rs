@@ -568,7 +568,7 @@ fn the_window_restarts_when_its_anchor_is_exactly_250_ms_old() {
     assert!(is_valid(send(&mut c, 400, 252_000)), "4 deg up");
 }
 
-/// Issue 24, item 5: the AS state of a frame that passes the CRC is the sender's word whatever
+/// The AS state of a frame that passes the CRC is the sender's word whatever
 /// its counter (a jump after a lost frame, a repeat); a frame that fails the CRC, or carries
 /// an unknown code, gives none.
 #[test]
