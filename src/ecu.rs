@@ -594,8 +594,11 @@ impl Ecu {
         // A dropped frame whose ID, length and CRC were good carries the AS state the vehicle
         // did send: any state that does not allow power disables at once, whatever the
         // counter (a frame lost before it) and the angle. Only more authority needs a frame
-        // that passed every rule: Ready/Driving from it refresh nothing.
+        // that passed every rule: Ready/Driving from it refresh nothing, and neither does an
+        // AS Off that would release a standing emergency (the drive is off already).
+        let in_emergency = self.machine.as_state() == Some(AsState::Emergency);
         let out = match self.e2e.authentic_as_state() {
+            Some(AsState::Off) if in_emergency => out,
             Some(as_state) if !self.machine.config().actuation().allows(as_state) => {
                 self.machine.on_as_state(now_us, as_state)
             }
@@ -1132,6 +1135,46 @@ mod tests {
             DriveDemand::Disabled,
             "Ready with a jumped counter"
         );
+    }
+
+    /// AS Emergency is released only by an AS Off frame that passes every rule: an Off in a
+    /// frame that fails its counter disables (the drive is off already) but leaves the
+    /// emergency standing, so a Ready after it does not power the drive.
+    #[test]
+    fn only_an_accepted_as_off_frame_releases_an_emergency() {
+        for lost_before_off in [true, false] {
+            let mut ecu = Ecu::paper().unwrap();
+            let mut vehicle = Vehicle::new();
+            let mut t = 0;
+            for _ in 0..5 {
+                let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                let _ = vehicle.send(&mut ecu, t, AsState::Driving, 0.0);
+                t += 10 * MS;
+            }
+            let out = vehicle.send(&mut ecu, t, AsState::Emergency, 0.0);
+            assert_eq!(out.state, EcuState::Emergency);
+            if lost_before_off {
+                let _lost = vehicle.frame(AsState::Off, 0.0, false);
+            }
+            for s in [AsState::Off, AsState::Off, AsState::Ready, AsState::Ready] {
+                t += 10 * MS;
+                let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                let _ = vehicle.send(&mut ecu, t, s, 0.0);
+            }
+            // The second Off frame was in sequence again: it releases the emergency, and the
+            // Ready frames power the drive. With only the first Off (bad counter) it would not.
+            assert_eq!(ecu.output().demand, DriveDemand::Track, "{lost_before_off}");
+        }
+        // Only the counter-failing Off: the emergency stands.
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+        let _ = vehicle.send(&mut ecu, 0, AsState::Driving, 0.0);
+        let _ = vehicle.send(&mut ecu, 10 * MS, AsState::Emergency, 0.0);
+        let _lost = vehicle.frame(AsState::Off, 0.0, false);
+        let out = vehicle.send(&mut ecu, 20 * MS, AsState::Off, 0.0);
+        assert_eq!(out.state, EcuState::Emergency, "Off with a jumped counter");
+        assert_eq!(ecu.machine().as_state(), Some(AsState::Emergency));
     }
 
     #[test]

@@ -32,7 +32,8 @@
 //!                                      any fault, from any state: | Disabled |
 //!                                      same call                  +----------+
 //!
-//!   AS Emergency, from any state, in the same call ----> Emergency (Disabled)
+//!   AS Emergency, from any state, in the same call ----> Emergency (Disabled), latched:
+//!   every AS state but Off after it still reads Emergency; AS Off ----> Idle
 //! ```
 //!
 //! What the drive does ([`DriveDemand`]): `Disabled` = bridge off / EPOS4 "disable voltage",
@@ -903,6 +904,14 @@ impl SteeringStateMachine {
     }
 
     fn set_as_state(&mut self, now: u64, as_state: AsState) {
+        // The rules' AS state machine leaves AS Emergency only for AS Off (the ASMS switched
+        // off): any other state after it is a vehicle computer out of order, and the
+        // emergency stands.
+        let as_state = if self.as_state == Some(AsState::Emergency) && as_state != AsState::Off {
+            AsState::Emergency
+        } else {
+            as_state
+        };
         if self.config.actuation.allows(as_state) {
             if self.powered_since_us.is_none() {
                 self.powered_since_us = Some(now);
@@ -1121,6 +1130,46 @@ mod tests {
         assert_eq!(out.state, EcuState::Emergency);
         // Emergency is the AS's verdict, not an ECU fault.
         assert!(out.faults.is_empty());
+    }
+
+    /// AS Emergency latches until AS Off, as the driverless rules' AS state machine says
+    /// (Emergency is left only when the ASMS is switched off): Emergency followed by Ready,
+    /// Driving, Finished or Manual stays Emergency, drive off, however long the frames come;
+    /// Off releases it, and from Off the usual Ready -> Driving powers the drive again.
+    #[test]
+    fn emergency_latches_until_as_off() {
+        for next in [
+            AsState::Driving,
+            AsState::Ready,
+            AsState::Finished,
+            AsState::Manual,
+        ] {
+            let (mut sm, t) = tracking();
+            let out = sm.on_reference(t + 10 * MS, AsState::Emergency);
+            assert_eq!(out.state, EcuState::Emergency);
+            let mut t = t + 10 * MS;
+            for _ in 0..20 {
+                t += 10 * MS;
+                let _ = sm.on_encoder(t, SteeringDeg(0.0), motor_at(0.0));
+                let out = sm.on_reference(t, next);
+                assert_eq!(out.demand, DriveDemand::Disabled, "Emergency -> {next:?}");
+                assert_eq!(out.state, EcuState::Emergency, "Emergency -> {next:?}");
+                assert!(out.faults.is_empty(), "{:?}", out.faults);
+                let out = sm.on_as_state(t + MS, next);
+                assert_eq!(out.state, EcuState::Emergency, "AS-only {next:?}");
+            }
+            assert_eq!(sm.as_state(), Some(AsState::Emergency), "{next:?}");
+            // AS Off releases the latch.
+            t += 10 * MS;
+            let out = sm.on_reference(t, AsState::Off);
+            assert_eq!(out.state, EcuState::Idle, "{next:?}");
+            for s in [AsState::Ready, AsState::Driving] {
+                t += 10 * MS;
+                let _ = sm.on_encoder(t, SteeringDeg(0.0), motor_at(0.0));
+                let out = sm.on_reference(t, s);
+                assert_eq!(out.demand, DriveDemand::Track, "{s:?} after Off");
+            }
+        }
     }
 
     #[test]
@@ -1732,6 +1781,15 @@ mod property_tests {
         ]
     }
 
+    /// The AS state the machine must believe: Emergency stands until Off.
+    fn next_as_state(believed: Option<AsState>, sent: AsState) -> Option<AsState> {
+        if believed == Some(AsState::Emergency) && sent != AsState::Off {
+            believed
+        } else {
+            Some(sent)
+        }
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(512))]
 
@@ -1751,12 +1809,12 @@ mod property_tests {
                 let out = match ev {
                     Event::Tick => sm.tick(now),
                     Event::Reference(i) => {
-                        as_state = Some(AS_STATES[i]);
+                        as_state = next_as_state(as_state, AS_STATES[i]);
                         last_reference = Some(now);
                         sm.on_reference(now, AS_STATES[i])
                     }
                     Event::AsOnly(i) => {
-                        as_state = Some(AS_STATES[i]);
+                        as_state = next_as_state(as_state, AS_STATES[i]);
                         sm.on_as_state(now, AS_STATES[i])
                     }
                     Event::InvalidFrames => sm.on_invalid_frames_fault(now, 10),
@@ -1813,6 +1871,7 @@ mod property_tests {
                 prop_assert_eq!(out.faults.intersection(faults), faults);
                 faults = out.faults;
                 prop_assert_eq!(out.faults, sm.faults());
+                prop_assert_eq!(sm.as_state(), as_state);
                 prop_assert_eq!(EcuState::from_code(out.state.code()), Some(out.state));
             }
         }
