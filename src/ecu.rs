@@ -163,6 +163,14 @@ pub struct Ecu {
     /// The enable ramp ([`ENABLE_RAMP_DPS`]): the last angle given to the drive and when;
     /// `None` once the ramp has met the vehicle's reference.
     ramp: Option<(SteeringDeg, u64)>,
+    /// Position ticks since the last reference sample was pushed (direct drive), saturating:
+    /// the rate limit's time base ([`Ecu::rate_limited`]).
+    ticks_since_push: u32,
+    /// EPOS4 mode: the reference sample the drive's target came from at the last SYNC, and
+    /// when that SYNC and the one before it went out: the rate limit's anchor and time base.
+    synced_reference: Option<SteeringDeg>,
+    last_sync_us: Option<u64>,
+    sync_interval_us: u64,
     /// The state machine's over-current threshold (its configuration never changes).
     overcurrent_threshold: Amps,
     motor_counter: AliveCounter,
@@ -222,6 +230,10 @@ impl Ecu {
             reference: None,
             origin_counts: None,
             ramp: None,
+            ticks_since_push: u32::MAX,
+            synced_reference: None,
+            last_sync_us: None,
+            sync_interval_us: u64::from(protocol.period_us),
             overcurrent_threshold,
             motor_counter: AliveCounter::wrapping(0),
             current_sum: 0.0,
@@ -398,8 +410,11 @@ impl Ecu {
         out.drive_just_enabled =
             self.last.demand == DriveDemand::Disabled && out.demand != DriveDemand::Disabled;
         if out.drive_just_enabled {
-            // The first reference sample after enabling is the one to track.
+            // The first reference sample after enabling is the one to track (the enable ramp
+            // bounds its motion, not the rate limit: there is no previous sample).
             self.reference = None;
+            self.synced_reference = None;
+            self.ticks_since_push = u32::MAX;
             // Every enable takes the motor origin from the column encoder afresh: the motor
             // may have been turned (driver, tyres) while the drive was off, and the Hall
             // count or the drive's position only ever counted relative steps.
@@ -486,12 +501,60 @@ impl Ecu {
         next
     }
 
+    /// The angle the drive is given for `angle`: at most the protocol's rate (400 deg/s) times
+    /// the time the controller takes to get there from the previous sample, whatever the
+    /// frame timing. The E2E budget grows with the time since the last accepted frame (a
+    /// 48 deg step is plausible after 120 ms of silence), and the controller ramps each sample
+    /// in one period: unlimited, that step would be 4 800 deg/s. So after a gap, a burst, junk
+    /// frames or a hold the drive ramps to the vehicle's angle at the rate limit instead.
+    ///
+    /// Direct drive: the interpolator ramps a sample from the set-point due next to the sample
+    /// over one reference period; the step from the previous sample may be the rate times
+    /// the position ticks taken since it (at most one period), and the set-point then moves
+    /// at most the rate times each tick (the rest of the previous segment plus the new step
+    /// is at most one period's worth). EPOS4: the drive takes its target once per SYNC, so
+    /// the step from the sample of the last SYNC may be the rate times the SYNC interval.
+    fn rate_limited(&self, angle: SteeringDeg) -> SteeringDeg {
+        let rate = self.protocol.max_rate_deg_per_s;
+        let period_s = self.protocol.period_us as f32 * 1e-6;
+        let (anchor, span_s) = match &self.drive {
+            Drive::Direct(_) => {
+                let ticks = self
+                    .ticks_since_push
+                    .min(crate::paper_mode::POSITION_TICKS_PER_REFERENCE);
+                (
+                    self.reference,
+                    ticks as f32 / crate::paper_mode::POSITION_LOOP_HZ as f32,
+                )
+            }
+            Drive::Epos4(_) => (
+                self.synced_reference,
+                (self.sync_interval_us as f32 * 1e-6).min(period_s),
+            ),
+        };
+        let Some(anchor) = anchor.filter(|a| a.is_finite()) else {
+            return angle;
+        };
+        let max_step = rate * span_s;
+        let step = angle.0 - anchor.0;
+        // NaN compares false: a non-finite angle goes on to be refused by the controller.
+        if step.abs() <= max_step {
+            angle
+        } else if step.is_finite() {
+            SteeringDeg(anchor.0 + max_step * step.signum())
+        } else {
+            angle
+        }
+    }
+
     fn push_reference(&mut self, now_us: u64, target: SteeringDeg) {
         // The enable ramp is the ECU's own motion, its last step included: ECU mode does not
         // shape it.
         let ramping = self.ramp.is_some();
         let angle = self.ramped(now_us, target);
+        let angle = self.rate_limited(angle);
         self.reference = Some(angle);
+        self.ticks_since_push = 0;
         match &mut self.drive {
             // The E2E check already bounds the angle to the cascade's range; a refusal here
             // keeps the ramp in progress, which is the documented outcome.
@@ -671,6 +734,7 @@ impl Ecu {
     /// is enabled. In EPOS4 mode nothing runs here: 0 A.
     pub fn position_tick(&mut self, hall_count: i32) -> Amps {
         self.hall_count = hall_count;
+        self.ticks_since_push = self.ticks_since_push.saturating_add(1);
         let Drive::Direct(cascade) = &mut self.drive else {
             return Amps::ZERO;
         };
@@ -792,6 +856,13 @@ impl Ecu {
             out = self.machine.on_epos_fault_gone(now_us);
         }
         self.link_up = up;
+        if link_out.iter().any(crate::canopen::nmt::is_sync) {
+            // The target went out with this SYNC: the rate limit's next anchor.
+            self.synced_reference = self.reference;
+            if let Some(t) = self.last_sync_us.replace(now_us) {
+                self.sync_interval_us = now_us.saturating_sub(t);
+            }
+        }
         let _ = self.apply(now_us, out);
         let mut frames = DriveFrames::new();
         for f in self.pending.iter().chain(link_out.iter()) {
@@ -1213,6 +1284,10 @@ mod tests {
             let deg = 15.0 * (core::f32::consts::TAU * 4.0 * s).sin() + 20.0;
             let _ = ecu.on_encoder(t, SteeringDeg(0.0));
             let _ = vehicle.send(&mut ecu, t, AsState::Driving, deg);
+            // The position ticks of the period, as the fast loop takes them.
+            for _ in 0..20 {
+                let _ = ecu.position_tick(0);
+            }
             if handed_over_at.is_none() && k > 0 && ecu.ramp.is_none() {
                 handed_over_at = Some(k);
                 let given = ecu.reference.map_or(f32::NAN, |r| r.0);
@@ -2086,5 +2161,218 @@ mod mutation_tests {
         let f = vehicle.frame(AsState::Off, 0.0, true);
         let out = ecu.on_reference_frame(t, &f);
         assert!(out.faults.is_empty(), "{:?}", out.faults);
+    }
+
+    /// EPOS4 mode: after 120 ms without frames the vehicle's next frame is 48 deg away (the
+    /// E2E budget allows it); the drive's target moves at most the 400 deg/s rate times the
+    /// 10 ms SYNC cycle, however the frames fall between SYNCs.
+    #[test]
+    fn after_a_gap_the_epos4_target_moves_at_the_rate_limit() {
+        let (mut ecu, mut drive, mut vehicle, t) = tracking_epos4();
+        drive.follows = true;
+        let before = drive.targets.len();
+        // Silence, then 48 deg, on time again.
+        let _ = run(
+            &mut ecu,
+            &mut drive,
+            &mut vehicle,
+            t,
+            t + 120 * MS,
+            AsState::Driving,
+            f32::NAN,
+            0.0,
+        );
+        let start = t + 120 * MS;
+        let mut t = start;
+        while t < start + 200 * MS {
+            if t.is_multiple_of(10 * MS) {
+                let motor = ecu.motor_angle();
+                let column = SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor));
+                let _ = ecu.on_encoder(t, column);
+                let _ = vehicle.send(&mut ecu, t, AsState::Driving, 48.0);
+            }
+            let _ = step(&mut ecu, &mut drive, t);
+            t += MS;
+        }
+        assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
+        let per_cycle = inc_at(&ecu, 4.0) + 1;
+        let steps: Vec<i32> = drive.targets[before..]
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .collect();
+        assert!(steps.iter().all(|s| s.abs() <= per_cycle), "{steps:?}");
+        assert_eq!(drive.targets.last(), Some(&(500 + inc_at(&ecu, 48.0))));
+    }
+}
+
+// The reference's rate limit, end to end: what the controller is handed, whatever the frames do.
+#[cfg(test)]
+mod rate_limit_tests {
+    use super::tests::Vehicle;
+    use super::*;
+    use proptest::prelude::*;
+
+    const MS: u64 = 1000;
+    /// The position tick, us (2 kHz).
+    const TICK_US: u64 = 500;
+
+    /// What the vehicle does next, after `gap_us` of silence.
+    #[derive(Debug, Clone)]
+    enum Send {
+        /// One frame stepping `frac` of the E2E budget for the gap (beyond 1: refused).
+        Step { frac: f32 },
+        /// `n` frames 200 us apart, each stepping `frac` of a period's budget.
+        Burst { n: u8, frac: f32 },
+        /// `n` frames with a broken CRC (the counter still advances), 200 us apart.
+        Junk { n: u8 },
+    }
+
+    fn send() -> impl Strategy<Value = (u64, Send)> {
+        let gap = prop_oneof![
+            4 => Just(10 * MS),
+            3 => 0u64..=125 * MS,
+            1 => prop_oneof![Just(40 * MS), Just(80 * MS), Just(120 * MS), Just(125 * MS)],
+        ];
+        let what = prop_oneof![
+            6 => (-1.2f32..1.2).prop_map(|frac| Send::Step { frac }),
+            2 => (2u8..6, -1.0f32..1.0).prop_map(|(n, frac)| Send::Burst { n, frac }),
+            1 => (1u8..5).prop_map(|n| Send::Junk { n }),
+        ];
+        (gap, what)
+    }
+
+    fn setpoint_deg(ecu: &Ecu) -> f32 {
+        let Drive::Direct(cascade) = ecu.drive() else {
+            panic!("direct mode")
+        };
+        SteeringDeg::from(Gearing::PAPER.steering_from_motor(cascade.setpoint().position)).0
+    }
+
+    fn hall_at(deg: f32) -> i32 {
+        let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(deg).into());
+        hall_from_motor(f64::from(motor.0))
+    }
+
+    /// The direct-drive car as the firmware runs it: position ticks at 2 kHz, column samples
+    /// at 500 Hz, a motor and column that follow the set-point exactly. The vehicle's frames
+    /// come as `script` says. Every set-point step (wheel deg) taken while the drive stayed
+    /// on, with the time it was taken, and the faults latched at the end.
+    fn run(script: &[(u64, Send)]) -> (Vec<(u64, f32)>, crate::faults::FaultSet) {
+        let mut ecu = Ecu::paper().expect("paper ECU");
+        let rate = ecu.protocol.max_rate_deg_per_s;
+        let mut vehicle = Vehicle::new();
+        // Frames due: (time, angle, junk).
+        let mut due: Vec<(u64, f32, bool)> = (0..5).map(|k| (k * 10 * MS, 0.0, false)).collect();
+        let mut t_frame = 40 * MS;
+        let mut angle = 0.0f32;
+        for (gap, what) in script {
+            t_frame += gap;
+            match *what {
+                Send::Step { frac } => {
+                    let budget = rate * (*gap).max(10 * MS) as f32 * 1e-6;
+                    angle = (angle + frac * budget).clamp(-85.0, 85.0);
+                    due.push((t_frame, angle, false));
+                }
+                Send::Burst { n, frac } => {
+                    for k in 0..u64::from(n) {
+                        angle = (angle + frac * rate * 0.01).clamp(-85.0, 85.0);
+                        due.push((t_frame + k * 200, angle, false));
+                    }
+                    t_frame += u64::from(n) * 200;
+                }
+                Send::Junk { n } => {
+                    for k in 0..u64::from(n) {
+                        due.push((t_frame + k * 200, angle, true));
+                    }
+                    t_frame += u64::from(n) * 200;
+                }
+            }
+        }
+        // Then on time again, at the last angle, for 200 ms.
+        for k in 1..=20 {
+            due.push((t_frame + k * 10 * MS, angle, false));
+        }
+        let end = t_frame + 200 * MS;
+        let mut steps = Vec::new();
+        let mut next = due.iter().peekable();
+        let mut position = 0.0f32;
+        let mut on_before = false;
+        let mut t = 0;
+        while t <= end {
+            if t.is_multiple_of(2 * MS) {
+                let _ = ecu.on_encoder(t, SteeringDeg(position));
+            }
+            while let Some(&&(at, deg, junk)) = next.peek() {
+                if at > t {
+                    break;
+                }
+                let mut f = vehicle.frame(AsState::Driving, deg, false);
+                if junk {
+                    let mut bytes: [u8; 8] = f.data().try_into().expect("8 bytes");
+                    bytes[0] ^= 0x5A;
+                    f = Frame::new(f.id(), &bytes).expect("a frame");
+                }
+                let _ = ecu.on_reference_frame(at, &f);
+                next.next();
+            }
+            if t.is_multiple_of(2 * MS) {
+                let _ = ecu.tick(t);
+            }
+            let on = ecu.output().demand != DriveDemand::Disabled;
+            let _ = ecu.position_tick(hall_at(position));
+            let setpoint = setpoint_deg(&ecu);
+            if on && on_before {
+                steps.push((t, setpoint - position));
+            }
+            if on {
+                // The motor and the column are where the set-point was.
+                position = setpoint;
+            }
+            on_before = on;
+            t += TICK_US;
+        }
+        (steps, ecu.output().faults)
+    }
+
+    fn assert_within_rate(steps: &[(u64, f32)]) -> Result<(), TestCaseError> {
+        let limit = ProtocolConfig::default().max_rate_deg_per_s * TICK_US as f32 * 1e-6;
+        for &(t, step) in steps {
+            prop_assert!(
+                step.abs() <= limit + 1e-3,
+                "the set-point moved {step} deg in one {TICK_US} us tick at {t} us (limit {limit})"
+            );
+        }
+        Ok(())
+    }
+
+    /// The cases the audit measured: 40/80/120/125 ms without frames, then a step of the whole
+    /// budget; four junk frames, then a 20 deg step.
+    #[test]
+    fn after_a_gap_the_set_point_ramps_at_the_rate_limit() {
+        for gap in [40, 80, 120, 125] {
+            let (steps, faults) = run(&[(gap * MS, Send::Step { frac: 1.0 })]);
+            assert_within_rate(&steps).unwrap();
+            assert!(faults.is_empty(), "after {gap} ms: {faults:?}");
+        }
+        let (steps, _) = run(&[
+            (10 * MS, Send::Junk { n: 4 }),
+            (10 * MS, Send::Step { frac: 0.5 }),
+            (0, Send::Step { frac: 0.0 }),
+        ]);
+        assert_within_rate(&steps).unwrap();
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Whatever the frame timing (gaps of 0 to 125 ms, bursts, junk frames, Hold and back
+        /// to Track), the set-point the cascade is handed never moves more than 400 deg/s
+        /// times its tick.
+        #[test]
+        fn the_set_point_never_moves_faster_than_the_rate_limit(
+            script in prop::collection::vec(send(), 1..40)
+        ) {
+            assert_within_rate(&run(&script).0)?;
+        }
     }
 }
