@@ -80,6 +80,17 @@ pub type DriveFrames = heapless::Vec<Frame, { PENDING_DEPTH + 4 }>;
 /// vehicle computer gives the steering in AS Ready.
 pub const ENABLE_RAMP_DPS: f32 = 100.0;
 
+/// The motor origin is taken at every enable from the column samples of this window, us
+/// (the encoder task's 500 Hz gives 8), and only if each is within [`ORIGIN_AGREEMENT_COUNTS`]
+/// column-encoder counts (plus one motor count) of their median: one glitched sample before
+/// the enabling frame (1.5 deg passes the jump check) must not become an offset of the
+/// wheels for the whole run.
+pub const ORIGIN_WINDOW_US: u64 = 16_000;
+/// See [`ORIGIN_WINDOW_US`]: one count of the 12-bit column encoder, its quantisation.
+pub const ORIGIN_AGREEMENT_COUNTS: f32 = 1.0;
+/// Origin candidates kept: the window's samples at 500 Hz.
+const ORIGIN_SAMPLES: usize = 8;
+
 /// Time between automatic resets of a failed EPOS4 link in AS Off, us.
 pub const LINK_RESET_INTERVAL_US: u64 = 1_000_000;
 
@@ -160,6 +171,9 @@ pub struct Ecu {
     /// until the first column sample with a known motor position; the disagreement check
     /// waits for it.
     origin_counts: Option<i32>,
+    /// The origin each recent column sample implies (the motor count less the column's angle
+    /// in counts), with its time: [`ORIGIN_WINDOW_US`].
+    origin_candidates: heapless::Deque<(u64, i32), ORIGIN_SAMPLES>,
     /// The enable ramp ([`ENABLE_RAMP_DPS`]): the last angle given to the drive and when;
     /// `None` once the ramp has met the vehicle's reference.
     ramp: Option<(SteeringDeg, u64)>,
@@ -229,6 +243,7 @@ impl Ecu {
             current_seen_us: 0,
             reference: None,
             origin_counts: None,
+            origin_candidates: heapless::Deque::new(),
             ramp: None,
             ticks_since_push: u32::MAX,
             synced_reference: None,
@@ -375,6 +390,51 @@ impl Ecu {
         }
     }
 
+    /// The last column sample's angle in motor counts, through the gearing.
+    fn column_counts(&self) -> Option<i32> {
+        self.counts_from_motor(
+            self.gearing
+                .motor_from_steering(SteeringRad::from(self.column)),
+        )
+    }
+
+    /// Sets the origin to the median of the window's candidates ([`ORIGIN_WINDOW_US`]) if
+    /// they agree; their spread (deg at the wheel) if not. With no candidate in the window
+    /// (the column is not known), the last sample's origin as before.
+    fn origin_from_window(&mut self, now_us: u64) -> Result<(), SteeringDeg> {
+        let mut window: heapless::Vec<i32, ORIGIN_SAMPLES> = self
+            .origin_candidates
+            .iter()
+            .filter(|(t, _)| now_us.saturating_sub(*t) <= ORIGIN_WINDOW_US)
+            .map(|&(_, o)| o)
+            .collect();
+        window.sort_unstable();
+        let (Some(&median), Some(&low), Some(&high)) =
+            (window.get(window.len() / 2), window.first(), window.last())
+        else {
+            self.align_origin();
+            return Ok(());
+        };
+        let count_deg = 360.0 / crate::sensors::COLUMN_ENCODER_COUNTS as f32;
+        let one_count =
+            self.counts_from_motor(self.gearing.motor_from_steering(SteeringRad::from(
+                SteeringDeg(ORIGIN_AGREEMENT_COUNTS * count_deg),
+            )))
+            .and_then(|c| c.checked_sub(self.counts_from_motor(MotorRad(0.0))?))
+            .unwrap_or(0)
+            .saturating_abs();
+        // Plus one motor count: the motor sensor's own quantisation.
+        let bound = one_count.saturating_add(1);
+        if median.saturating_sub(low) > bound || high.saturating_sub(median) > bound {
+            let spread_motor = self.motor_from_counts(high.saturating_sub(low));
+            return Err(SteeringDeg::from(
+                self.gearing.steering_from_motor(spread_motor),
+            ));
+        }
+        self.set_origin(Some(median));
+        Ok(())
+    }
+
     /// Frames from demand changes that did not fit the pending queue (saturating).
     pub fn pending_overflow(&self) -> u16 {
         self.pending_overflow
@@ -417,8 +477,12 @@ impl Ecu {
             self.ticks_since_push = u32::MAX;
             // Every enable takes the motor origin from the column encoder afresh: the motor
             // may have been turned (driver, tyres) while the drive was off, and the Hall
-            // count or the drive's position only ever counted relative steps.
-            self.align_origin();
+            // count or the drive's position only ever counted relative steps. From the
+            // window's samples, which must agree; otherwise the enable is refused.
+            if let Err(spread) = self.origin_from_window(now_us) {
+                let refused = self.machine.on_origin_disagreement(now_us, spread);
+                return self.apply(now_us, refused);
+            }
             // ... and the reference starts where the column is. The demand is Track or Hold
             // only with a fresh, finite column sample; should it not be finite, the ramp
             // starts at the first reference sample instead (see `push_reference`).
@@ -687,6 +751,18 @@ impl Ecu {
         }
         if self.origin_counts.is_none() && column.is_finite() {
             self.align_origin();
+        }
+        match (self.motor_counts(), self.column_counts()) {
+            (Some(counts), Some(column_counts)) => {
+                if self.origin_candidates.is_full() {
+                    let _ = self.origin_candidates.pop_front();
+                }
+                let _ = self
+                    .origin_candidates
+                    .push_back((now_us, counts.saturating_sub(column_counts)));
+            }
+            // No motor position, or no column: nothing agrees with anything.
+            _ => self.origin_candidates.clear(),
         }
         let out = match self.aligned_motor() {
             Some(motor) => self.machine.on_encoder(now_us, column, motor),
@@ -1036,6 +1112,70 @@ mod tests {
                 "position tick {k}: {} A with the motor at the reference",
                 current.0
             );
+        }
+    }
+
+    /// A glitch of 0.5, 1.5 or 2.9 deg in the column sample just before the enabling frame
+    /// (each within the jump check's 2 deg between 2 ms samples): either the origin is still
+    /// right to 0.1 deg, or a fault is latched. Never a silent offset.
+    #[test]
+    fn a_glitch_in_the_sample_before_the_enable_leaves_no_silent_origin_offset() {
+        for glitch in [0.0f32, 0.5, 1.5, 2.9] {
+            let mut ecu = Ecu::paper().unwrap();
+            let mut vehicle = Vehicle::new();
+            let hall = hall_at(10.0);
+            let truth = Gearing::PAPER.motor_from_steering(SteeringDeg(10.0).into());
+            let mut t = 0u64;
+            // AS Off, the column and the motor resting at 10 deg, the tasks at their rates.
+            while t <= 300 * MS {
+                if t.is_multiple_of(2 * MS) {
+                    // The sample at 100 ms is the last before the first AS Driving frame.
+                    let column = if t == 100 * MS { 10.0 + glitch } else { 10.0 };
+                    let _ = ecu.on_encoder(t, SteeringDeg(column));
+                }
+                if t.is_multiple_of(10 * MS) {
+                    let s = if t < 100 * MS {
+                        AsState::Off
+                    } else {
+                        AsState::Driving
+                    };
+                    let _ = vehicle.send(&mut ecu, t, s, 10.0);
+                }
+                let _ = ecu.position_tick(hall);
+                t += 500;
+            }
+            let offset = SteeringDeg::from(
+                Gearing::PAPER.steering_from_motor(MotorRad(ecu.motor_angle().0 - truth.0)),
+            );
+            let faults = ecu.output().faults;
+            assert!(
+                faults.contains(crate::faults::Fault::Origin)
+                    || (offset.0.abs() <= 0.1 && faults.is_empty()),
+                "glitch {glitch} deg: origin off by {} deg, faults {faults:?}",
+                offset.0
+            );
+            if glitch == 0.0 {
+                assert_eq!(ecu.output().demand, DriveDemand::Track, "a clean enable");
+            } else {
+                assert_eq!(ecu.output().demand, DriveDemand::Disabled, "{glitch} deg");
+                // The cause is judged at each enable: AS Off clears it, and the next enable
+                // on clean samples takes the right origin.
+                let _ = ecu.on_encoder(t, SteeringDeg(10.0));
+                let f = vehicle.frame(AsState::Off, 10.0, true);
+                let out = ecu.on_reference_frame(t, &f);
+                assert!(out.faults.is_empty(), "cleared in AS Off: {:?}", out.faults);
+                let mut t = t;
+                for _ in 0..10 {
+                    t += 2 * MS;
+                    let _ = ecu.on_encoder(t, SteeringDeg(10.0));
+                }
+                let out = vehicle.send(&mut ecu, t, AsState::Ready, 10.0);
+                assert_eq!(out.demand, DriveDemand::Track, "{glitch} deg, re-enabled");
+                let offset = SteeringDeg::from(
+                    Gearing::PAPER.steering_from_motor(MotorRad(ecu.motor_angle().0 - truth.0)),
+                );
+                assert!(offset.0.abs() <= 0.1, "re-enabled {} deg off", offset.0);
+            }
         }
     }
 

@@ -87,6 +87,7 @@
 //! | `EposFault` | statusword fault bit or an EMCY from the EPOS4 | the firmware reports the EPOS4 fault reset done |
 //! | `HeartbeatLost` | the CANopen consumer-heartbeat time of the EPOS4 elapsed | a heartbeat arrives |
 //! | `BusOff` | the CAN controller reports bus-off | bus recovered, or a valid frame arrives |
+//! | `Origin` | at an enable, the column samples of the last 16 ms disagree on the motor origin by more than one encoder count (plus one motor count) from their median ([`crate::ecu::ORIGIN_WINDOW_US`]): the enable is refused | judged afresh at each enable |
 //! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s; or (runaway) the current pushing toward the reference at 18 A or more for 50 ms while the column still moves away at 20 deg/s or more, no slower than when the push began | a sample within the window, or the drive off |
 //!
 //! The plausibility checks (jump, disagreement, current) run in every AS state: a broken
@@ -190,6 +191,11 @@ pub const RUNAWAY_SPEED_WINDOW_US: u32 = 10_000;
 /// began still counts as not slowing, deg/s: one 12-bit encoder count (0.088 deg) per
 /// [`RUNAWAY_SPEED_WINDOW_US`], the speed measurement's resolution.
 pub const RUNAWAY_SLOWING_SLACK_DPS: f32 = 360.0 / 4096.0 / (RUNAWAY_SPEED_WINDOW_US as f32 * 1e-6);
+
+/// The detail of a [`Fault::Origin`] found by the resting cross-check is its difference in
+/// centi-degrees moved this far from 0 (with its sign), so it reads apart from the spread of
+/// the samples at an enable (always below it).
+pub const ORIGIN_RESTING_DETAIL: i32 = 1_000_000;
 
 /// What the drive must do from this call on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -809,6 +815,17 @@ impl SteeringStateMachine {
                 self.raise(now, Fault::OverCurrent, detail);
             }
         }
+        self.output()
+    }
+
+    /// The column samples the motor origin is taken from at this enable disagree by `spread`
+    /// (deg at the wheel): the enable is refused and [`Fault::Origin`] latches. The cause is
+    /// judged afresh at every enable, so it is gone once reported.
+    pub fn on_origin_disagreement(&mut self, now_us: u64, spread: SteeringDeg) -> Output {
+        let now = self.advance(now_us);
+        let detail = centideg_detail(spread.0).clamp(0, ORIGIN_RESTING_DETAIL - 1);
+        self.raise(now, Fault::Origin, detail);
+        self.active.remove(Fault::Origin);
         self.output()
     }
 
