@@ -91,6 +91,20 @@ pub const ORIGIN_AGREEMENT_COUNTS: f32 = 1.0;
 /// Origin candidates kept: the window's samples at 500 Hz.
 const ORIGIN_SAMPLES: usize = 8;
 
+/// The running cross-check of the origin: while the drive is on and rests (column and motor
+/// each within [`ORIGIN_REST_MOTION_DEG`] of where the rest began, |effort| at most
+/// [`ORIGIN_REST_CURRENT`]) for this long, us ...
+pub const ORIGIN_REST_US: u64 = 100_000;
+/// ... column and motor angle / gear ratio must agree within this, deg at the wheel: the
+/// backlash (about 1 deg), the belt's stretch at 2 A (0.49 deg/A: 9.7 deg at 20 A, see the
+/// disagreement window in `src/steering.rs`, about 1 deg) and the quantisation (0.1 deg). An
+/// origin wrong by more latches `Origin`; the agreement at the enable bounds it far tighter.
+pub const ORIGIN_REST_BOUND_DEG: f32 = 2.5;
+/// See [`ORIGIN_REST_US`], deg at the wheel.
+pub const ORIGIN_REST_MOTION_DEG: f32 = 0.2;
+/// See [`ORIGIN_REST_US`].
+pub const ORIGIN_REST_CURRENT: Amps = Amps(2.0);
+
 /// Time between automatic resets of a failed EPOS4 link in AS Off, us.
 pub const LINK_RESET_INTERVAL_US: u64 = 1_000_000;
 
@@ -174,6 +188,9 @@ pub struct Ecu {
     /// The origin each recent column sample implies (the motor count less the column's angle
     /// in counts), with its time: [`ORIGIN_WINDOW_US`].
     origin_candidates: heapless::Deque<(u64, i32), ORIGIN_SAMPLES>,
+    /// The running origin check: when the current rest began, with column and motor (wheel
+    /// deg) then, and the effort summed since (A) over that many samples.
+    rest: Option<(u64, f32, f32, f32, u32)>,
     /// The enable ramp ([`ENABLE_RAMP_DPS`]): the last angle given to the drive and when;
     /// `None` once the ramp has met the vehicle's reference.
     ramp: Option<(SteeringDeg, u64)>,
@@ -244,6 +261,7 @@ impl Ecu {
             reference: None,
             origin_counts: None,
             origin_candidates: heapless::Deque::new(),
+            rest: None,
             ramp: None,
             ticks_since_push: u32::MAX,
             synced_reference: None,
@@ -433,6 +451,51 @@ impl Ecu {
         }
         self.set_origin(Some(median));
         Ok(())
+    }
+
+    /// The running cross-check of the origin ([`ORIGIN_REST_US`]); the machine's output if it
+    /// latched the fault.
+    fn check_origin_at_rest(
+        &mut self,
+        now_us: u64,
+        column: SteeringDeg,
+        effort: Amps,
+    ) -> Option<Output> {
+        let motor = self
+            .aligned_motor()
+            .map(|m| SteeringDeg::from(self.gearing.steering_from_motor(m)).0)
+            .filter(|m| m.is_finite() && column.is_finite());
+        let Some(motor) = motor else {
+            self.rest = None;
+            return None;
+        };
+        if !effort.is_finite() {
+            // An effort nobody can read is no rest.
+            self.rest = None;
+            return None;
+        }
+        let (since, column_then, motor_then, sum, n) =
+            *self.rest.get_or_insert((now_us, column.0, motor, 0.0, 0));
+        let still = (column.0 - column_then).abs() <= ORIGIN_REST_MOTION_DEG
+            && (motor - motor_then).abs() <= ORIGIN_REST_MOTION_DEG;
+        if !still {
+            self.rest = Some((now_us, column.0, motor, effort.0, 1));
+            return None;
+        }
+        let (sum, n) = (sum + effort.0, n.saturating_add(1));
+        self.rest = Some((since, column_then, motor_then, sum, n));
+        // The mean: the loop dithers a count either side at rest (its current with it), the
+        // belt's load is what stays.
+        let quiet = (sum / n as f32).abs() <= ORIGIN_REST_CURRENT.0;
+        let difference = column.0 - motor;
+        if now_us.saturating_sub(since) >= ORIGIN_REST_US
+            && quiet
+            && difference.abs() > ORIGIN_REST_BOUND_DEG
+        {
+            self.rest = None;
+            return Some(self.machine.on_origin_off(now_us, SteeringDeg(difference)));
+        }
+        None
     }
 
     /// Frames from demand changes that did not fit the pending queue (saturating).
@@ -777,10 +840,16 @@ impl Ecu {
                     Drive::Direct(cascade) => cascade.current_setpoint(),
                     Drive::Epos4(_) => self.current,
                 };
-                self.machine
-                    .on_drive_effort(now_us, reference, column, effort)
+                let out = self
+                    .machine
+                    .on_drive_effort(now_us, reference, column, effort);
+                self.check_origin_at_rest(now_us, column, effort)
+                    .unwrap_or(out)
             }
-            _ => self.machine.on_not_tracking(now_us),
+            _ => {
+                self.rest = None;
+                self.machine.on_not_tracking(now_us)
+            }
         };
         self.apply(now_us, out)
     }
@@ -1175,6 +1244,69 @@ mod tests {
                     Gearing::PAPER.steering_from_motor(MotorRad(ecu.motor_angle().0 - truth.0)),
                 );
                 assert!(offset.0.abs() <= 0.1, "re-enabled {} deg off", offset.0);
+            }
+        }
+    }
+
+    /// An origin 2.9 deg off (every sample of the enable's window glitched alike, so they
+    /// agree) is found while the drive rests on: the loop holds the motor where its wrong
+    /// origin says the reference is, the column reads 2.9 deg apart, little current flows.
+    /// With the right origin nothing latches.
+    #[test]
+    fn a_wrong_origin_latches_once_the_drive_rests() {
+        for offset in [0.0f32, 2.9, -2.9] {
+            let mut ecu = Ecu::paper().unwrap();
+            let mut vehicle = Vehicle::new();
+            // The motor's true angle, wheel deg; the column reads it (plus the glitch while
+            // the window before the enable is sampled).
+            let mut motor = 10.0f32;
+            let mut t = 0u64;
+            let mut latched_at = None;
+            while t <= 1_000 * MS {
+                if t.is_multiple_of(2 * MS) {
+                    let glitched = (84 * MS..=100 * MS).contains(&t);
+                    let column = if glitched { motor + offset } else { motor };
+                    let _ = ecu.on_encoder(t, SteeringDeg(column));
+                }
+                if t.is_multiple_of(10 * MS) {
+                    let s = if t < 100 * MS {
+                        AsState::Off
+                    } else {
+                        AsState::Driving
+                    };
+                    let _ = vehicle.send(&mut ecu, t, s, 10.0);
+                }
+                let _ = ecu.position_tick(hall_at(motor));
+                if ecu.output().demand != DriveDemand::Disabled {
+                    // A stiff drive: the motor is where the set-point is, in truth.
+                    let aligned = setpoint_deg(&ecu);
+                    let origin_error = ecu.motor_angle().0
+                        - Gearing::PAPER
+                            .motor_from_steering(SteeringDeg(motor).into())
+                            .0;
+                    let error = SteeringDeg::from(
+                        Gearing::PAPER.steering_from_motor(MotorRad(origin_error)),
+                    );
+                    motor = aligned - error.0;
+                }
+                if latched_at.is_none()
+                    && ecu.output().faults.contains(crate::faults::Fault::Origin)
+                {
+                    latched_at = Some(t);
+                }
+                t += 500;
+            }
+            if offset == 0.0 {
+                assert_eq!(latched_at, None, "the right origin");
+                assert_eq!(ecu.output().demand, DriveDemand::Track);
+            } else {
+                let at = latched_at.expect("a wrong origin latches");
+                assert!(at <= 300 * MS, "{offset} deg: latched at {at} us");
+                let detail = ecu.machine().fault_log().iter().last().map(|r| r.detail);
+                assert!(
+                    detail.is_some_and(|d| d.abs() > crate::steering::ORIGIN_RESTING_DETAIL),
+                    "{detail:?}"
+                );
             }
         }
     }

@@ -87,7 +87,7 @@
 //! | `EposFault` | statusword fault bit or an EMCY from the EPOS4 | the firmware reports the EPOS4 fault reset done |
 //! | `HeartbeatLost` | the CANopen consumer-heartbeat time of the EPOS4 elapsed | a heartbeat arrives |
 //! | `BusOff` | the CAN controller reports bus-off | bus recovered, or a valid frame arrives |
-//! | `Origin` | at an enable, the column samples of the last 16 ms disagree on the motor origin by more than one encoder count (plus one motor count) from their median ([`crate::ecu::ORIGIN_WINDOW_US`]): the enable is refused | judged afresh at each enable |
+//! | `Origin` | at an enable, the column samples of the last 16 ms disagree on the motor origin by more than one encoder count (plus one motor count) from their median ([`crate::ecu::ORIGIN_WINDOW_US`]): the enable is refused; or, drive on and resting (column and motor each within 0.2 deg, \|effort\| <= 2 A for 100 ms), \|column - motor / gear ratio\| > 2.5 deg ([`crate::ecu::ORIGIN_REST_BOUND_DEG`]) | judged afresh at each enable |
 //! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s; or (runaway) the current pushing toward the reference at 18 A or more for 50 ms while the column still moves away at 20 deg/s or more, no slower than when the push began | a sample within the window, or the drive off |
 //!
 //! The plausibility checks (jump, disagreement, current) run in every AS state: a broken
@@ -824,6 +824,24 @@ impl SteeringStateMachine {
     pub fn on_origin_disagreement(&mut self, now_us: u64, spread: SteeringDeg) -> Output {
         let now = self.advance(now_us);
         let detail = centideg_detail(spread.0).clamp(0, ORIGIN_RESTING_DETAIL - 1);
+        self.raise(now, Fault::Origin, detail);
+        self.active.remove(Fault::Origin);
+        self.output()
+    }
+
+    /// The drive rested on (see [`crate::ecu::ORIGIN_REST_US`]) with column and motor angle /
+    /// gear ratio `difference` apart (deg at the wheel), more than compliance and backlash
+    /// allow at that effort: the origin is wrong, [`Fault::Origin`] latches. The cause goes
+    /// with the next enable, which takes the origin afresh.
+    pub fn on_origin_off(&mut self, now_us: u64, difference: SteeringDeg) -> Output {
+        let now = self.advance(now_us);
+        let centideg =
+            centideg_detail(difference.0).clamp(-ORIGIN_RESTING_DETAIL, ORIGIN_RESTING_DETAIL);
+        let detail = if centideg < 0 {
+            centideg.saturating_sub(ORIGIN_RESTING_DETAIL)
+        } else {
+            centideg.saturating_add(ORIGIN_RESTING_DETAIL)
+        };
         self.raise(now, Fault::Origin, detail);
         self.active.remove(Fault::Origin);
         self.output()
