@@ -1311,6 +1311,62 @@ mod tests {
         }
     }
 
+    /// With the column beyond +-90 deg at the enable (the drive's limits allow 110), the ramp
+    /// starts there: its samples beyond the vehicle's +-90 deg are the ECU's own and are taken,
+    /// so the set-point moves at the ramp's 100 deg/s from the first tick to the reference, in
+    /// paper mode and ECU mode.
+    #[test]
+    fn an_enable_beyond_90_deg_ramps_from_the_column() {
+        for (column, target) in [(105.0f32, 80.0f32), (-108.0, -60.0), (100.0, 95.0)] {
+            for mut ecu in [Ecu::paper().unwrap(), Ecu::ecu_direct().unwrap()] {
+                let mut vehicle = Vehicle::new();
+                let mut position = column;
+                let mut previous = None;
+                let mut t = 0u64;
+                let target = target.clamp(-90.0, 90.0);
+                while t < 600 * MS {
+                    // The position tick first (the fast loop runs from power-up), and its
+                    // set-point read only when the tick ran with the drive on.
+                    let on = ecu.output().demand != DriveDemand::Disabled;
+                    let _ = ecu.position_tick(hall_at(position));
+                    if t.is_multiple_of(2 * MS) {
+                        let _ = ecu.on_encoder(t, SteeringDeg(position));
+                    }
+                    if t.is_multiple_of(10 * MS) {
+                        let _ = vehicle.send(&mut ecu, t, AsState::Driving, target);
+                    }
+                    if on {
+                        let Drive::Direct(cascade) = ecu.drive() else {
+                            panic!("direct")
+                        };
+                        let motor = cascade.setpoint().position;
+                        let setpoint =
+                            SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0;
+                        if let Some(p) = previous {
+                            let step: f32 = setpoint - p;
+                            assert!(
+                                step.abs() <= ENABLE_RAMP_DPS * 0.5e-3 + 0.01,
+                                "{column} -> {target}: {step} deg in one tick at {t} us"
+                            );
+                        }
+                        previous = Some(setpoint);
+                        position = setpoint;
+                    }
+                    t += 500;
+                }
+                let log: Vec<_> = ecu.machine().fault_log().iter().copied().collect();
+                assert!(
+                    ecu.output().faults.is_empty(),
+                    "{column} -> {target}: {log:?}"
+                );
+                assert!(
+                    (position - target).abs() < 0.5,
+                    "{column} -> {target}: at {position}"
+                );
+            }
+        }
+    }
+
     /// The set-point the direct cascade holds, wheel deg.
     fn setpoint_deg(ecu: &Ecu) -> f32 {
         let Drive::Direct(cascade) = ecu.drive() else {
