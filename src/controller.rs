@@ -47,10 +47,11 @@ impl SteeringController {
     }
 
     /// A sample the ECU made itself (the enable ramp): ECU mode takes it without its inverse
-    /// belt model ([`crate::ecu_mode::ColumnShaper::push_unshaped`]); paper mode as any sample.
+    /// belt model ([`crate::ecu_mode::ColumnShaper::push_unshaped`]); both take it within the
+    /// drive's limits ([`crate::paper_mode::RAMP_RANGE_DEG`]), beyond the vehicle's +-90 deg.
     pub fn push_unshaped(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
         match self {
-            SteeringController::Paper(c) => c.push_reference(angle),
+            SteeringController::Paper(c) => c.push_unshaped(angle),
             SteeringController::Ecu(c) => c.push_unshaped(angle),
         }
     }

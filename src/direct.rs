@@ -191,6 +191,10 @@ mod tests {
             let _ = ecu.on_encoder(t, SteeringDeg(0.0));
             let out = ecu.on_reference_frame(t, &frame);
             assert_eq!(out.demand, DriveDemand::Track);
+            // The position ticks of the period, as the fast loop takes them.
+            for _ in 0..20 {
+                let _ = ecu.position_tick(0);
+            }
         }
         ecu
     }

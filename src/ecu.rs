@@ -80,6 +80,31 @@ pub type DriveFrames = heapless::Vec<Frame, { PENDING_DEPTH + 4 }>;
 /// vehicle computer gives the steering in AS Ready.
 pub const ENABLE_RAMP_DPS: f32 = 100.0;
 
+/// The motor origin is taken at every enable from the column samples of this window, us
+/// (the encoder task's 500 Hz gives 8), and only if each is within [`ORIGIN_AGREEMENT_COUNTS`]
+/// column-encoder counts (plus one motor count) of their median: one glitched sample before
+/// the enabling frame (1.5 deg passes the jump check) must not become an offset of the
+/// wheels for the whole run.
+pub const ORIGIN_WINDOW_US: u64 = 16_000;
+/// See [`ORIGIN_WINDOW_US`]: one count of the 12-bit column encoder, its quantisation.
+pub const ORIGIN_AGREEMENT_COUNTS: f32 = 1.0;
+/// Origin candidates kept: the window's samples at 500 Hz.
+const ORIGIN_SAMPLES: usize = 8;
+
+/// The running cross-check of the origin: while the drive is on and rests (column and motor
+/// each within [`ORIGIN_REST_MOTION_DEG`] of where the rest began, |effort| at most
+/// [`ORIGIN_REST_CURRENT`]) for this long, us ...
+pub const ORIGIN_REST_US: u64 = 100_000;
+/// ... column and motor angle / gear ratio must agree within this, deg at the wheel: the
+/// backlash (about 1 deg), the belt's stretch at 2 A (0.49 deg/A: 9.7 deg at 20 A, see the
+/// disagreement window in `src/steering.rs`, about 1 deg) and the quantisation (0.1 deg). An
+/// origin wrong by more latches `Origin`; the agreement at the enable bounds it far tighter.
+pub const ORIGIN_REST_BOUND_DEG: f32 = 2.5;
+/// See [`ORIGIN_REST_US`], deg at the wheel.
+pub const ORIGIN_REST_MOTION_DEG: f32 = 0.2;
+/// See [`ORIGIN_REST_US`].
+pub const ORIGIN_REST_CURRENT: Amps = Amps(2.0);
+
 /// Time between automatic resets of a failed EPOS4 link in AS Off, us.
 pub const LINK_RESET_INTERVAL_US: u64 = 1_000_000;
 
@@ -162,9 +187,23 @@ pub struct Ecu {
     /// until the first column sample with a known motor position; the disagreement check
     /// waits for it.
     origin_counts: Option<i32>,
+    /// The origin each recent column sample implies (the motor count less the column's angle
+    /// in counts), with its time: [`ORIGIN_WINDOW_US`].
+    origin_candidates: heapless::Deque<(u64, i32), ORIGIN_SAMPLES>,
+    /// The running origin check: when the current rest began, with column and motor (wheel
+    /// deg) then, and the effort summed since (A) over that many samples.
+    rest: Option<(u64, f32, f32, f32, u32)>,
     /// The enable ramp ([`ENABLE_RAMP_DPS`]): the last angle given to the drive and when;
     /// `None` once the ramp has met the vehicle's reference.
     ramp: Option<(SteeringDeg, u64)>,
+    /// Position ticks since the last reference sample was pushed (direct drive), saturating:
+    /// the rate limit's time base ([`Ecu::rate_limited`]).
+    ticks_since_push: u32,
+    /// EPOS4 mode: the reference sample the drive's target came from at the last SYNC, and
+    /// when that SYNC and the one before it went out: the rate limit's anchor and time base.
+    synced_reference: Option<SteeringDeg>,
+    last_sync_us: Option<u64>,
+    sync_interval_us: u64,
     /// The state machine's over-current threshold (its configuration never changes).
     overcurrent_threshold: Amps,
     motor_counter: AliveCounter,
@@ -224,7 +263,13 @@ impl Ecu {
             current_seen_us: 0,
             reference: None,
             origin_counts: None,
+            origin_candidates: heapless::Deque::new(),
+            rest: None,
             ramp: None,
+            ticks_since_push: u32::MAX,
+            synced_reference: None,
+            last_sync_us: None,
+            sync_interval_us: u64::from(protocol.period_us),
             overcurrent_threshold,
             motor_counter: AliveCounter::wrapping(0),
             current_sum: 0.0,
@@ -366,6 +411,96 @@ impl Ecu {
         }
     }
 
+    /// The last column sample's angle in motor counts, through the gearing.
+    fn column_counts(&self) -> Option<i32> {
+        self.counts_from_motor(
+            self.gearing
+                .motor_from_steering(SteeringRad::from(self.column)),
+        )
+    }
+
+    /// Sets the origin to the median of the window's candidates ([`ORIGIN_WINDOW_US`]) if
+    /// they agree; their spread (deg at the wheel) if not. With no candidate in the window
+    /// (the column is not known), the last sample's origin as before.
+    fn origin_from_window(&mut self, now_us: u64) -> Result<(), SteeringDeg> {
+        let mut window: heapless::Vec<i32, ORIGIN_SAMPLES> = self
+            .origin_candidates
+            .iter()
+            .filter(|(t, _)| now_us.saturating_sub(*t) <= ORIGIN_WINDOW_US)
+            .map(|&(_, o)| o)
+            .collect();
+        window.sort_unstable();
+        let (Some(&median), Some(&low), Some(&high)) =
+            (window.get(window.len() / 2), window.first(), window.last())
+        else {
+            self.align_origin();
+            return Ok(());
+        };
+        let count_deg = 360.0 / crate::sensors::COLUMN_ENCODER_COUNTS as f32;
+        let one_count =
+            self.counts_from_motor(self.gearing.motor_from_steering(SteeringRad::from(
+                SteeringDeg(ORIGIN_AGREEMENT_COUNTS * count_deg),
+            )))
+            .and_then(|c| c.checked_sub(self.counts_from_motor(MotorRad(0.0))?))
+            .unwrap_or(0)
+            .saturating_abs();
+        // Plus one motor count: the motor sensor's own quantisation.
+        let bound = one_count.saturating_add(1);
+        if median.saturating_sub(low) > bound || high.saturating_sub(median) > bound {
+            let spread_motor = self.motor_from_counts(high.saturating_sub(low));
+            return Err(SteeringDeg::from(
+                self.gearing.steering_from_motor(spread_motor),
+            ));
+        }
+        self.set_origin(Some(median));
+        Ok(())
+    }
+
+    /// The running cross-check of the origin ([`ORIGIN_REST_US`]); the machine's output if it
+    /// latched the fault.
+    fn check_origin_at_rest(
+        &mut self,
+        now_us: u64,
+        column: SteeringDeg,
+        effort: Amps,
+    ) -> Option<Output> {
+        let motor = self
+            .aligned_motor()
+            .map(|m| SteeringDeg::from(self.gearing.steering_from_motor(m)).0)
+            .filter(|m| m.is_finite() && column.is_finite());
+        let Some(motor) = motor else {
+            self.rest = None;
+            return None;
+        };
+        if !effort.is_finite() {
+            // An effort nobody can read is no rest.
+            self.rest = None;
+            return None;
+        }
+        let (since, column_then, motor_then, sum, n) =
+            *self.rest.get_or_insert((now_us, column.0, motor, 0.0, 0));
+        let still = (column.0 - column_then).abs() <= ORIGIN_REST_MOTION_DEG
+            && (motor - motor_then).abs() <= ORIGIN_REST_MOTION_DEG;
+        if !still {
+            self.rest = Some((now_us, column.0, motor, effort.0, 1));
+            return None;
+        }
+        let (sum, n) = (sum + effort.0, n.saturating_add(1));
+        self.rest = Some((since, column_then, motor_then, sum, n));
+        // The mean: the loop dithers a count either side at rest (its current with it), the
+        // belt's load is what stays.
+        let quiet = (sum / n as f32).abs() <= ORIGIN_REST_CURRENT.0;
+        let difference = column.0 - motor;
+        if now_us.saturating_sub(since) >= ORIGIN_REST_US
+            && quiet
+            && difference.abs() > ORIGIN_REST_BOUND_DEG
+        {
+            self.rest = None;
+            return Some(self.machine.on_origin_off(now_us, SteeringDeg(difference)));
+        }
+        None
+    }
+
     /// Frames from demand changes that did not fit the pending queue (saturating).
     pub fn pending_overflow(&self) -> u16 {
         self.pending_overflow
@@ -407,12 +542,19 @@ impl Ecu {
         out.drive_just_enabled =
             self.last.demand == DriveDemand::Disabled && out.demand != DriveDemand::Disabled;
         if out.drive_just_enabled {
-            // The first reference sample after enabling is the one to track.
+            // The first reference sample after enabling is the one to track (the enable ramp
+            // bounds its motion, not the rate limit: there is no previous sample).
             self.reference = None;
+            self.synced_reference = None;
+            self.ticks_since_push = u32::MAX;
             // Every enable takes the motor origin from the column encoder afresh: the motor
             // may have been turned (driver, tyres) while the drive was off, and the Hall
-            // count or the drive's position only ever counted relative steps.
-            self.align_origin();
+            // count or the drive's position only ever counted relative steps. From the
+            // window's samples, which must agree; otherwise the enable is refused.
+            if let Err(spread) = self.origin_from_window(now_us) {
+                let refused = self.machine.on_origin_disagreement(now_us, spread);
+                return self.apply(now_us, refused);
+            }
             // ... and the reference starts where the column is. The demand is Track or Hold
             // only with a fresh, finite column sample; should it not be finite, the ramp
             // starts at the first reference sample instead (see `push_reference`).
@@ -495,12 +637,60 @@ impl Ecu {
         next
     }
 
+    /// The angle the drive is given for `angle`: at most the protocol's rate (400 deg/s) times
+    /// the time the controller takes to get there from the previous sample, whatever the
+    /// frame timing. The E2E budget grows with the time since the last accepted frame (a
+    /// 48 deg step is plausible after 120 ms of silence), and the controller ramps each sample
+    /// in one period: unlimited, that step would be 4 800 deg/s. So after a gap, a burst, junk
+    /// frames or a hold the drive ramps to the vehicle's angle at the rate limit instead.
+    ///
+    /// Direct drive: the interpolator ramps a sample from the set-point due next to the sample
+    /// over one reference period; the step from the previous sample may be the rate times
+    /// the position ticks taken since it (at most one period), and the set-point then moves
+    /// at most the rate times each tick (the rest of the previous segment plus the new step
+    /// is at most one period's worth). EPOS4: the drive takes its target once per SYNC, so
+    /// the step from the sample of the last SYNC may be the rate times the SYNC interval.
+    fn rate_limited(&self, angle: SteeringDeg) -> SteeringDeg {
+        let rate = self.protocol.max_rate_deg_per_s;
+        let period_s = self.protocol.period_us as f32 * 1e-6;
+        let (anchor, span_s) = match &self.drive {
+            Drive::Direct(_) => {
+                let ticks = self
+                    .ticks_since_push
+                    .min(crate::paper_mode::POSITION_TICKS_PER_REFERENCE);
+                (
+                    self.reference,
+                    ticks as f32 / crate::paper_mode::POSITION_LOOP_HZ as f32,
+                )
+            }
+            Drive::Epos4(_) => (
+                self.synced_reference,
+                (self.sync_interval_us as f32 * 1e-6).min(period_s),
+            ),
+        };
+        let Some(anchor) = anchor.filter(|a| a.is_finite()) else {
+            return angle;
+        };
+        let max_step = rate * span_s;
+        let step = angle.0 - anchor.0;
+        // NaN compares false: a non-finite angle goes on to be refused by the controller.
+        if step.abs() <= max_step {
+            angle
+        } else if step.is_finite() {
+            SteeringDeg(anchor.0 + max_step * step.signum())
+        } else {
+            angle
+        }
+    }
+
     fn push_reference(&mut self, now_us: u64, target: SteeringDeg) {
         // The enable ramp is the ECU's own motion, its last step included: ECU mode does not
         // shape it.
         let ramping = self.ramp.is_some();
         let angle = self.ramped(now_us, target);
+        let angle = self.rate_limited(angle);
         self.reference = Some(angle);
+        self.ticks_since_push = 0;
         match &mut self.drive {
             // The E2E check already bounds the angle to the cascade's range; a refusal here
             // keeps the ramp in progress, which is the documented outcome.
@@ -600,10 +790,14 @@ impl Ecu {
                 .machine
                 .on_invalid_frames_fault(now_us, u16::from(invalid_in_row)),
         };
-        // A dropped frame whose ID, length, CRC and counter were good carries the AS state
-        // the vehicle did send: any state that does not allow power disables at once, whatever
-        // the angle. (Ready/Driving from it refresh nothing: the reference was not accepted.)
+        // A dropped frame whose ID, length and CRC were good carries the AS state the vehicle
+        // did send: any state that does not allow power disables at once, whatever the
+        // counter (a frame lost before it) and the angle. Only more authority needs a frame
+        // that passed every rule: Ready/Driving from it refresh nothing, and neither does an
+        // AS Off that would release a standing emergency (the drive is off already).
+        let in_emergency = self.machine.as_state() == Some(AsState::Emergency);
         let out = match self.e2e.authentic_as_state() {
+            Some(AsState::Off) if in_emergency => out,
             Some(as_state) if !self.machine.config().actuation().allows(as_state) => {
                 self.machine.on_as_state(now_us, as_state)
             }
@@ -630,6 +824,18 @@ impl Ecu {
         if self.origin_counts.is_none() && column.is_finite() {
             self.align_origin();
         }
+        match (self.motor_counts(), self.column_counts()) {
+            (Some(counts), Some(column_counts)) => {
+                if self.origin_candidates.is_full() {
+                    let _ = self.origin_candidates.pop_front();
+                }
+                let _ = self
+                    .origin_candidates
+                    .push_back((now_us, counts.saturating_sub(column_counts)));
+            }
+            // No motor position, or no column: nothing agrees with anything.
+            _ => self.origin_candidates.clear(),
+        }
         let out = match self.aligned_motor() {
             Some(motor) => self.machine.on_encoder(now_us, column, motor),
             None => self.machine.on_column(now_us, column),
@@ -643,10 +849,16 @@ impl Ecu {
                     Drive::Direct(cascade) => cascade.current_setpoint(),
                     Drive::Epos4(_) => self.current,
                 };
-                self.machine
-                    .on_drive_effort(now_us, reference, column, effort)
+                let out = self
+                    .machine
+                    .on_drive_effort(now_us, reference, column, effort);
+                self.check_origin_at_rest(now_us, column, effort)
+                    .unwrap_or(out)
             }
-            _ => self.machine.on_not_tracking(now_us),
+            _ => {
+                self.rest = None;
+                self.machine.on_not_tracking(now_us)
+            }
         };
         self.apply(now_us, out)
     }
@@ -676,6 +888,7 @@ impl Ecu {
     /// is enabled. In EPOS4 mode nothing runs here: 0 A.
     pub fn position_tick(&mut self, hall_count: i32) -> Amps {
         self.hall_count = hall_count;
+        self.ticks_since_push = self.ticks_since_push.saturating_add(1);
         let Drive::Direct(cascade) = &mut self.drive else {
             return Amps::ZERO;
         };
@@ -797,6 +1010,13 @@ impl Ecu {
             out = self.machine.on_epos_fault_gone(now_us);
         }
         self.link_up = up;
+        if link_out.iter().any(crate::canopen::nmt::is_sync) {
+            // The target went out with this SYNC: the rate limit's next anchor.
+            self.synced_reference = self.reference;
+            if let Some(t) = self.last_sync_us.replace(now_us) {
+                self.sync_interval_us = now_us.saturating_sub(t);
+            }
+        }
         let _ = self.apply(now_us, out);
         let mut frames = DriveFrames::new();
         for f in self.pending.iter().chain(link_out.iter()) {
@@ -1000,6 +1220,189 @@ mod tests {
         }
     }
 
+    /// A glitch of 0.5, 1.5 or 2.9 deg in the column sample just before the enabling frame
+    /// (each within the jump check's 2 deg between 2 ms samples): either the origin is still
+    /// right to 0.1 deg, or a fault is latched. Never a silent offset.
+    #[test]
+    fn a_glitch_in_the_sample_before_the_enable_leaves_no_silent_origin_offset() {
+        for glitch in [0.0f32, 0.5, 1.5, 2.9] {
+            let mut ecu = Ecu::paper().unwrap();
+            let mut vehicle = Vehicle::new();
+            let hall = hall_at(10.0);
+            let truth = Gearing::PAPER.motor_from_steering(SteeringDeg(10.0).into());
+            let mut t = 0u64;
+            // AS Off, the column and the motor resting at 10 deg, the tasks at their rates.
+            while t <= 300 * MS {
+                if t.is_multiple_of(2 * MS) {
+                    // The sample at 100 ms is the last before the first AS Driving frame.
+                    let column = if t == 100 * MS { 10.0 + glitch } else { 10.0 };
+                    let _ = ecu.on_encoder(t, SteeringDeg(column));
+                }
+                if t.is_multiple_of(10 * MS) {
+                    let s = if t < 100 * MS {
+                        AsState::Off
+                    } else {
+                        AsState::Driving
+                    };
+                    let _ = vehicle.send(&mut ecu, t, s, 10.0);
+                }
+                let _ = ecu.position_tick(hall);
+                t += 500;
+            }
+            let offset = SteeringDeg::from(
+                Gearing::PAPER.steering_from_motor(MotorRad(ecu.motor_angle().0 - truth.0)),
+            );
+            let faults = ecu.output().faults;
+            assert!(
+                faults.contains(crate::faults::Fault::Origin)
+                    || (offset.0.abs() <= 0.1 && faults.is_empty()),
+                "glitch {glitch} deg: origin off by {} deg, faults {faults:?}",
+                offset.0
+            );
+            if glitch == 0.0 {
+                assert_eq!(ecu.output().demand, DriveDemand::Track, "a clean enable");
+            } else {
+                assert_eq!(ecu.output().demand, DriveDemand::Disabled, "{glitch} deg");
+                // The cause is judged at each enable: AS Off clears it, and the next enable
+                // on clean samples takes the right origin.
+                let _ = ecu.on_encoder(t, SteeringDeg(10.0));
+                let f = vehicle.frame(AsState::Off, 10.0, true);
+                let out = ecu.on_reference_frame(t, &f);
+                assert!(out.faults.is_empty(), "cleared in AS Off: {:?}", out.faults);
+                let mut t = t;
+                for _ in 0..10 {
+                    t += 2 * MS;
+                    let _ = ecu.on_encoder(t, SteeringDeg(10.0));
+                }
+                let out = vehicle.send(&mut ecu, t, AsState::Ready, 10.0);
+                assert_eq!(out.demand, DriveDemand::Track, "{glitch} deg, re-enabled");
+                let offset = SteeringDeg::from(
+                    Gearing::PAPER.steering_from_motor(MotorRad(ecu.motor_angle().0 - truth.0)),
+                );
+                assert!(offset.0.abs() <= 0.1, "re-enabled {} deg off", offset.0);
+            }
+        }
+    }
+
+    /// An origin 2.9 deg off (every sample of the enable's window glitched alike, so they
+    /// agree) is found while the drive rests on: the loop holds the motor where its wrong
+    /// origin says the reference is, the column reads 2.9 deg apart, little current flows.
+    /// With the right origin nothing latches.
+    #[test]
+    fn a_wrong_origin_latches_once_the_drive_rests() {
+        for offset in [0.0f32, 2.9, -2.9] {
+            let mut ecu = Ecu::paper().unwrap();
+            let mut vehicle = Vehicle::new();
+            // The motor's true angle, wheel deg; the column reads it (plus the glitch while
+            // the window before the enable is sampled).
+            let mut motor = 10.0f32;
+            let mut t = 0u64;
+            let mut latched_at = None;
+            while t <= 1_000 * MS {
+                if t.is_multiple_of(2 * MS) {
+                    let glitched = (84 * MS..=100 * MS).contains(&t);
+                    let column = if glitched { motor + offset } else { motor };
+                    let _ = ecu.on_encoder(t, SteeringDeg(column));
+                }
+                if t.is_multiple_of(10 * MS) {
+                    let s = if t < 100 * MS {
+                        AsState::Off
+                    } else {
+                        AsState::Driving
+                    };
+                    let _ = vehicle.send(&mut ecu, t, s, 10.0);
+                }
+                let _ = ecu.position_tick(hall_at(motor));
+                if ecu.output().demand != DriveDemand::Disabled {
+                    // A stiff drive: the motor is where the set-point is, in truth.
+                    let aligned = setpoint_deg(&ecu);
+                    let origin_error = ecu.motor_angle().0
+                        - Gearing::PAPER
+                            .motor_from_steering(SteeringDeg(motor).into())
+                            .0;
+                    let error = SteeringDeg::from(
+                        Gearing::PAPER.steering_from_motor(MotorRad(origin_error)),
+                    );
+                    motor = aligned - error.0;
+                }
+                if latched_at.is_none()
+                    && ecu.output().faults.contains(crate::faults::Fault::Origin)
+                {
+                    latched_at = Some(t);
+                }
+                t += 500;
+            }
+            if offset == 0.0 {
+                assert_eq!(latched_at, None, "the right origin");
+                assert_eq!(ecu.output().demand, DriveDemand::Track);
+            } else {
+                let at = latched_at.expect("a wrong origin latches");
+                assert!(at <= 300 * MS, "{offset} deg: latched at {at} us");
+                let detail = ecu.machine().fault_log().iter().last().map(|r| r.detail);
+                assert!(
+                    detail.is_some_and(|d| d.abs() > crate::steering::ORIGIN_RESTING_DETAIL),
+                    "{detail:?}"
+                );
+            }
+        }
+    }
+
+    /// With the column beyond +-90 deg at the enable (the drive's limits allow 110), the ramp
+    /// starts there: its samples beyond the vehicle's +-90 deg are the ECU's own and are taken,
+    /// so the set-point moves at the ramp's 100 deg/s from the first tick to the reference, in
+    /// paper mode and ECU mode.
+    #[test]
+    fn an_enable_beyond_90_deg_ramps_from_the_column() {
+        for (column, target) in [(105.0f32, 80.0f32), (-108.0, -60.0), (100.0, 95.0)] {
+            for mut ecu in [Ecu::paper().unwrap(), Ecu::ecu_direct().unwrap()] {
+                let mut vehicle = Vehicle::new();
+                let mut position = column;
+                let mut previous = None;
+                let mut t = 0u64;
+                let target = target.clamp(-90.0, 90.0);
+                while t < 600 * MS {
+                    // The position tick first (the fast loop runs from power-up), and its
+                    // set-point read only when the tick ran with the drive on.
+                    let on = ecu.output().demand != DriveDemand::Disabled;
+                    let _ = ecu.position_tick(hall_at(position));
+                    if t.is_multiple_of(2 * MS) {
+                        let _ = ecu.on_encoder(t, SteeringDeg(position));
+                    }
+                    if t.is_multiple_of(10 * MS) {
+                        let _ = vehicle.send(&mut ecu, t, AsState::Driving, target);
+                    }
+                    if on {
+                        let Drive::Direct(cascade) = ecu.drive() else {
+                            panic!("direct")
+                        };
+                        let motor = cascade.setpoint().position;
+                        let setpoint =
+                            SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0;
+                        if let Some(p) = previous {
+                            let step: f32 = setpoint - p;
+                            assert!(
+                                step.abs() <= ENABLE_RAMP_DPS * 0.5e-3 + 0.01,
+                                "{column} -> {target}: {step} deg in one tick at {t} us"
+                            );
+                        }
+                        previous = Some(setpoint);
+                        position = setpoint;
+                    }
+                    t += 500;
+                }
+                let log: Vec<_> = ecu.machine().fault_log().iter().copied().collect();
+                assert!(
+                    ecu.output().faults.is_empty(),
+                    "{column} -> {target}: {log:?}"
+                );
+                assert!(
+                    (position - target).abs() < 0.5,
+                    "{column} -> {target}: at {position}"
+                );
+            }
+        }
+    }
+
     /// The set-point the direct cascade holds, wheel deg.
     fn setpoint_deg(ecu: &Ecu) -> f32 {
         let Drive::Direct(cascade) = ecu.drive() else {
@@ -1099,6 +1502,116 @@ mod tests {
         }
     }
 
+    /// After one lost frame the next frame (CRC good) fails the counter
+    /// check, but a frame that asks for less authority is honoured whatever its counter:
+    /// AS Emergency, Finished, Off and Manual (and Ready under the DrivingOnly rule) disable in
+    /// that very frame, 10 ms after the last one, not a period later.
+    #[test]
+    fn a_disabling_as_state_is_honoured_in_a_frame_that_fails_only_its_counter() {
+        use crate::as_state::Actuation;
+        let cases = [
+            (Actuation::ReadyOrDriving, AsState::Emergency),
+            (Actuation::ReadyOrDriving, AsState::Finished),
+            (Actuation::ReadyOrDriving, AsState::Off),
+            (Actuation::ReadyOrDriving, AsState::Manual),
+            (Actuation::DrivingOnly, AsState::Ready),
+        ];
+        for (actuation, as_state) in cases {
+            for repeat in [false, true] {
+                let config = Config::DEFAULT.with_actuation(actuation);
+                let mut ecu =
+                    Ecu::new(ProtocolConfig::default(), config, Cascade::paper()).unwrap();
+                let mut vehicle = Vehicle::new();
+                let mut t = 0;
+                for _ in 0..5 {
+                    let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                    let _ = vehicle.send(&mut ecu, t, AsState::Driving, 0.0);
+                    t += 10 * MS;
+                }
+                assert_eq!(ecu.output().demand, DriveDemand::Track);
+                let f = if repeat {
+                    // The counter of the last frame again (a repeat, but new content).
+                    vehicle.counter = AliveCounter::wrapping(vehicle.counter.raw().wrapping_sub(1));
+                    vehicle.frame(as_state, 0.0, false)
+                } else {
+                    // One frame lost on the bus: the next one jumps the counter.
+                    let _lost = vehicle.frame(AsState::Driving, 0.0, false);
+                    vehicle.frame(as_state, 0.0, false)
+                };
+                let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                let drops = *ecu.e2e().drops();
+                let out = ecu.on_reference_frame(t, &f);
+                let after = *ecu.e2e().drops();
+                assert_eq!(
+                    (
+                        after.stale - drops.stale,
+                        after.counter_jump - drops.counter_jump
+                    ),
+                    if repeat { (1, 0) } else { (0, 1) },
+                    "the frame fails its counter"
+                );
+                assert_eq!(
+                    out.demand,
+                    DriveDemand::Disabled,
+                    "{as_state:?} ({actuation:?}, repeat {repeat})"
+                );
+            }
+        }
+        // A frame asking for more authority (AS Driving) with a bad counter is not taken.
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+        let _ = vehicle.send(&mut ecu, 0, AsState::Off, 0.0);
+        let _lost = vehicle.frame(AsState::Ready, 0.0, false);
+        let _ = ecu.on_encoder(10 * MS, SteeringDeg(0.0));
+        let out = vehicle.send(&mut ecu, 10 * MS, AsState::Ready, 0.0);
+        assert_eq!(
+            out.demand,
+            DriveDemand::Disabled,
+            "Ready with a jumped counter"
+        );
+    }
+
+    /// AS Emergency is released only by an AS Off frame that passes every rule: an Off in a
+    /// frame that fails its counter disables (the drive is off already) but leaves the
+    /// emergency standing, so a Ready after it does not power the drive.
+    #[test]
+    fn only_an_accepted_as_off_frame_releases_an_emergency() {
+        for lost_before_off in [true, false] {
+            let mut ecu = Ecu::paper().unwrap();
+            let mut vehicle = Vehicle::new();
+            let mut t = 0;
+            for _ in 0..5 {
+                let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                let _ = vehicle.send(&mut ecu, t, AsState::Driving, 0.0);
+                t += 10 * MS;
+            }
+            let out = vehicle.send(&mut ecu, t, AsState::Emergency, 0.0);
+            assert_eq!(out.state, EcuState::Emergency);
+            if lost_before_off {
+                let _lost = vehicle.frame(AsState::Off, 0.0, false);
+            }
+            for s in [AsState::Off, AsState::Off, AsState::Ready, AsState::Ready] {
+                t += 10 * MS;
+                let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+                let _ = vehicle.send(&mut ecu, t, s, 0.0);
+            }
+            // The second Off frame was in sequence again: it releases the emergency, and the
+            // Ready frames power the drive. With only the first Off (bad counter) it would not.
+            assert_eq!(ecu.output().demand, DriveDemand::Track, "{lost_before_off}");
+        }
+        // Only the counter-failing Off: the emergency stands.
+        let mut ecu = Ecu::paper().unwrap();
+        let mut vehicle = Vehicle::new();
+        let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+        let _ = vehicle.send(&mut ecu, 0, AsState::Driving, 0.0);
+        let _ = vehicle.send(&mut ecu, 10 * MS, AsState::Emergency, 0.0);
+        let _lost = vehicle.frame(AsState::Off, 0.0, false);
+        let out = vehicle.send(&mut ecu, 20 * MS, AsState::Off, 0.0);
+        assert_eq!(out.state, EcuState::Emergency, "Off with a jumped counter");
+        assert_eq!(ecu.machine().as_state(), Some(AsState::Emergency));
+    }
+
     #[test]
     fn tracking_is_not_reported_before_the_epos4_is_enabled() {
         use crate::canopen::NodeId;
@@ -1135,6 +1648,10 @@ mod tests {
             let deg = 15.0 * (core::f32::consts::TAU * 4.0 * s).sin() + 20.0;
             let _ = ecu.on_encoder(t, SteeringDeg(0.0));
             let _ = vehicle.send(&mut ecu, t, AsState::Driving, deg);
+            // The position ticks of the period, as the fast loop takes them.
+            for _ in 0..20 {
+                let _ = ecu.position_tick(0);
+            }
             if handed_over_at.is_none() && k > 0 && ecu.ramp.is_none() {
                 handed_over_at = Some(k);
                 let given = ecu.reference.map_or(f32::NAN, |r| r.0);
@@ -2119,5 +2636,218 @@ mod mutation_tests {
         let f = vehicle.frame(AsState::Off, 0.0, true);
         let out = ecu.on_reference_frame(t, &f);
         assert!(out.faults.is_empty(), "{:?}", out.faults);
+    }
+
+    /// EPOS4 mode: after 120 ms without frames the vehicle's next frame is 48 deg away (the
+    /// E2E budget allows it); the drive's target moves at most the 400 deg/s rate times the
+    /// 10 ms SYNC cycle, however the frames fall between SYNCs.
+    #[test]
+    fn after_a_gap_the_epos4_target_moves_at_the_rate_limit() {
+        let (mut ecu, mut drive, mut vehicle, t) = tracking_epos4();
+        drive.follows = true;
+        let before = drive.targets.len();
+        // Silence, then 48 deg, on time again.
+        let _ = run(
+            &mut ecu,
+            &mut drive,
+            &mut vehicle,
+            t,
+            t + 120 * MS,
+            AsState::Driving,
+            f32::NAN,
+            0.0,
+        );
+        let start = t + 120 * MS;
+        let mut t = start;
+        while t < start + 200 * MS {
+            if t.is_multiple_of(10 * MS) {
+                let motor = ecu.motor_angle();
+                let column = SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor));
+                let _ = ecu.on_encoder(t, column);
+                let _ = vehicle.send(&mut ecu, t, AsState::Driving, 48.0);
+            }
+            let _ = step(&mut ecu, &mut drive, t);
+            t += MS;
+        }
+        assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
+        let per_cycle = inc_at(&ecu, 4.0) + 1;
+        let steps: Vec<i32> = drive.targets[before..]
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .collect();
+        assert!(steps.iter().all(|s| s.abs() <= per_cycle), "{steps:?}");
+        assert_eq!(drive.targets.last(), Some(&(500 + inc_at(&ecu, 48.0))));
+    }
+}
+
+// The reference's rate limit, end to end: what the controller is handed, whatever the frames do.
+#[cfg(test)]
+mod rate_limit_tests {
+    use super::tests::Vehicle;
+    use super::*;
+    use proptest::prelude::*;
+
+    const MS: u64 = 1000;
+    /// The position tick, us (2 kHz).
+    const TICK_US: u64 = 500;
+
+    /// What the vehicle does next, after `gap_us` of silence.
+    #[derive(Debug, Clone)]
+    enum Send {
+        /// One frame stepping `frac` of the E2E budget for the gap (beyond 1: refused).
+        Step { frac: f32 },
+        /// `n` frames 200 us apart, each stepping `frac` of a period's budget.
+        Burst { n: u8, frac: f32 },
+        /// `n` frames with a broken CRC (the counter still advances), 200 us apart.
+        Junk { n: u8 },
+    }
+
+    fn send() -> impl Strategy<Value = (u64, Send)> {
+        let gap = prop_oneof![
+            4 => Just(10 * MS),
+            3 => 0u64..=125 * MS,
+            1 => prop_oneof![Just(40 * MS), Just(80 * MS), Just(120 * MS), Just(125 * MS)],
+        ];
+        let what = prop_oneof![
+            6 => (-1.2f32..1.2).prop_map(|frac| Send::Step { frac }),
+            2 => (2u8..6, -1.0f32..1.0).prop_map(|(n, frac)| Send::Burst { n, frac }),
+            1 => (1u8..5).prop_map(|n| Send::Junk { n }),
+        ];
+        (gap, what)
+    }
+
+    fn setpoint_deg(ecu: &Ecu) -> f32 {
+        let Drive::Direct(cascade) = ecu.drive() else {
+            panic!("direct mode")
+        };
+        SteeringDeg::from(Gearing::PAPER.steering_from_motor(cascade.setpoint().position)).0
+    }
+
+    fn hall_at(deg: f32) -> i32 {
+        let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(deg).into());
+        hall_from_motor(f64::from(motor.0))
+    }
+
+    /// The direct-drive car as the firmware runs it: position ticks at 2 kHz, column samples
+    /// at 500 Hz, a motor and column that follow the set-point exactly. The vehicle's frames
+    /// come as `script` says. Every set-point step (wheel deg) taken while the drive stayed
+    /// on, with the time it was taken, and the faults latched at the end.
+    fn run(script: &[(u64, Send)]) -> (Vec<(u64, f32)>, crate::faults::FaultSet) {
+        let mut ecu = Ecu::paper().expect("paper ECU");
+        let rate = ecu.protocol.max_rate_deg_per_s;
+        let mut vehicle = Vehicle::new();
+        // Frames due: (time, angle, junk).
+        let mut due: Vec<(u64, f32, bool)> = (0..5).map(|k| (k * 10 * MS, 0.0, false)).collect();
+        let mut t_frame = 40 * MS;
+        let mut angle = 0.0f32;
+        for (gap, what) in script {
+            t_frame += gap;
+            match *what {
+                Send::Step { frac } => {
+                    let budget = rate * (*gap).max(10 * MS) as f32 * 1e-6;
+                    angle = (angle + frac * budget).clamp(-85.0, 85.0);
+                    due.push((t_frame, angle, false));
+                }
+                Send::Burst { n, frac } => {
+                    for k in 0..u64::from(n) {
+                        angle = (angle + frac * rate * 0.01).clamp(-85.0, 85.0);
+                        due.push((t_frame + k * 200, angle, false));
+                    }
+                    t_frame += u64::from(n) * 200;
+                }
+                Send::Junk { n } => {
+                    for k in 0..u64::from(n) {
+                        due.push((t_frame + k * 200, angle, true));
+                    }
+                    t_frame += u64::from(n) * 200;
+                }
+            }
+        }
+        // Then on time again, at the last angle, for 200 ms.
+        for k in 1..=20 {
+            due.push((t_frame + k * 10 * MS, angle, false));
+        }
+        let end = t_frame + 200 * MS;
+        let mut steps = Vec::new();
+        let mut next = due.iter().peekable();
+        let mut position = 0.0f32;
+        let mut on_before = false;
+        let mut t = 0;
+        while t <= end {
+            if t.is_multiple_of(2 * MS) {
+                let _ = ecu.on_encoder(t, SteeringDeg(position));
+            }
+            while let Some(&&(at, deg, junk)) = next.peek() {
+                if at > t {
+                    break;
+                }
+                let mut f = vehicle.frame(AsState::Driving, deg, false);
+                if junk {
+                    let mut bytes: [u8; 8] = f.data().try_into().expect("8 bytes");
+                    bytes[0] ^= 0x5A;
+                    f = Frame::new(f.id(), &bytes).expect("a frame");
+                }
+                let _ = ecu.on_reference_frame(at, &f);
+                next.next();
+            }
+            if t.is_multiple_of(2 * MS) {
+                let _ = ecu.tick(t);
+            }
+            let on = ecu.output().demand != DriveDemand::Disabled;
+            let _ = ecu.position_tick(hall_at(position));
+            let setpoint = setpoint_deg(&ecu);
+            if on && on_before {
+                steps.push((t, setpoint - position));
+            }
+            if on {
+                // The motor and the column are where the set-point was.
+                position = setpoint;
+            }
+            on_before = on;
+            t += TICK_US;
+        }
+        (steps, ecu.output().faults)
+    }
+
+    fn assert_within_rate(steps: &[(u64, f32)]) -> Result<(), TestCaseError> {
+        let limit = ProtocolConfig::default().max_rate_deg_per_s * TICK_US as f32 * 1e-6;
+        for &(t, step) in steps {
+            prop_assert!(
+                step.abs() <= limit + 1e-3,
+                "the set-point moved {step} deg in one {TICK_US} us tick at {t} us (limit {limit})"
+            );
+        }
+        Ok(())
+    }
+
+    /// The cases the audit measured: 40/80/120/125 ms without frames, then a step of the whole
+    /// budget; four junk frames, then a 20 deg step.
+    #[test]
+    fn after_a_gap_the_set_point_ramps_at_the_rate_limit() {
+        for gap in [40, 80, 120, 125] {
+            let (steps, faults) = run(&[(gap * MS, Send::Step { frac: 1.0 })]);
+            assert_within_rate(&steps).unwrap();
+            assert!(faults.is_empty(), "after {gap} ms: {faults:?}");
+        }
+        let (steps, _) = run(&[
+            (10 * MS, Send::Junk { n: 4 }),
+            (10 * MS, Send::Step { frac: 0.5 }),
+            (0, Send::Step { frac: 0.0 }),
+        ]);
+        assert_within_rate(&steps).unwrap();
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Whatever the frame timing (gaps of 0 to 125 ms, bursts, junk frames, Hold and back
+        /// to Track), the set-point the cascade is handed never moves more than 400 deg/s
+        /// times its tick.
+        #[test]
+        fn the_set_point_never_moves_faster_than_the_rate_limit(
+            script in prop::collection::vec(send(), 1..40)
+        ) {
+            assert_within_rate(&run(&script).0)?;
+        }
     }
 }

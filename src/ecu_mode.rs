@@ -268,7 +268,7 @@ impl ColumnShaper {
     /// become a position step of `lag1_s` times the ramp rate (4.9 deg at 100 deg/s) at the
     /// start of every enable, and again at its end.
     pub fn push_unshaped(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
-        let r = reference_at_motor(self.gearing, angle)?.0;
+        let r = crate::paper_mode::ramp_at_motor(self.gearing, angle)?.0;
         self.history = [Some(r), Some(r)];
         self.plain.push(MotorRad(r))?;
         self.shaping = false;

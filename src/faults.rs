@@ -52,11 +52,16 @@ pub enum Fault {
     /// told (a current-sense offset, a wrong commutation, a jammed or slipping mechanism).
     /// Detail: the error, centi-degrees at the wheel.
     TrackingError = 9,
+    /// Bit 10. The motor origin is not trustworthy: at an enable, the column samples of the
+    /// last 16 ms did not agree on it (detail: their spread, centi-degrees at the wheel), or,
+    /// while the drive rests on, column and motor angle / gear ratio differ by more than a
+    /// wrong origin's bound (detail: the difference, centi-degrees, plus 1 000 000).
+    Origin = 10,
 }
 
 impl Fault {
     /// Every fault, in bit order.
-    pub const ALL: [Fault; 10] = [
+    pub const ALL: [Fault; 11] = [
         Fault::ReferenceTimeout,
         Fault::InvalidFrames,
         Fault::Encoder,
@@ -67,6 +72,7 @@ impl Fault {
         Fault::HeartbeatLost,
         Fault::BusOff,
         Fault::TrackingError,
+        Fault::Origin,
     ];
 
     /// Bit position in [`FaultSet`] and in the status frame.
@@ -87,6 +93,7 @@ impl Fault {
             7 => Some(Fault::HeartbeatLost),
             8 => Some(Fault::BusOff),
             9 => Some(Fault::TrackingError),
+            10 => Some(Fault::Origin),
             _ => None,
         }
     }
@@ -108,7 +115,7 @@ pub enum EncoderFaultDetail {
     SensorReported = 0x1_0000,
 }
 
-/// A set of faults as a `u16` bitset; bit `n` is the fault with [`Fault::bit`] `n`. Bits 10 to
+/// A set of faults as a `u16` bitset; bit `n` is the fault with [`Fault::bit`] `n`. Bits 11 to
 /// 15 are free and always zero.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -287,23 +294,24 @@ mod tests {
             (Fault::HeartbeatLost, 7),
             (Fault::BusOff, 8),
             (Fault::TrackingError, 9),
+            (Fault::Origin, 10),
         ];
         for (fault, bit) in expected {
             assert_eq!(fault.bit(), bit);
             assert_eq!(Fault::from_bit(bit), Some(fault));
             assert_eq!(FaultSet::from(fault).bits(), 1 << bit);
         }
-        for bit in 10..=255u8 {
+        for bit in 11..=255u8 {
             assert_eq!(Fault::from_bit(bit), None);
         }
-        assert_eq!(FaultSet::VALID_BITS, 0x03FF);
+        assert_eq!(FaultSet::VALID_BITS, 0x07FF);
     }
 
     #[test]
     fn fault_set_drops_free_bits_and_iterates_in_bit_order() {
         let set = FaultSet::from_bits(0xFFFF);
-        assert_eq!(set.bits(), 0x03FF);
-        assert_eq!(set.iter().count(), 10);
+        assert_eq!(set.bits(), 0x07FF);
+        assert_eq!(set.iter().count(), 11);
         let mut s = FaultSet::EMPTY;
         assert!(s.insert(Fault::BusOff));
         assert!(!s.insert(Fault::BusOff), "second insert is not new");

@@ -45,16 +45,35 @@ pub const MOTOR_LA_H: f32 = 0.279e-3;
 /// Steering range accepted as a reference, deg at the wheel (section 2: -90..+90 deg).
 pub const STEERING_RANGE_DEG: f32 = 90.0;
 
+/// The range of the ECU's own samples (the enable ramp), deg at the wheel: the drive's position
+/// limits ([`crate::canopen::epos4::POSITION_LIMIT_DEG`], 110 deg). A column beyond the
+/// vehicle's +-90 deg at an enable is where the ramp must start, not a sample to refuse.
+pub const RAMP_RANGE_DEG: f32 = crate::canopen::epos4::POSITION_LIMIT_DEG;
+
 /// A reference sample at the wheel as a motor angle; refused if it is not finite or beyond
 /// +-[`STEERING_RANGE_DEG`]. Every controller takes its samples through this.
 pub fn reference_at_motor(
     gearing: Gearing,
     angle: SteeringDeg,
 ) -> Result<MotorRad, ReferenceError> {
+    within_at_motor(gearing, angle, STEERING_RANGE_DEG)
+}
+
+/// The ECU's own sample (the enable ramp) as a motor angle; refused if it is not finite or
+/// beyond +-[`RAMP_RANGE_DEG`].
+pub fn ramp_at_motor(gearing: Gearing, angle: SteeringDeg) -> Result<MotorRad, ReferenceError> {
+    within_at_motor(gearing, angle, RAMP_RANGE_DEG)
+}
+
+fn within_at_motor(
+    gearing: Gearing,
+    angle: SteeringDeg,
+    range_deg: f32,
+) -> Result<MotorRad, ReferenceError> {
     if !angle.is_finite() {
         return Err(ReferenceError::NotFinite);
     }
-    if angle.0.abs() > STEERING_RANGE_DEG {
+    if angle.0.abs() > range_deg {
         return Err(ReferenceError::OutOfRange);
     }
     Ok(gearing.motor_from_steering(SteeringRad::from(angle)))
@@ -143,6 +162,12 @@ impl Cascade {
     /// it is not finite or beyond +-[`STEERING_RANGE_DEG`].
     pub fn push_reference(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
         let motor = reference_at_motor(self.gearing, angle)?;
+        self.interpolator.push(motor)
+    }
+
+    /// A sample the ECU made itself (the enable ramp), taken within +-[`RAMP_RANGE_DEG`].
+    pub fn push_unshaped(&mut self, angle: SteeringDeg) -> Result<(), ReferenceError> {
+        let motor = ramp_at_motor(self.gearing, angle)?;
         self.interpolator.push(motor)
     }
 

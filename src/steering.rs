@@ -32,7 +32,8 @@
 //!                                      any fault, from any state: | Disabled |
 //!                                      same call                  +----------+
 //!
-//!   AS Emergency, from any state, in the same call ----> Emergency (Disabled)
+//!   AS Emergency, from any state, in the same call ----> Emergency (Disabled), latched:
+//!   every AS state but Off after it still reads Emergency; AS Off ----> Idle
 //! ```
 //!
 //! What the drive does ([`DriveDemand`]): `Disabled` = bridge off / EPOS4 "disable voltage",
@@ -86,6 +87,7 @@
 //! | `EposFault` | statusword fault bit or an EMCY from the EPOS4 | the firmware reports the EPOS4 fault reset done |
 //! | `HeartbeatLost` | the CANopen consumer-heartbeat time of the EPOS4 elapsed | a heartbeat arrives |
 //! | `BusOff` | the CAN controller reports bus-off | bus recovered, or a valid frame arrives |
+//! | `Origin` | at an enable, the column samples of the last 16 ms disagree on the motor origin by more than one encoder count (plus one motor count) from their median ([`crate::ecu::ORIGIN_WINDOW_US`]): the enable is refused; or, drive on and resting (column and motor each within 0.2 deg, \|effort\| <= 2 A for 100 ms), \|column - motor / gear ratio\| > 2.5 deg ([`crate::ecu::ORIGIN_REST_BOUND_DEG`]) | judged afresh at each enable |
 //! | `TrackingError` | drive on, \|column - reference\| > 20 deg for 200 ms and the column not closing the gap at 30 deg/s; or (runaway) the current pushing toward the reference at 18 A or more for 50 ms while the column still moves away at 20 deg/s or more, no slower than when the push began | a sample within the window, or the drive off |
 //!
 //! The plausibility checks (jump, disagreement, current) run in every AS state: a broken
@@ -189,6 +191,11 @@ pub const RUNAWAY_SPEED_WINDOW_US: u32 = 10_000;
 /// began still counts as not slowing, deg/s: one 12-bit encoder count (0.088 deg) per
 /// [`RUNAWAY_SPEED_WINDOW_US`], the speed measurement's resolution.
 pub const RUNAWAY_SLOWING_SLACK_DPS: f32 = 360.0 / 4096.0 / (RUNAWAY_SPEED_WINDOW_US as f32 * 1e-6);
+
+/// The detail of a [`Fault::Origin`] found by the resting cross-check is its difference in
+/// centi-degrees moved this far from 0 (with its sign), so it reads apart from the spread of
+/// the samples at an enable (always below it).
+pub const ORIGIN_RESTING_DETAIL: i32 = 1_000_000;
 
 /// What the drive must do from this call on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -811,6 +818,35 @@ impl SteeringStateMachine {
         self.output()
     }
 
+    /// The column samples the motor origin is taken from at this enable disagree by `spread`
+    /// (deg at the wheel): the enable is refused and [`Fault::Origin`] latches. The cause is
+    /// judged afresh at every enable, so it is gone once reported.
+    pub fn on_origin_disagreement(&mut self, now_us: u64, spread: SteeringDeg) -> Output {
+        let now = self.advance(now_us);
+        let detail = centideg_detail(spread.0).clamp(0, ORIGIN_RESTING_DETAIL - 1);
+        self.raise(now, Fault::Origin, detail);
+        self.active.remove(Fault::Origin);
+        self.output()
+    }
+
+    /// The drive rested on (see [`crate::ecu::ORIGIN_REST_US`]) with column and motor angle /
+    /// gear ratio `difference` apart (deg at the wheel), more than compliance and backlash
+    /// allow at that effort: the origin is wrong, [`Fault::Origin`] latches. The cause goes
+    /// with the next enable, which takes the origin afresh.
+    pub fn on_origin_off(&mut self, now_us: u64, difference: SteeringDeg) -> Output {
+        let now = self.advance(now_us);
+        let centideg =
+            centideg_detail(difference.0).clamp(-ORIGIN_RESTING_DETAIL, ORIGIN_RESTING_DETAIL);
+        let detail = if centideg < 0 {
+            centideg.saturating_sub(ORIGIN_RESTING_DETAIL)
+        } else {
+            centideg.saturating_add(ORIGIN_RESTING_DETAIL)
+        };
+        self.raise(now, Fault::Origin, detail);
+        self.active.remove(Fault::Origin);
+        self.output()
+    }
+
     /// The EPOS4 reported a fault (statusword bit 3 or an EMCY); `code` is its error code.
     pub fn on_epos_fault(&mut self, now_us: u64, code: u16) -> Output {
         let now = self.advance(now_us);
@@ -904,6 +940,14 @@ impl SteeringStateMachine {
     }
 
     fn set_as_state(&mut self, now: u64, as_state: AsState) {
+        // The rules' AS state machine leaves AS Emergency only for AS Off (the ASMS switched
+        // off): any other state after it is a vehicle computer out of order, and the
+        // emergency stands.
+        let as_state = if self.as_state == Some(AsState::Emergency) && as_state != AsState::Off {
+            AsState::Emergency
+        } else {
+            as_state
+        };
         if self.config.actuation.allows(as_state) {
             if self.powered_since_us.is_none() {
                 self.powered_since_us = Some(now);
@@ -1122,6 +1166,46 @@ mod tests {
         assert_eq!(out.state, EcuState::Emergency);
         // Emergency is the AS's verdict, not an ECU fault.
         assert!(out.faults.is_empty());
+    }
+
+    /// AS Emergency latches until AS Off, as the driverless rules' AS state machine says
+    /// (Emergency is left only when the ASMS is switched off): Emergency followed by Ready,
+    /// Driving, Finished or Manual stays Emergency, drive off, however long the frames come;
+    /// Off releases it, and from Off the usual Ready -> Driving powers the drive again.
+    #[test]
+    fn emergency_latches_until_as_off() {
+        for next in [
+            AsState::Driving,
+            AsState::Ready,
+            AsState::Finished,
+            AsState::Manual,
+        ] {
+            let (mut sm, t) = tracking();
+            let out = sm.on_reference(t + 10 * MS, AsState::Emergency);
+            assert_eq!(out.state, EcuState::Emergency);
+            let mut t = t + 10 * MS;
+            for _ in 0..20 {
+                t += 10 * MS;
+                let _ = sm.on_encoder(t, SteeringDeg(0.0), motor_at(0.0));
+                let out = sm.on_reference(t, next);
+                assert_eq!(out.demand, DriveDemand::Disabled, "Emergency -> {next:?}");
+                assert_eq!(out.state, EcuState::Emergency, "Emergency -> {next:?}");
+                assert!(out.faults.is_empty(), "{:?}", out.faults);
+                let out = sm.on_as_state(t + MS, next);
+                assert_eq!(out.state, EcuState::Emergency, "AS-only {next:?}");
+            }
+            assert_eq!(sm.as_state(), Some(AsState::Emergency), "{next:?}");
+            // AS Off releases the latch.
+            t += 10 * MS;
+            let out = sm.on_reference(t, AsState::Off);
+            assert_eq!(out.state, EcuState::Idle, "{next:?}");
+            for s in [AsState::Ready, AsState::Driving] {
+                t += 10 * MS;
+                let _ = sm.on_encoder(t, SteeringDeg(0.0), motor_at(0.0));
+                let out = sm.on_reference(t, s);
+                assert_eq!(out.demand, DriveDemand::Track, "{s:?} after Off");
+            }
+        }
     }
 
     #[test]
@@ -1733,6 +1817,15 @@ mod property_tests {
         ]
     }
 
+    /// The AS state the machine must believe: Emergency stands until Off.
+    fn next_as_state(believed: Option<AsState>, sent: AsState) -> Option<AsState> {
+        if believed == Some(AsState::Emergency) && sent != AsState::Off {
+            believed
+        } else {
+            Some(sent)
+        }
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(512))]
 
@@ -1752,12 +1845,12 @@ mod property_tests {
                 let out = match ev {
                     Event::Tick => sm.tick(now),
                     Event::Reference(i) => {
-                        as_state = Some(AS_STATES[i]);
+                        as_state = next_as_state(as_state, AS_STATES[i]);
                         last_reference = Some(now);
                         sm.on_reference(now, AS_STATES[i])
                     }
                     Event::AsOnly(i) => {
-                        as_state = Some(AS_STATES[i]);
+                        as_state = next_as_state(as_state, AS_STATES[i]);
                         sm.on_as_state(now, AS_STATES[i])
                     }
                     Event::InvalidFrames => sm.on_invalid_frames_fault(now, 10),
@@ -1814,6 +1907,7 @@ mod property_tests {
                 prop_assert_eq!(out.faults.intersection(faults), faults);
                 faults = out.faults;
                 prop_assert_eq!(out.faults, sm.faults());
+                prop_assert_eq!(sm.as_state(), as_state);
                 prop_assert_eq!(EcuState::from_code(out.state.code()), Some(out.state));
             }
         }

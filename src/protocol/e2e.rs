@@ -34,9 +34,10 @@
 //! period)`, however many frames come. Frames that come less than half a period after the
 //! previous authentic one are counted ([`E2eChecker::early_frames`]).
 //!
-//! A frame that fails only the angle rules (range, rate) still carries an AS state the sender
-//! did send: [`E2eChecker::authentic_as_state`] gives it, so AS Emergency in such a frame still
-//! disables the drive at once.
+//! A frame that passes the CRC but fails the counter (one frame lost before it, a repeat) or
+//! the angle rules (range, rate) still carries an AS state the sender did send:
+//! [`E2eChecker::authentic_as_state`] gives it, so AS Emergency (or Finished, Off) in such a
+//! frame still disables the drive at once. Only power needs a frame that passes every rule.
 //!
 //! The checker does not latch the fault: a valid frame lowers the invalid score (as panda's
 //! wrong-counter count: a good frame decrements, it does not zero, so 4 bad frames in every
@@ -221,9 +222,15 @@ impl E2eChecker {
             self.early_frames = self.early_frames.saturating_add(1);
         }
 
+        // The frame passed the CRC, so the sender did send this AS state, whatever its counter
+        // (a frame lost before it, a repeat) or its angle: see `authentic_as_state`.
+        let code = field(word, 12, 4) as u8;
+        let as_state = AsState::from_code(code);
+        self.authentic_as_state = as_state;
+
         let counter = AliveCounter::wrapping(field(word, 8, 4) as u8);
-        // The frame passed the CRC, so the sender did send this counter: the next frame is
-        // judged against it whether or not this one is accepted.
+        // ... and this counter: the next frame is judged against it whether or not this one is
+        // accepted.
         let last = self.last_counter.replace(counter);
         if let Some(last) = last {
             if counter == last {
@@ -240,11 +247,7 @@ impl E2eChecker {
             }
         }
 
-        let code = field(word, 12, 4) as u8;
-        let as_state = AsState::from_code(code).ok_or(FrameError::UnknownAsState { code })?;
-        // ID, length, CRC and counter are good: the sender did send this AS state now, even if
-        // the angle fails a rule below.
-        self.authentic_as_state = Some(as_state);
+        let as_state = as_state.ok_or(FrameError::UnknownAsState { code })?;
 
         let angle_raw = field(word, 16, 16) as u16 as i16;
         let clear_faults = field(word, 32, 1) == 1;
@@ -310,10 +313,12 @@ impl E2eChecker {
         self.max_rate_raw_per_s.saturating_mul(dt_us) / 1_000_000
     }
 
-    /// The AS state of the frame just checked, if that frame was authentic and in sequence
-    /// (ID, length, CRC and counter good, known AS code), whether or not its angle passed the
-    /// range and rate rules; `None` otherwise. The angle of such a frame is not used, but its
-    /// AS state is the vehicle's word: AS Emergency in it must disable the drive at once.
+    /// The AS state of the frame just checked, if that frame was authentic (ID, length and CRC
+    /// good, a known AS code), whether or not its counter, angle and rate passed; `None`
+    /// otherwise. Such a frame is not accepted, but its AS state is the vehicle's word: one
+    /// that asks for less authority (AS Emergency, Finished, Off, Manual) must disable the drive
+    /// at once, a lost frame before it or not. Only a frame that asks for more
+    /// authority (power) needs every rule, the counter included: act on this only to disable.
     pub fn authentic_as_state(&self) -> Option<AsState> {
         self.authentic_as_state
     }

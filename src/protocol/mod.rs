@@ -99,7 +99,9 @@
 //!
 //! "Last counter" is the counter of the last frame that passed the CRC, accepted or not, so
 //! one lost frame costs the next frame too (it is dropped as a jump, and re-synchronises the
-//! counter), and the one after is accepted again. The rate budget is 400 deg/s times the time
+//! counter), and the one after is accepted again. A dropped frame whose CRC is good still
+//! carries the sender's AS state, whatever its counter: AS Emergency, Finished or Off in it
+//! disables at once ([`e2e::E2eChecker::authentic_as_state`]). The rate budget is 400 deg/s times the time
 //! since the last accepted reference, at least one 10 ms period: 4.00 deg per sample.
 //! An invalid-frame score of five (configurable; +1 per invalid frame, -1 per valid one) makes
 //! [`e2e::E2eVerdict::Fault`].

@@ -13,7 +13,7 @@ use steering_ecu::protocol::{
     DIAGNOSTIC_ID, Diagnostic, FrameError, MOTOR_ID, MotorStatus, ProtocolConfig, REFERENCE_ID,
     Reference, STATUS_ID, Status,
 };
-use steering_ecu::steering::EcuState;
+use steering_ecu::steering::{EcuState, ORIGIN_RESTING_DETAIL};
 
 /// One frame, decoded.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -191,6 +191,7 @@ pub fn fault_words(fault: Fault) -> &'static str {
         Fault::HeartbeatLost => "EPOS4 heartbeat lost",
         Fault::BusOff => "CAN bus-off",
         Fault::TrackingError => "tracking error",
+        Fault::Origin => "motor origin",
     }
 }
 
@@ -211,6 +212,18 @@ pub fn fault_detail_words(fault: Fault, detail: i32) -> String {
         Fault::HeartbeatLost => "no heartbeat within the consumer time".into(),
         Fault::BusOff => format!("transmit error counter {detail}"),
         Fault::TrackingError => format!("{:+.2} deg from the reference", centideg(detail)),
+        Fault::Origin if detail >= ORIGIN_RESTING_DETAIL => format!(
+            "column and motor {:+.2} deg apart at rest",
+            centideg(detail - ORIGIN_RESTING_DETAIL)
+        ),
+        Fault::Origin if detail <= -ORIGIN_RESTING_DETAIL => format!(
+            "column and motor {:+.2} deg apart at rest",
+            centideg(detail + ORIGIN_RESTING_DETAIL)
+        ),
+        Fault::Origin => format!(
+            "column samples at the enable {:.2} deg apart",
+            centideg(detail)
+        ),
     }
 }
 

@@ -567,3 +567,45 @@ fn the_window_restarts_when_its_anchor_is_exactly_250_ms_old() {
     // 4 deg from 0 deg at 240 ms, 12 ms ago: 400 deg/s x 22 ms allows 8.8.
     assert!(is_valid(send(&mut c, 400, 252_000)), "4 deg up");
 }
+
+/// The AS state of a frame that passes the CRC is the sender's word whatever
+/// its counter (a jump after a lost frame, a repeat); a frame that fails the CRC, or carries
+/// an unknown code, gives none.
+#[test]
+fn a_crc_good_frame_gives_its_as_state_whatever_its_counter() {
+    const EMERGENCY: u8 = 3;
+    let mut c = checker();
+    assert!(is_valid(c.check(&frame(0, DRIVING, 0), 0)));
+    assert_eq!(c.authentic_as_state(), Some(AsState::Driving));
+    // Counter 1 lost: 2 jumps.
+    let v = c.check(&frame(2, EMERGENCY, 0), T);
+    assert!(
+        matches!(error(v), Some(FrameError::Counter { .. })),
+        "{v:?}"
+    );
+    assert_eq!(c.authentic_as_state(), Some(AsState::Emergency));
+    // A repeat of counter 2.
+    let v = c.check(&frame(2, EMERGENCY, 0), 2 * T);
+    assert!(matches!(error(v), Some(FrameError::Stale { .. })), "{v:?}");
+    assert_eq!(c.authentic_as_state(), Some(AsState::Emergency));
+    // An unknown code (with a good counter) and a bad CRC give nothing.
+    let v = c.check(&frame(3, 9, 0), 3 * T);
+    assert!(matches!(
+        error(v),
+        Some(FrameError::UnknownAsState { code: 9 })
+    ));
+    assert_eq!(c.authentic_as_state(), None);
+    let good = frame(4, EMERGENCY, 0);
+    let mut bytes: [u8; 8] = good.data().try_into().unwrap();
+    bytes[0] ^= 0x01;
+    let v = c.check(&Frame::new(REFERENCE_ID, &bytes).unwrap(), 4 * T);
+    assert!(matches!(error(v), Some(FrameError::Crc { .. })));
+    assert_eq!(c.authentic_as_state(), None);
+    // An unknown code with a jumped counter is still reported as the counter's failure.
+    let v = c.check(&frame(9, 9, 0), 5 * T);
+    assert!(
+        matches!(error(v), Some(FrameError::Counter { .. })),
+        "{v:?}"
+    );
+    assert_eq!(c.authentic_as_state(), None);
+}
