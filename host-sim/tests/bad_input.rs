@@ -19,14 +19,19 @@ fn host_sim(args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// The lines of a log that host-sim itself wrote: a 1.5 s step at 1 kHz, header on line 1.
+/// The lines of a log that host-sim itself wrote: a 1.5 s step at 1 kHz, without the comment
+/// lines that name the car, so the header is on line 1 (the tests count file lines).
 fn step_log(dir: &Path) -> Vec<String> {
     let path = dir.join("step.csv");
     let o = host_sim(&["step", "--log", s(&path)]);
     assert!(o.status.success(), "{}", stderr(&o));
-    std::fs::read_to_string(&path)
-        .unwrap()
-        .lines()
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(
+        text.starts_with("# drive: direct\n"),
+        "host-sim names the car it simulated"
+    );
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
         .map(str::to_string)
         .collect()
 }
