@@ -35,6 +35,7 @@
 //!                 encoder value; mock clock += 50 µs
 //! ```
 
+use crate::effect_plant::{EffectPlant, PlantEffects};
 use crate::epos4_sim::Epos4Sim;
 use crate::plant::{Actuator, LinearPlant, PlantParams};
 use canlink::canbus::{CanBus, Port};
@@ -96,6 +97,8 @@ pub struct SimCar {
     pub column_deg: f64,
     pub controller: ControllerKind,
     pub drive: SimDrive,
+    /// What the car has that Table 4 leaves out (none: the paper's plant exactly).
+    pub effects: CarEffects,
 }
 
 impl SimCar {
@@ -104,7 +107,136 @@ impl SimCar {
         column_deg: 0.0,
         controller: ControllerKind::Paper,
         drive: SimDrive::Epos4,
+        effects: CarEffects::NONE,
     };
+}
+
+/// The direct-drive car's plant: the linear one of eqs. 1-8, or with effects the effect plant.
+#[derive(Debug)]
+enum CarPlant {
+    Linear(LinearPlant),
+    Effects(EffectPlant),
+}
+
+impl CarPlant {
+    fn new(effects: PlantEffects, dt: f64) -> CarPlant {
+        if effects.is_none() {
+            CarPlant::Linear(
+                LinearPlant::new(PlantParams::PAPER, dt).expect("the paper plant discretises"),
+            )
+        } else {
+            CarPlant::Effects(
+                EffectPlant::new(PlantParams::PAPER, effects, dt)
+                    .expect("the paper plant discretises"),
+            )
+        }
+    }
+
+    fn get(&mut self) -> &mut dyn Actuator {
+        match self {
+            CarPlant::Linear(p) => p,
+            CarPlant::Effects(p) => p,
+        }
+    }
+}
+
+impl Actuator for CarPlant {
+    fn step(&mut self, voltage_v: f64) {
+        self.get().step(voltage_v)
+    }
+    fn current_a(&self) -> f64 {
+        match self {
+            CarPlant::Linear(p) => p.current_a(),
+            CarPlant::Effects(p) => p.current_a(),
+        }
+    }
+    fn motor_rad(&self) -> f64 {
+        match self {
+            CarPlant::Linear(p) => p.motor_rad(),
+            CarPlant::Effects(p) => p.motor_rad(),
+        }
+    }
+    fn motor_speed_rad_s(&self) -> f64 {
+        match self {
+            CarPlant::Linear(p) => p.motor_speed_rad_s(),
+            CarPlant::Effects(p) => p.motor_speed_rad_s(),
+        }
+    }
+    fn column_rad(&self) -> f64 {
+        match self {
+            CarPlant::Linear(p) => p.column_rad(),
+            CarPlant::Effects(p) => p.column_rad(),
+        }
+    }
+    fn set_at_rest(&mut self, column_rad: f64) {
+        self.get().set_at_rest(column_rad)
+    }
+}
+
+/// A simulated car's hidden effects, `--plant-effects KEY=VALUE,...`: the plant's (host-sim's
+/// `--plant-effects` keys: `backlash_deg`, `coulomb_n`, `coulomb_creep_mm_s`, `tire_n`, ...)
+/// and `reference_delay_ms`, a delay between the reference frame reaching the ECU and the ECU
+/// acting on it. For rehearsing the gap diagnosis on a car whose gap is known.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CarEffects {
+    pub plant: PlantEffects,
+    /// 0..=200 ms.
+    pub reference_delay_s: f64,
+}
+
+impl CarEffects {
+    pub const NONE: CarEffects = CarEffects {
+        plant: PlantEffects::NONE,
+        reference_delay_s: 0.0,
+    };
+
+    pub fn is_none(&self) -> bool {
+        self.plant.is_none() && self.reference_delay_s == 0.0
+    }
+}
+
+impl std::str::FromStr for CarEffects {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let mut delay = 0.0;
+        let mut rest = Vec::new();
+        for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+            match item.split_once('=') {
+                Some((k, v)) if k.trim() == "reference_delay_ms" => {
+                    let ms: f64 = v
+                        .trim()
+                        .parse()
+                        .map_err(|_| format!("reference_delay_ms={v}: not a number"))?;
+                    if !(0.0..=200.0).contains(&ms) {
+                        return Err(format!("reference_delay_ms={v}: must be within 0..=200"));
+                    }
+                    delay = ms * 1e-3;
+                }
+                _ => rest.push(item),
+            }
+        }
+        let plant = PlantEffects::parse(&rest.join(",")).map_err(|e| e.to_string())?;
+        Ok(CarEffects {
+            plant,
+            reference_delay_s: delay,
+        })
+    }
+}
+
+impl std::fmt::Display for CarEffects {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (self.plant.is_none(), self.reference_delay_s > 0.0) {
+            (true, false) => write!(f, "none"),
+            (false, false) => write!(f, "{}", self.plant),
+            (true, true) => write!(f, "reference_delay_ms={}", self.reference_delay_s * 1e3),
+            (false, true) => write!(
+                f,
+                "{},reference_delay_ms={}",
+                self.plant,
+                self.reference_delay_s * 1e3
+            ),
+        }
+    }
 }
 
 /// The ECU as the firmware's EPOS4 build makes it at start-up (`main.rs`), with the EPOS4 at
@@ -276,7 +408,10 @@ pub struct SimEcu {
     epos_port: Port,
     host_port: Port,
     vehicle: Option<Vehicle>,
-    plant: LinearPlant,
+    plant: CarPlant,
+    /// Reference frames held back from the ECU (`reference_delay_ms`), with when they are due.
+    delayed_references: VecDeque<(u64, Frame)>,
+    reference_delay_us: u64,
     fast: FastLoop,
     epos: Epos4Sim,
     now_us: u64,
@@ -316,6 +451,7 @@ impl SimEcu {
             column_deg,
             controller,
             drive: SimDrive::Direct,
+            effects: CarEffects::NONE,
         })
     }
 
@@ -375,13 +511,12 @@ impl SimEcu {
         let epos_port = bus.attach();
         let host_port = bus.attach();
         let scale = PositionScale::new(config.counts_per_rev).expect("84 inc/rev");
-        let mut epos =
-            Epos4Sim::new_at(node, scale, column_rad).expect("the paper plant discretises");
+        let mut epos = Epos4Sim::new_at_with(node, scale, column_rad, car.effects.plant)
+            .expect("the paper plant discretises");
         for frame in epos.advance(0) {
             bus.send(epos_port, frame, 0);
         }
-        let mut plant = LinearPlant::new(PlantParams::PAPER, STEP_US as f64 * 1e-6)
-            .expect("the paper plant discretises");
+        let mut plant = CarPlant::new(car.effects.plant, STEP_US as f64 * 1e-6);
         plant.set_at_rest(column_rad);
         SimEcu {
             ecu,
@@ -397,6 +532,8 @@ impl SimEcu {
             host_port,
             vehicle: None,
             plant,
+            delayed_references: VecDeque::new(),
+            reference_delay_us: (car.effects.reference_delay_s * 1e6).round() as u64,
             fast: FastLoop::new(0, Volts(SUPPLY_V as f32)),
             epos,
             now_us: 0,
@@ -515,8 +652,23 @@ impl SimEcu {
         for i in due {
             self.inject(i);
         }
+        // A hidden reference delay: the vehicle's frames reach the ECU's reference task late.
+        while self
+            .delayed_references
+            .front()
+            .is_some_and(|(due, _)| *due <= now)
+        {
+            if let Some((_, frame)) = self.delayed_references.pop_front() {
+                route_to_ecu(frame, self.reference_frames, self.drive_frames);
+            }
+        }
         for (port, frame) in self.bus.deliver(now) {
             if port == self.ecu_port {
+                if self.reference_delay_us > 0 && FirmwareRoutes.route(&frame) == Some(0) {
+                    self.delayed_references
+                        .push_back((now + self.reference_delay_us, frame));
+                    continue;
+                }
                 // Direct drive has no EPOS4 link task: its queue stays empty-handed, as the
                 // firmware built for direct drive routes to a link it does not run.
                 route_to_ecu(frame, self.reference_frames, self.drive_frames);

@@ -67,6 +67,12 @@ pub struct Cli {
     /// bridge, `--features drive-direct`).
     #[arg(long, global = true, value_enum, default_value_t = DriveArg::Epos4)]
     pub drive: DriveArg,
+    /// With `--iface sim`: effects the simulated car has and Table 4 leaves out, KEY=VALUE,...:
+    /// host-sim's `--plant-effects` keys (`backlash_deg`, `coulomb_n`, `coulomb_creep_mm_s`,
+    /// `tire_n`, ...) and `reference_delay_ms`. A car with a known gap, for rehearsing
+    /// `host-sim gap` on the whole chain (campaign, candump, convert).
+    #[arg(long, global = true, value_name = "LIST")]
+    pub plant_effects: Option<String>,
     #[command(subcommand)]
     pub command: Command,
 }

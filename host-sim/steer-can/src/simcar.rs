@@ -13,7 +13,7 @@ use crate::cli::{Command, DriveArg, stop_flag};
 #[cfg(feature = "sim")]
 use crate::profile;
 #[cfg(feature = "sim")]
-use host_sim::sim_ecu::{Injection, SimCar, SimDrive, SimEcu};
+use host_sim::sim_ecu::{CarEffects, Injection, SimCar, SimDrive, SimEcu};
 #[cfg(feature = "sim")]
 use steering_ecu::as_state::AsState;
 
@@ -80,6 +80,14 @@ fn record_vehicle_script() -> Result<Vec<(AsState, f64)>, BringupError> {
 /// `--sim-column-deg`, `--sim-inject`), at t = 0.
 #[cfg(feature = "sim")]
 pub fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
+    let effects = match &cli.plant_effects {
+        Some(list) => list
+            .parse::<CarEffects>()
+            .map_err(|e| BringupError::Usage {
+                reason: format!("--plant-effects `{list}`: {e}"),
+            })?,
+        None => CarEffects::NONE,
+    };
     let mut sim = SimEcu::new(SimCar {
         column_deg: cli.sim_column_deg,
         controller: cli.controller.kind(),
@@ -87,6 +95,7 @@ pub fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
             DriveArg::Epos4 => SimDrive::Epos4,
             DriveArg::Direct => SimDrive::Direct,
         },
+        effects,
     });
     if let Some(spec) = &cli.sim_inject {
         let bad = || BringupError::Usage {
