@@ -13,7 +13,7 @@ use super::profile::{self, Profile, parse_as_state};
 use super::simcar;
 use super::{BringupError, Transport, candump, epos, pump};
 use canlink::reference::ReferenceSender;
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use host_io::scenario::Sweep;
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
@@ -35,11 +35,16 @@ use steering_ecu::protocol::PERIOD_US;
 )]
 pub struct Cli {
     /// SocketCAN interface (`can0`); `sim` for a simulated car of this call alone; `sim:PATH`
-    /// for the car `steer-can sim-car --socket PATH` serves to every call.
+    /// for the car `steer-can sim-car --socket PATH` serves to every call. `rehearse`: `sim`.
     #[arg(long, global = true, default_value = "can0")]
     pub iface: String,
     /// The EPOS4's CANopen node ID.
-    #[arg(long, global = true, default_value_t = 1)]
+    #[arg(
+        long,
+        global = true,
+        default_value_t = 1,
+        allow_negative_numbers = true
+    )]
     pub node: u8,
     /// With `--iface sim`: run as fast as the CPU allows instead of in step with the wall
     /// clock (tests, quick rehearsals).
@@ -69,6 +74,53 @@ pub struct Cli {
     pub drive: DriveArg,
     #[command(subcommand)]
     pub command: Command,
+}
+
+/// The global options that mean nothing to a command, by command: hidden from its `--help`.
+/// `convert` reads a file (only `--node` matters to it: the EPOS4's PDO IDs); `sim-car` is the
+/// simulated car itself, so it has no interface to name.
+const NOT_FOR: &[(&str, &[&str])] = &[
+    (
+        "convert",
+        &["iface", "fast", "sim_column_deg", "controller", "drive"],
+    ),
+    ("sim-car", &["iface", "fast"]),
+];
+
+/// The command line as `main` parses it: [`Cli`]'s, with each command's `--help` listing only
+/// the global options that apply to it.
+pub fn command() -> clap::Command {
+    let mut cmd = Cli::command();
+    // A subcommand that has an option of a global's name does not get the global copied into
+    // it: give it a hidden copy instead, still accepted (a script that passes `--iface` to
+    // every call keeps working) but not listed. Its value stays with the subcommand, which
+    // does not read it.
+    for (sub, hidden) in NOT_FOR {
+        let copies: Vec<clap::Arg> = cmd
+            .get_arguments()
+            .filter(|a| hidden.contains(&a.get_id().as_str()))
+            .map(|a| a.clone().global(false).hide(true))
+            .collect();
+        cmd = cmd.mut_subcommand(*sub, |c| c.args(copies));
+    }
+    cmd
+}
+
+impl Cli {
+    /// The defaults that depend on the command: `rehearse` runs on the simulated car only, so
+    /// there `--iface` means `sim` unless it is given.
+    pub fn with_command_defaults(mut self, matches: &clap::ArgMatches) -> Cli {
+        let iface_given = matches!(
+            matches.value_source("iface"),
+            Some(clap::parser::ValueSource::CommandLine | clap::parser::ValueSource::EnvVariable)
+        ) || matches.subcommand().is_some_and(|(_, sub)| {
+            sub.value_source("iface") == Some(clap::parser::ValueSource::CommandLine)
+        });
+        if matches!(self.command, Command::Rehearse { .. }) && !iface_given {
+            self.iface = "sim".into();
+        }
+        self
+    }
 }
 
 /// `--controller`: which steering controller the simulated ECU runs.
@@ -103,13 +155,18 @@ pub enum Command {
     /// with counters, CRC errors and the fault bits in words.
     Monitor {
         /// Stop after this long, s (default: until Ctrl-C).
-        #[arg(long, value_name = "S")]
+        #[arg(long, value_name = "S", allow_negative_numbers = true)]
         duration_s: Option<f64>,
         /// Print every frame, decoded, besides the summary.
         #[arg(long)]
         each: bool,
         /// Summary every this many seconds.
-        #[arg(long, default_value_t = 1.0, value_name = "S")]
+        #[arg(
+            long,
+            default_value_t = 1.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         refresh_s: f64,
     },
     /// The EPOS4 by SDO reads: NMT state, mode, the gains and the drive's limits (current,
@@ -142,12 +199,13 @@ pub enum Command {
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
         /// Stop after this long, s (default: until Ctrl-C).
-        #[arg(long, value_name = "S")]
+        #[arg(long, value_name = "S", allow_negative_numbers = true)]
         duration_s: Option<f64>,
     },
     /// The README's first day on the simulated car, in one session: each `steer-can` step the
     /// README's bring-up list names, its result beside what the README expects, pass or fail
-    /// (exit 1 if any step fails). `--iface sim` only; `--fast` to run it at CPU speed.
+    /// (exit 1 if any step fails). On the simulated car only (the default `--iface` here);
+    /// `--fast` to run it at CPU speed.
     Rehearse {
         /// Where the steps' files go (sweep.csv.gz, track.csv.gz, profile.csv, bus.candump,
         /// log.csv).
@@ -185,25 +243,55 @@ pub enum SendProfile {
     /// A step at the wheel (sent as a ramp at the ECU's 400 deg/s).
     Step {
         /// Height of the step at the steering wheel, deg.
-        #[arg(long, default_value_t = 2.0, value_name = "DEG")]
+        #[arg(
+            long,
+            default_value_t = 2.0,
+            value_name = "DEG",
+            allow_negative_numbers = true
+        )]
         amplitude_deg: f64,
         /// When the step starts, s after the first frame.
-        #[arg(long, default_value_t = 0.5, value_name = "S")]
+        #[arg(
+            long,
+            default_value_t = 0.5,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         at_s: f64,
         /// Length of the whole profile, s.
-        #[arg(long, default_value_t = 2.0, value_name = "S")]
+        #[arg(
+            long,
+            default_value_t = 2.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         duration_s: f64,
     },
     /// A sine at the wheel.
     Sine {
         /// Amplitude at the steering wheel, deg.
-        #[arg(long, default_value_t = 2.0, value_name = "DEG")]
+        #[arg(
+            long,
+            default_value_t = 2.0,
+            value_name = "DEG",
+            allow_negative_numbers = true
+        )]
         amplitude_deg: f64,
         /// Frequency, Hz.
-        #[arg(long, default_value_t = 1.0, value_name = "HZ")]
+        #[arg(
+            long,
+            default_value_t = 1.0,
+            value_name = "HZ",
+            allow_negative_numbers = true
+        )]
         freq_hz: f64,
         /// Length of the profile, s.
-        #[arg(long, default_value_t = 5.0, value_name = "S")]
+        #[arg(
+            long,
+            default_value_t = 5.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         duration_s: f64,
     },
     /// The paper's chirp (section 4.2).
@@ -218,16 +306,36 @@ pub enum SendProfile {
 #[derive(Args, Debug, Clone)]
 pub struct SweepArgs {
     /// Amplitude of the chirp at the steering wheel, deg.
-    #[arg(long, default_value_t = 10.0, value_name = "DEG")]
+    #[arg(
+        long,
+        default_value_t = 10.0,
+        value_name = "DEG",
+        allow_negative_numbers = true
+    )]
     pub amplitude_deg: f64,
     /// Frequency at the start, Hz.
-    #[arg(long, default_value_t = 0.0, value_name = "HZ")]
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        value_name = "HZ",
+        allow_negative_numbers = true
+    )]
     pub f_start_hz: f64,
     /// Frequency at the end, Hz.
-    #[arg(long, default_value_t = 10.0, value_name = "HZ")]
+    #[arg(
+        long,
+        default_value_t = 10.0,
+        value_name = "HZ",
+        allow_negative_numbers = true
+    )]
     pub f_end_hz: f64,
     /// Length of the chirp, s.
-    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    #[arg(
+        long,
+        default_value_t = 10.0,
+        value_name = "S",
+        allow_negative_numbers = true
+    )]
     pub duration_s: f64,
 }
 
@@ -287,7 +395,11 @@ pub const EXIT_ABORTED: u8 = 3;
 
 /// Entry point of the binary.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let matches = command().get_matches();
+    let cli = match Cli::from_arg_matches(&matches) {
+        Ok(cli) => cli.with_command_defaults(&matches),
+        Err(e) => e.exit(),
+    };
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
@@ -382,7 +494,8 @@ pub struct CampaignOutcome {
 }
 
 fn run(cli: Cli) -> Result<ExitCode, BringupError> {
-    let node = NodeId::new(cli.node).ok_or_else(|| BringupError::Profile {
+    super::bounds::check(&cli)?;
+    let node = NodeId::new(cli.node).ok_or_else(|| BringupError::Usage {
         reason: format!("--node {}: a CANopen node ID is 1 to 127", cli.node),
     })?;
     let dec = decoder(node)?;
@@ -496,6 +609,15 @@ pub(crate) fn convert(
             file.first_dropped_line.unwrap_or(0)
         );
     }
+    if file.socket_drops > 0 {
+        eprintln!(
+            "steer-can: warning: {}: candump reports {} frames its socket lost while \
+             recording (the first report at line {}); the log has gaps there",
+            path.display(),
+            file.socket_drops,
+            file.first_drop_report_line.unwrap_or(0)
+        );
+    }
     let rows = if all_rows { Rows::All } else { Rows::Active };
     // The log builder knows frames, not files: name the file the frames came from.
     let built = logbuild::build(&file.frames, dec, rows).map_err(|e| match e {
@@ -561,12 +683,14 @@ fn monitor(
             );
             any = true;
         }
+        // The end's summary follows below: one for the same instant is enough.
+        let ending = end.is_some_and(|e| t.now_us() >= e) || stop.load(Ordering::SeqCst);
+        if ending {
+            break;
+        }
         if t.now_us() >= next {
             say!("--- {} ---\n{}", t.name(), m.summary().trim_end());
             next += refresh_us;
-        }
-        if end.is_some_and(|e| t.now_us() >= e) || stop.load(Ordering::SeqCst) {
-            break;
         }
     }
     say!("=== {} ===\n{}", t.name(), m.summary().trim_end());
@@ -590,7 +714,11 @@ fn record(
         source,
     };
     let file = std::fs::File::create(out).map_err(io)?;
-    let mut w = candump::Writer::new(std::io::BufWriter::new(file), t.epoch_s(), t.name());
+    let mut w = candump::Writer::new(
+        std::io::BufWriter::new(file),
+        t.epoch_s(),
+        candump::recorded_iface(t.name()),
+    );
     let mut m = Monitor::new(*dec);
     let start = t.now_us();
     let end = duration_s.map(|d| start + (d * 1e6) as u64);
@@ -717,7 +845,12 @@ fn campaign_cmd(
         p.push(".candump");
         PathBuf::from(p)
     });
-    candump::save(&record_path, t.epoch_s(), t.name(), &run.frames)?;
+    candump::save(
+        &record_path,
+        t.epoch_s(),
+        candump::recorded_iface(t.name()),
+        &run.frames,
+    )?;
     say!(
         "recording written to {} ({} frames)",
         record_path.display(),
@@ -876,7 +1009,6 @@ fn send(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::CommandFactory;
 
     /// Every option and argument of every subcommand says what it is in `--help`.
     #[test]
