@@ -127,6 +127,9 @@ pub const INJECT_AT_S: Range = range(0.0, false, 86_400.0, false, "s", "at most 
 /// A CANopen node ID (CiA 301: 1 to 127; 0 addresses every node).
 pub const NODE: Range = range(1.0, false, 127.0, false, "", "a CANopen node ID");
 
+/// When a step starts, s after the first frame: within the longest profile.
+pub const AT_S: Range = range(0.0, false, 600.0, false, "s", "within the longest profile");
+
 /// A signed amplitude at the wheel within the ECU's reference limit.
 fn amplitude() -> Range {
     let max = max_angle_deg();
@@ -187,8 +190,9 @@ pub fn check(cli: &Cli) -> Result<(), BringupError> {
             } => {
                 amplitude().check("--amplitude-deg", *amplitude_deg)?;
                 PROFILE_S.check("--duration-s", *duration_s)?;
-                range(0.0, false, *duration_s, false, "s", "within the profile")
-                    .check("--at-s", *at_s)
+                // Not tied to the profile's length: a step after its end is a hold at 0
+                // (`--amplitude-deg 0 --duration-s 0.3` leaves the default 0.5 s).
+                AT_S.check("--at-s", *at_s)
             }
             SendProfile::Sine {
                 amplitude_deg,

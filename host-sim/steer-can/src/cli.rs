@@ -519,18 +519,28 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
         Command::SimCar { socket } => simcar::serve(&cli, socket)?,
         command => {
             let mut t = open(&cli)?;
-            execute(command, node, &dec, t.as_mut())?
+            execute(
+                command,
+                node,
+                &dec,
+                t.as_mut(),
+                &mut ReferenceSender::default(),
+            )?
         }
     };
     Ok(outcome.exit_code())
 }
 
 /// Runs one command that needs the bus on `t` (every command but `convert` and `rehearse`).
+/// `sender` holds the reference frames' alive counter for the session: the ECU expects each
+/// frame's counter one above the last it saw, so the `send`s of one session (`rehearse`)
+/// continue one counter rather than each starting from 0, which the ECU would count as a jump.
 pub(crate) fn execute(
     command: &Command,
     node: NodeId,
     dec: &Decoder,
     t: &mut dyn Transport,
+    sender: &mut ReferenceSender,
 ) -> Result<Outcome, BringupError> {
     match command {
         Command::Monitor {
@@ -561,6 +571,7 @@ pub(crate) fn execute(
             *as_state,
             !*no_finish,
             profile,
+            sender,
         )?)),
         Command::Record { out, duration_s } => {
             let (frames, monitor) = record(t, dec, out, *duration_s)?;
@@ -906,6 +917,7 @@ fn send(
     as_state: Option<AsState>,
     finish: bool,
     which: &SendProfile,
+    sender: &mut ReferenceSender,
 ) -> Result<Monitor, BringupError> {
     let stop = stop_flag();
     let (profile, as_state, clear) = match which {
@@ -944,7 +956,6 @@ fn send(
         t.name(),
         profile.rate_limited
     );
-    let mut sender = ReferenceSender::default();
     let mut m = Monitor::new(*dec);
     let mut next = t.now_us();
     let n = profile.samples.len();
@@ -1027,6 +1038,39 @@ mod tests {
         let mut missing = Vec::new();
         walk(&Cli::command(), "steer-can", &mut missing);
         assert!(missing.is_empty(), "no help text: {missing:?}");
+    }
+
+    /// Two `send`s on one car in one session (`rehearse`): the second continues the first's
+    /// alive counter, so the ECU's E2E check counts no jump at its first frame.
+    #[cfg(feature = "sim")]
+    #[test]
+    fn a_second_send_in_a_session_continues_the_counter() {
+        let mut sim = host_sim::sim_ecu::SimEcu::new(host_sim::sim_ecu::SimCar::DEFAULT);
+        let node = NodeId::new(1).unwrap();
+        let dec = decoder(node).unwrap();
+        let step = Command::Send {
+            as_state: Some(AsState::Driving),
+            no_finish: false,
+            profile: SendProfile::Step {
+                amplitude_deg: 1.0,
+                at_s: 0.1,
+                duration_s: 0.3,
+            },
+        };
+        let jumps =
+            |sim: &host_sim::sim_ecu::SimEcu| sim.with_ecu(|e| e.e2e().drops().counter_jump);
+        let mut session = ReferenceSender::default();
+        execute(&step, node, &dec, &mut sim, &mut session).unwrap();
+        assert_eq!(jumps(&sim), 0);
+        execute(&step, node, &dec, &mut sim, &mut session).unwrap();
+        assert_eq!(
+            jumps(&sim),
+            0,
+            "the second send's first frame was a counter jump"
+        );
+        // A sender of its own, as a separate `steer-can send` has, starts from its own 0.
+        execute(&step, node, &dec, &mut sim, &mut ReferenceSender::default()).unwrap();
+        assert_eq!(jumps(&sim), 1);
     }
 
     /// The global options and the AS state are accepted before or after the subcommand.

@@ -53,7 +53,7 @@ const TABLE: &[Row] = &[
     Row {
         command: "send step",
         option: "--at-s",
-        refused: &["nan", "inf", "-1", "3", "1e9"],
+        refused: &["nan", "inf", "-1", "601", "1e9"],
     },
     Row {
         command: "send step",
