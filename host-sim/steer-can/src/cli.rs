@@ -6,7 +6,8 @@
 //! ([`Outcome`]) besides printing it, so `rehearse` judges values, not text.
 
 use super::campaign::{self, Campaign, Live};
-use super::decode::{Decoder, faults_in_words};
+use super::decode::{Decoded, Decoder, faults_in_words};
+use super::liveplot::{self, LivePlot};
 use super::logbuild::{self, Rows};
 use super::monitor::Monitor;
 use super::profile::{self, Profile, parse_as_state};
@@ -168,6 +169,10 @@ pub enum Command {
             allow_negative_numbers = true
         )]
         refresh_s: f64,
+        /// Draw reference, column angle, motor angle and current scrolling in the terminal
+        /// (the last 10 s, redrawn 10 times a second), with state, faults and counters below.
+        #[arg(long, conflicts_with = "each")]
+        plot: bool,
     },
     /// The EPOS4 by SDO reads: NMT state, mode, the gains and the drive's limits (current,
     /// following error, speed, software position limits) against ours, error register and
@@ -547,12 +552,14 @@ pub(crate) fn execute(
             duration_s,
             each,
             refresh_s,
+            plot,
         } => Ok(Outcome::Monitor(monitor(
             t,
             dec,
             *duration_s,
             *each,
             *refresh_s,
+            plot.then(|| LivePlot::new(1000)),
         )?)),
         Command::Epos {
             what: EposCommand::Check,
@@ -664,11 +671,14 @@ fn monitor(
     duration_s: Option<f64>,
     each: bool,
     refresh_s: f64,
+    mut plot: Option<LivePlot>,
 ) -> Result<Monitor, BringupError> {
     let stop = stop_flag();
     let mut m = Monitor::new(*dec);
     let start = t.now_us();
     let end = duration_s.map(|d| start + (d * 1e6) as u64);
+    // The picture moves at 10 frames a second; the text summary at the refresh period.
+    let refresh_s = if plot.is_some() { 0.1 } else { refresh_s };
     let refresh_us = (refresh_s.max(0.05) * 1e6) as u64;
     let mut next = start + refresh_us;
     let mut any = false;
@@ -679,6 +689,9 @@ fn monitor(
             let d = m.on_frame(rx);
             if each {
                 lines.push(m.line(rx, &d));
+            }
+            if let (Some(p), Decoded::Status(Ok(_))) = (plot.as_mut(), &d) {
+                p.sample(&m);
             }
             true
         })?;
@@ -700,7 +713,15 @@ fn monitor(
             break;
         }
         if t.now_us() >= next {
-            say!("--- {} ---\n{}", t.name(), m.summary().trim_end());
+            match &plot {
+                Some(p) => {
+                    let (w, h) = liveplot::terminal_size();
+                    let title = format!("steer-can monitor --plot on {}", t.name());
+                    let frame = p.render(&title, &liveplot::info_lines(&m), w, h);
+                    say!("{}{}", liveplot::REDRAW, frame.trim_end());
+                }
+                None => say!("--- {} ---\n{}", t.name(), m.summary().trim_end()),
+            }
             next += refresh_us;
         }
     }

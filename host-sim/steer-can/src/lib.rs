@@ -38,6 +38,7 @@ pub mod candump;
 pub mod cli;
 pub mod decode;
 pub mod epos;
+pub mod liveplot;
 pub mod logbuild;
 pub mod monitor;
 pub mod profile;

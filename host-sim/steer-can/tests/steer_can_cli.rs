@@ -103,6 +103,53 @@ fn monitor_prints_each_summary_once() {
     }
 }
 
+/// `monitor --plot` redraws in place 10 times a second: three charts of the simulated car at
+/// its power-up angle, the state below them, and the text summary at the end.
+#[test]
+fn monitor_plot_draws_the_charts_in_place() {
+    let o = Command::new(env!("CARGO_BIN_EXE_steer-can"))
+        .args(["--iface", "sim", "--fast", "--sim-column-deg", "3"])
+        .args(["monitor", "--plot", "--duration-s", "1"])
+        .env("COLUMNS", "80")
+        .env("LINES", "30")
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    let frames: Vec<&str> = out.split("\x1b[H\x1b[J").skip(1).collect();
+    assert_eq!(frames.len(), 9, "redrawn every 0.1 s before the end");
+    // The last picture, without the text summary printed after it at the end.
+    let last = frames[frames.len() - 1]
+        .split("=== sim ===")
+        .next()
+        .unwrap();
+    for part in [
+        "angle at the wheel, deg",
+        "motor angle, rad",
+        "current, A",
+        "state idle, faults: none",
+    ] {
+        assert!(last.contains(part), "{part} not in {last}");
+    }
+    // The column sits at its power-up angle: one row of marks, inside the scale's ends.
+    let angle: Vec<&str> = last
+        .split("motor angle")
+        .next()
+        .unwrap()
+        .lines()
+        .filter(|l| l.contains('|'))
+        .collect();
+    assert_eq!(
+        angle.iter().filter(|l| l.contains('#')).count(),
+        1,
+        "{last}"
+    );
+    assert!(angle[0].trim_start().starts_with("+3.99|"), "{last}");
+    assert!(last.lines().all(|l| l.chars().count() <= 80), "{last}");
+    assert!(out.contains("=== sim ==="), "the summary at the end");
+}
+
 /// `rehearse` runs on the simulated car only: there `--iface` means `sim` unless given.
 #[test]
 fn rehearse_defaults_to_the_simulated_car() {
