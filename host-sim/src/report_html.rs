@@ -28,12 +28,121 @@ pub fn escape(text: &str) -> String {
     out
 }
 
-/// The program's own command line, quoted so it can be pasted into a POSIX shell again.
+/// The program's own command line, quoted so it can be pasted into a POSIX shell again; the
+/// program by its name, not the path it was started from (a build directory on someone's
+/// machine says nothing in an archived report).
 pub fn command_line() -> String {
-    std::env::args()
+    let mut args = std::env::args();
+    let program = args
+        .next()
+        .map(|p| {
+            Path::new(&p)
+                .file_name()
+                .map_or(p.clone(), |n| n.to_string_lossy().into_owned())
+        })
+        .unwrap_or_else(|| "host-sim".into());
+    std::iter::once(program)
+        .chain(args)
         .map(|a| shell_quote(&a))
         .collect::<Vec<_>>()
         .join(" ")
+}
+
+/// What made a report: when (UTC), on which host, from which commit of the source tree, so an
+/// archived page says where its figures came from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Provenance {
+    /// `YYYY-MM-DD HH:MM:SS UTC`.
+    pub date: String,
+    pub host: String,
+    /// The source tree's commit when the report was written, `+ uncommitted changes` if it had
+    /// any; `unknown` outside a git checkout (an unpacked archive, an installed binary).
+    pub commit: String,
+    /// host-sim's version.
+    pub version: &'static str,
+}
+
+impl Provenance {
+    /// This process, now.
+    pub fn now() -> Provenance {
+        let secs = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        Provenance {
+            date: utc_date(secs),
+            host: host_name(),
+            commit: source_commit(Path::new(env!("CARGO_MANIFEST_DIR"))),
+            version: env!("CARGO_PKG_VERSION"),
+        }
+    }
+
+    /// The line the page shows.
+    pub fn line(&self) -> String {
+        format!(
+            "made {} on {}, host-sim {} at commit {}",
+            self.date, self.host, self.version, self.commit
+        )
+    }
+}
+
+/// `secs` since the Unix epoch as a UTC date and time (the civil calendar from the day count,
+/// Howard Hinnant's days-to-civil).
+pub fn utc_date(secs: u64) -> String {
+    let days = i64::try_from(secs / 86_400).unwrap_or(0);
+    let rem = secs % 86_400;
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02} {:02}:{:02}:{:02} UTC",
+        rem / 3600,
+        rem / 60 % 60,
+        rem % 60
+    )
+}
+
+fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .or_else(|| std::env::var("COMPUTERNAME").ok())
+        .map(|h| h.trim().to_string())
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "unknown host".into())
+}
+
+/// The commit of the git checkout at `dir`, if it is one and git is there.
+fn source_commit(dir: &Path) -> String {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .arg("-C")
+            .arg(dir)
+            .args(args)
+            .stdin(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    match git(&["rev-parse", "--short=12", "HEAD"]) {
+        Some(commit) if !commit.is_empty() => {
+            let dirty = git(&["status", "--porcelain", "--untracked-files=no"])
+                .is_some_and(|s| !s.is_empty());
+            if dirty {
+                format!("{commit} + uncommitted changes")
+            } else {
+                commit
+            }
+        }
+        _ => "unknown (not a git checkout)".into(),
+    }
 }
 
 fn shell_quote(arg: &str) -> String {
@@ -122,6 +231,7 @@ impl<'a> Num<'a> {
 pub struct HtmlReport {
     title: String,
     command: String,
+    made: Provenance,
     setup: Vec<(String, String)>,
     rows: Vec<Row>,
     tables: Vec<Table>,
@@ -135,6 +245,7 @@ impl HtmlReport {
         Self {
             title: title.to_string(),
             command: command_line(),
+            made: Provenance::now(),
             setup: Vec::new(),
             rows: Vec::new(),
             tables: Vec::new(),
@@ -236,8 +347,9 @@ impl HtmlReport {
             h,
             "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
              <title>{title}</title>\n<style>\n{STYLE}</style>\n</head>\n<body>\n<h1>{title}</h1>\n\
-             <p class=\"cmd\"><code>{}</code></p>\n",
-            escape(&self.command)
+             <p class=\"cmd\"><code>{}</code></p>\n<p class=\"made\">{}</p>\n",
+            escape(&self.command),
+            escape(&self.made.line())
         );
         if !self.setup.is_empty() {
             h.push_str("<table class=\"setup\">\n");
@@ -345,6 +457,14 @@ p.foot { color: #888; font-size: 0.8em; }\n";
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn utc_dates_are_the_calendar_s() {
+        assert_eq!(utc_date(0), "1970-01-01 00:00:00 UTC");
+        assert_eq!(utc_date(951_782_400), "2000-02-29 00:00:00 UTC");
+        assert_eq!(utc_date(1_700_000_000), "2023-11-14 22:13:20 UTC");
+        assert_eq!(utc_date(4_102_444_799), "2099-12-31 23:59:59 UTC");
+    }
 
     #[test]
     fn text_is_escaped_everywhere() {

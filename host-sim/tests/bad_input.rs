@@ -299,3 +299,37 @@ fn a_failed_worker_fails_the_diagnosis() {
         }
     }
 }
+
+/// A file that is not a log, with no line end for megabytes (a binary file, `truncate -s 2G`),
+/// is refused at the line that is too long, without reading it whole.
+#[test]
+fn gap_refuses_an_overlong_line_without_reading_it_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("zeros.csv");
+    let mut bytes = b"t,ref_sw_deg,sw_deg,motor_rad,current_a\n".to_vec();
+    bytes.resize(bytes.len() + 8 * 1024 * 1024, 0);
+    std::fs::write(&path, &bytes).unwrap();
+    let o = host_sim(&["gap", s(&path), "--threads", "2"]);
+    assert_refused(&o, &["zeros.csv", "line 2 is longer than 64 KiB"]);
+}
+
+/// Two rows are a straight line, not a track: `track --csv` refuses them instead of printing
+/// the tracking error of a run that never steered.
+#[test]
+fn track_refuses_a_reference_too_short_to_be_a_track() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, text) in [
+        ("two_rows.csv", "t,ref_sw_deg\n0,0\n0.01,1\n"),
+        ("two_far_rows.csv", "t,ref_sw_deg\n0,0\n5,10\n"),
+        (
+            "short.csv",
+            "t,ref_sw_deg\n0,0\n0.1,1\n0.2,2\n0.3,1\n0.4,0\n0.5,1\n0.6,0\n0.7,1\n0.8,0\n0.9,1\n",
+        ),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let o = host_sim(&["track", "--csv", s(&path)]);
+        assert_refused(&o, &[name, "at least 10 samples over at least 1 s"]);
+        assert!(!stdout(&o).contains("RMSE"), "{}", stdout(&o));
+    }
+}

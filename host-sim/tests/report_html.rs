@@ -197,6 +197,23 @@ fn sweep_report_holds_the_bode_and_time_figures_and_the_json_numbers() {
     check_page(&html, &plots, 2);
     assert!(html.contains("<title>host-sim sweep: Sine sweep 0-10 Hz, 10 deg at the wheel"));
     assert!(html.contains("--duration-s 4 --report"), "no command line");
+    // The command by the program's name, not the build directory's path; and what made it.
+    assert!(
+        html.contains("<code>host-sim sweep --duration-s 4"),
+        "the command is not `host-sim ...`"
+    );
+    assert!(
+        !html.contains(env!("CARGO_BIN_EXE_host-sim")),
+        "absolute path"
+    );
+    let made = &html[html
+        .find("<p class=\"made\">made ")
+        .expect("no date, host, commit")..];
+    let made = &made[..made.find("</p>").unwrap()];
+    assert!(
+        made.contains(" UTC on ") && made.contains(" at commit "),
+        "{made}"
+    );
     assert!(html.contains("paper mode: Hall feedback"), "no controller");
     for (pointer, decimals) in [
         ("/bandwidth_hz", 2),

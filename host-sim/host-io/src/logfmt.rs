@@ -53,13 +53,15 @@
 //! * **Other column names.** [`Table`] reads any CSV of numeric columns with one named time
 //!   column by these same rules (a rig's logs for `host-sim gap`, a track reference).
 //! * **Precision.** The writer rounds the required columns to fixed decimals well below what is
-//!   measured (see the constants below); extra columns are written losslessly. A file with the
-//!   header and no rows is a valid, empty log.
+//!   measured (see the constants below), and an extra column whose name ends in one of their
+//!   units or in `_v` (1 mV) likewise; any other extra column (a state code, a count) is
+//!   written losslessly. A file with the header and no rows is a valid, empty log.
 use std::fmt;
 use std::fs::{self, File};
 use std::io::{self, BufRead, BufReader, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use crate::lines::{Capped, read_line_capped};
 use flate2::Compression;
 use flate2::read::MultiGzDecoder;
 use flate2::write::GzEncoder;
@@ -78,6 +80,23 @@ const DEG_DECIMALS: usize = 4;
 const RAD_DECIMALS: usize = 5;
 /// 0.1 mA: the EPOS4 reports current in mA.
 const AMP_DECIMALS: usize = 4;
+/// 1 mV: a 24 V PWM bridge with a 12-bit duty cycle resolves 6 mV.
+const VOLT_DECIMALS: usize = 3;
+
+/// The fixed decimals of an extra column, from the unit at the end of its name (as its bound,
+/// [`bound_for`]); `None` for a column without one of these units (a state code, a count),
+/// which is written exactly.
+fn decimals_for(column: &str) -> Option<usize> {
+    let (_, unit) = column.rsplit_once('_')?;
+    match unit.to_ascii_lowercase().as_str() {
+        "s" => Some(T_DECIMALS),
+        "deg" => Some(DEG_DECIMALS),
+        "rad" => Some(RAD_DECIMALS),
+        "a" => Some(AMP_DECIMALS),
+        "v" => Some(VOLT_DECIMALS),
+        _ => None,
+    }
+}
 
 const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
 
@@ -180,6 +199,8 @@ pub enum LogError {
         expected: usize,
         found: usize,
     },
+    /// A line longer than [`MAX_LINE_BYTES`]: not a log (a binary file, no line ends).
+    LineTooLong { line: usize, max_bytes: usize },
     /// Writing: a non-finite time, or two samples that round to the same microsecond (rows
     /// count from 0).
     TimeNotWritable { row: usize, reason: &'static str },
@@ -280,6 +301,12 @@ impl fmt::Display for LogError {
             } => write!(
                 f,
                 "column `{column}` has {found} samples but `t` has {expected}"
+            ),
+            Self::LineTooLong { line, max_bytes } => write!(
+                f,
+                "line {line} is longer than {} KiB: not a log (a binary file, or no line \
+                 ends?); nothing past it was read",
+                max_bytes / 1024
             ),
             Self::TimeNotWritable { row, reason } => write!(f, "row {row}: {reason}"),
             Self::InfiniteValue { row, column } => write!(
@@ -420,6 +447,7 @@ impl Log {
         header.extend(self.extra_names());
         writeln!(w, "{}", header.join(",")).map_err(LogError::io)?;
 
+        let extra_decimals: Vec<Option<usize>> = self.extra_names().map(decimals_for).collect();
         let mut line = String::new();
         for i in 0..self.len() {
             line.clear();
@@ -433,9 +461,12 @@ impl Log {
                 line.push(',');
                 push_fixed(&mut line, column[i], decimals);
             }
-            for (_, column) in &self.extra {
+            for ((_, column), decimals) in self.extra.iter().zip(&extra_decimals) {
                 line.push(',');
-                push_exact(&mut line, column[i]);
+                match decimals {
+                    Some(d) => push_fixed(&mut line, column[i], *d),
+                    None => push_exact(&mut line, column[i]),
+                }
             }
             line.push('\n');
             w.write_all(line.as_bytes()).map_err(LogError::io)?;
@@ -723,11 +754,10 @@ fn read_table(
     let mut comments = Vec::new();
 
     let (names, time) = loop {
-        text.clear();
-        if r.read_line(&mut text).map_err(LogError::io)? == 0 {
+        line_no += 1;
+        if next_line(&mut r, &mut text, line_no)? {
             return Err(LogError::Empty);
         }
-        line_no += 1;
         let line = if line_no == 1 {
             text.trim_start_matches('\u{feff}')
         } else {
@@ -760,11 +790,10 @@ fn read_table(
     };
     let mut values = vec![0.0; table.names.len()];
     loop {
-        text.clear();
-        if r.read_line(&mut text).map_err(LogError::io)? == 0 {
+        line_no += 1;
+        if next_line(&mut r, &mut text, line_no)? {
             break;
         }
-        line_no += 1;
         let line = text.trim();
         if line.is_empty() {
             continue;
@@ -810,6 +839,22 @@ fn read_table(
         table.lines.push(line_no);
     }
     Ok(table)
+}
+
+/// The longest line the reader takes, bytes: a row of thousands of columns fits, and a file
+/// that is not a log (no line end for gigabytes) is refused after this much, not held whole.
+pub const MAX_LINE_BYTES: usize = 64 * 1024;
+
+/// Reads line `line_no` into `text`; `true` at the end of the input.
+fn next_line(r: &mut impl BufRead, text: &mut String, line_no: usize) -> Result<bool, LogError> {
+    match read_line_capped(r, text, MAX_LINE_BYTES).map_err(LogError::io)? {
+        Capped::Line => Ok(false),
+        Capped::End => Ok(true),
+        Capped::TooLong => Err(LogError::LineTooLong {
+            line: line_no,
+            max_bytes: MAX_LINE_BYTES,
+        }),
+    }
 }
 
 fn is_gz_name(path: &Path) -> bool {
@@ -952,8 +997,9 @@ mod tests {
         assert_eq!(original.extra.len(), back.extra.len());
         for ((name_a, a), (name_b, b)) in original.extra.iter().zip(&back.extra) {
             assert_eq!(name_a, name_b);
-            // Extra columns are lossless.
-            assert_close(a, b, 0.0);
+            // An extra column with a unit keeps its unit's decimals; one without is lossless.
+            let tol = decimals_for(name_a).map_or(0.0, |d| 0.6 * 10f64.powi(-(d as i32)));
+            assert_close(a, b, tol);
         }
     }
 
@@ -990,6 +1036,31 @@ mod tests {
         sample_log(&[]).save(&path).expect("save");
         let names: Vec<_> = fs::read_dir(dir.path()).expect("list").flatten().collect();
         assert_eq!(names.len(), 1);
+    }
+
+    /// A simulated run's f32 signals in extra columns are written with their unit's decimals,
+    /// as the required columns are, not as the f32's 16 digits; a state code is kept exact.
+    #[test]
+    fn extra_columns_with_a_unit_get_its_fixed_decimals() {
+        let mut log = Log::with_extra_columns(&["current_setpoint_a", "voltage_v", "faults"]);
+        let row = Row {
+            t: 0.0,
+            ref_sw_deg: 0.0,
+            sw_deg: 0.0,
+            motor_rad: 0.0,
+            current_a: 0.0,
+        };
+        let volts = f64::from(-9.090_424_f32);
+        assert_eq!(volts.to_string(), "-9.090423583984375");
+        log.push(row, &[f64::from(1.234_567_8_f32), volts, 3.0]);
+        let mut out = Vec::new();
+        log.write_to(&mut out).expect("write");
+        let text = String::from_utf8(out).expect("utf-8");
+        assert_eq!(
+            text.lines().nth(1),
+            Some("0.000000,0.0000,0.0000,0.00000,0.0000,1.2346,-9.090,3"),
+            "{text}"
+        );
     }
 
     #[test]
@@ -1128,6 +1199,25 @@ mod tests {
             matches!(err, LogError::BadNumber { line: 2, .. }),
             "{err:?}"
         );
+    }
+
+    #[test]
+    fn a_line_past_the_length_cap_is_refused_with_its_number() {
+        let mut text = String::from("t,ref_sw_deg,sw_deg,motor_rad,current_a\n0,0,0,0,0\n");
+        text.push_str(&"0".repeat(4 * 1024 * 1024));
+        text.push('\n');
+        match read_str(&text) {
+            Err(LogError::LineTooLong { line, max_bytes }) => {
+                assert_eq!((line, max_bytes), (3, MAX_LINE_BYTES));
+            }
+            other => panic!("{other:?}"),
+        }
+        // A header without a line end for longer than the cap is refused as well.
+        let zeros = "\0".repeat(MAX_LINE_BYTES + 1);
+        assert!(matches!(
+            read_str(&zeros),
+            Err(LogError::LineTooLong { line: 1, .. })
+        ));
     }
 
     #[test]

@@ -167,10 +167,27 @@ pub enum ReferenceFileError {
         path: String,
         line: usize,
     },
+    /// Fewer than [`MIN_TRACK_ROWS`] rows or less than [`MIN_TRACK_S`]: not a recorded track.
     TooShort {
         path: String,
+        rows: usize,
+        span_s: f64,
+    },
+    /// Longer than [`MAX_TRACK_S`].
+    TooLong {
+        path: String,
+        span_s: f64,
     },
 }
+
+/// The fewest rows and the shortest time a track reference from a file may have: two rows are
+/// a straight line between them, and a tracking error over less than a second (the closed
+/// loop's settling is 0.1 s) is no track figure.
+pub const MIN_TRACK_ROWS: usize = 10;
+pub const MIN_TRACK_S: f64 = 1.0;
+/// The longest: an hour at 100 Hz is 360 000 samples, still small to hold; a time stamp
+/// beyond is garbage rather than a run.
+pub const MAX_TRACK_S: f64 = 3600.0;
 
 impl std::fmt::Display for ReferenceFileError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -185,9 +202,15 @@ impl std::fmt::Display for ReferenceFileError {
                 "{path}: line {line}: `ref_sw_deg` is nan; a reference cannot have missing \
                  samples"
             ),
-            ReferenceFileError::TooShort { path } => {
-                write!(f, "{path}: needs at least two samples")
-            }
+            ReferenceFileError::TooShort { path, rows, span_s } => write!(
+                f,
+                "{path}: a track reference needs at least {MIN_TRACK_ROWS} samples over at \
+                 least {MIN_TRACK_S} s; this one has {rows} over {span_s} s"
+            ),
+            ReferenceFileError::TooLong { path, span_s } => write!(
+                f,
+                "{path}: the reference runs to t = {span_s} s; at most {MAX_TRACK_S} s"
+            ),
         }
     }
 }
@@ -221,8 +244,17 @@ pub fn track_from_csv(path: &Path) -> Result<Vec<f64>, ReferenceFileError> {
             line: table.lines[row],
         });
     }
-    if t.len() < 2 {
-        return Err(ReferenceFileError::TooShort { path: name });
+    // From t = 0: the first sample is held before its time.
+    let span_s = t.last().copied().unwrap_or(0.0).max(0.0);
+    if t.len() < MIN_TRACK_ROWS || span_s < MIN_TRACK_S {
+        return Err(ReferenceFileError::TooShort {
+            path: name,
+            rows: t.len(),
+            span_s,
+        });
+    }
+    if span_s > MAX_TRACK_S {
+        return Err(ReferenceFileError::TooLong { path: name, span_s });
     }
     Ok(resample_to_reference_rate(t, r))
 }
@@ -331,7 +363,43 @@ mod tests {
             track_from_csv(&p),
             Err(ReferenceFileError::MissingSample { line: 3, .. })
         ));
-        std::fs::write(&p, "# from the MPC\nt,ref_sw_deg,extra\n0,1,9\n0.02,3,9\n").unwrap();
-        assert_eq!(track_from_csv(&p).unwrap(), vec![1.0, 2.0, 3.0]);
+        let mut text = String::from("# from the MPC\nt,ref_sw_deg,extra\n");
+        for k in 0..=10 {
+            text += &format!("{},{},9\n", f64::from(k) * 0.1, 2 * k);
+        }
+        std::fs::write(&p, text).unwrap();
+        let r = track_from_csv(&p).unwrap();
+        assert_eq!(r.len(), 101);
+        assert!(
+            (r[5] - 1.0).abs() < 1e-9 && (r[100] - 20.0).abs() < 1e-9,
+            "{r:?}"
+        );
+    }
+
+    #[test]
+    fn a_track_file_too_short_or_too_long_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("ref.csv");
+        for (text, rows, span_s) in [
+            ("t,ref_sw_deg\n0,0\n0.01,1\n", 2, 0.01),
+            ("t,ref_sw_deg\n0,0\n5,10\n", 2, 5.0),
+        ] {
+            std::fs::write(&p, text).unwrap();
+            match track_from_csv(&p) {
+                Err(ReferenceFileError::TooShort {
+                    rows: r, span_s: s, ..
+                }) => assert_eq!((r, s), (rows, span_s)),
+                other => panic!("{other:?}"),
+            }
+        }
+        let mut text = String::from("t,ref_sw_deg\n");
+        for k in 0..10 {
+            text += &format!("{},0\n", f64::from(k) * 1000.0);
+        }
+        std::fs::write(&p, text).unwrap();
+        assert!(matches!(
+            track_from_csv(&p),
+            Err(ReferenceFileError::TooLong { span_s: 9000.0, .. })
+        ));
     }
 }

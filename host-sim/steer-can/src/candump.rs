@@ -6,8 +6,17 @@
 //! Only what this bus carries is kept: classic data frames with 11-bit IDs. Extended IDs,
 //! remote frames and CAN FD frames are valid candump but not ours: they are skipped and
 //! counted, not errors.
+//!
+//! What other tools write for `candump -l` files is read too: the direction ` R`/` T` after
+//! the frame (`candump -l -x`, python-can's `CanutilsLogWriter`), a raw DLC above 8
+//! (`123#0011223344556677_9`), `candump -ta`'s spelled-out `123 [2] 01 02`, SavvyCAN's
+//! zero-padded relative stamps (`(0000000003.800000) vcan0 ...`), the `DROPCOUNT:` lines
+//! candump writes when its socket lost frames (counted, and said), CRLF line ends and a UTF-8
+//! byte-order mark. Hand-written rather than the `socketcan` crate's `dump` parser: that one is
+//! a dependency on Linux only, and `convert` runs on any laptop.
 
 use super::{BringupError, Stamped};
+use host_io::lines::Capped;
 use std::io::{BufRead, Write};
 use std::path::Path;
 use steering_ecu::can::{Frame, StandardId};
@@ -24,7 +33,16 @@ pub struct CandumpFile {
     /// latest frame kept, and the line of the first of them.
     pub dropped_backwards: usize,
     pub first_dropped_line: Option<usize>,
+    /// Frames candump's socket lost while recording (its `DROPCOUNT:` lines), and the line of
+    /// the first such report.
+    pub socket_drops: u64,
+    pub first_drop_report_line: Option<usize>,
 }
+
+/// The longest candump line read, bytes: a CAN FD frame with 64 data bytes takes under 200; a
+/// file without a line end for longer is not a candump log and is refused at once, not read
+/// whole.
+pub const MAX_LINE_BYTES: usize = 4096;
 
 /// How far a frame may be stamped before the one read just before it and still be kept (at the
 /// later time). One socket's stamps never go back, but a file merged from two captures can
@@ -68,12 +86,32 @@ fn parse_line(line: &str) -> Result<Line, String> {
     let body = parts
         .next()
         .ok_or_else(|| "missing frame `ID#DATA` after the interface name".to_string())?;
-    if let Some(extra) = parts.next() {
-        return Err(format!("unexpected `{extra}` after the frame"));
+    let rest: Vec<&str> = parts.collect();
+    let spelled;
+    let (id_hex, data_hex, after) = match body.split_once('#') {
+        Some((id, data)) => (id, data, &rest[..]),
+        None => match rest.first().and_then(|d| spelled_out_len(d)) {
+            // `candump -ta`'s `ID [LEN] B0 B1 ...`: the data as pairs, written here as
+            // candump -l would.
+            Some(len) if rest.len() > len && rest[1..=len].iter().all(|b| b.len() == 2) => {
+                spelled = rest[1..=len].concat();
+                (body, spelled.as_str(), &rest[len + 1..])
+            }
+            Some(len) => {
+                return Err(format!(
+                    "frame `{body} [{len}]` needs {len} data bytes as pairs of hex digits"
+                ));
+            }
+            None => return Err(format!("frame `{body}` has no `#` between ID and data")),
+        },
+    };
+    match after {
+        [] => {}
+        // The direction: received or transmitted by the recording host (`candump -x`,
+        // python-can). Either way the frame was on the bus.
+        [dir] if dir.eq_ignore_ascii_case("R") || dir.eq_ignore_ascii_case("T") => {}
+        [extra, ..] => return Err(format!("unexpected `{extra}` after the frame")),
     }
-    let (id_hex, data_hex) = body
-        .split_once('#')
-        .ok_or_else(|| format!("frame `{body}` has no `#` between ID and data"))?;
     if id_hex.is_empty() || !id_hex.chars().all(|c| c.is_ascii_hexdigit()) {
         return Err(format!("ID `{id_hex}` is not hexadecimal"));
     }
@@ -88,7 +126,14 @@ fn parse_line(line: &str) -> Result<Line, String> {
     }
     let raw = u16::from_str_radix(id_hex, 16).map_err(|e| format!("ID `{id_hex}`: {e}"))?;
     let id = StandardId::new(raw).ok_or_else(|| format!("ID 0x{raw:03X} is above 0x7FF"))?;
-    let data_hex: String = data_hex.chars().filter(|c| *c != '.').collect();
+    let mut data_hex: String = data_hex.chars().filter(|c| *c != '.').collect();
+    // A raw DLC of 9 to 15 after 8 bytes (`_9`..`_F`): still 8 bytes of data.
+    if data_hex.len() == 18
+        && data_hex.as_bytes()[16] == b'_'
+        && matches!(data_hex.as_bytes()[17], b'9' | b'A'..=b'F' | b'a'..=b'f')
+    {
+        data_hex.truncate(16);
+    }
     if !data_hex.len().is_multiple_of(2) || data_hex.len() > 16 {
         return Err(format!(
             "data `{data_hex}` must be 0 to 8 bytes as pairs of hex digits"
@@ -103,6 +148,24 @@ fn parse_line(line: &str) -> Result<Line, String> {
     }
     let frame = Frame::new(id, &data).ok_or_else(|| "more than 8 data bytes".to_string())?;
     Ok(Line::Frame { t_s, frame })
+}
+
+/// `[LEN]` of `candump -ta`'s spelled-out frames, 0 to 8.
+fn spelled_out_len(word: &str) -> Option<usize> {
+    let len: usize = word.strip_prefix('[')?.strip_suffix(']')?.parse().ok()?;
+    (len <= 8).then_some(len)
+}
+
+/// The frames a `DROPCOUNT: dropped N CAN frame(s) on 'can0' socket (total drops M)` line
+/// reports, if the line is one.
+fn drop_report(line: &str) -> Option<Result<u64, String>> {
+    let rest = line.trim_start().strip_prefix("DROPCOUNT:")?;
+    let n = rest
+        .split_whitespace()
+        .nth(1)
+        .and_then(|w| w.parse().ok())
+        .ok_or_else(|| format!("`{}`: no frame count after `dropped`", line.trim()));
+    Some(n)
 }
 
 /// One candump line read as a classic 11-bit data frame and its time stamp, s; `Ok(None)` for
@@ -157,21 +220,44 @@ pub fn read_from(reader: impl BufRead, path: &Path) -> Result<CandumpFile, Bring
     let mut first: Option<f64> = None;
     let mut latest_s = f64::NEG_INFINITY;
     let mut last_us = 0u64;
-    for (i, line) in reader.lines().enumerate() {
-        let line_no = i + 1;
-        let line = line.map_err(|source| BringupError::Io {
-            context: format!("{}:{line_no}", path.display()),
-            source,
-        })?;
-        if line.trim().is_empty() {
-            continue;
-        }
+    let mut reader = reader;
+    let mut text = String::new();
+    for line_no in 1.. {
         let err = |message: String| BringupError::Candump {
             path: path.to_path_buf(),
             line: line_no,
             message,
         };
-        match parse_line(&line).map_err(err)? {
+        let read = host_io::lines::read_line_capped(&mut reader, &mut text, MAX_LINE_BYTES)
+            .map_err(|source| BringupError::Io {
+                context: format!("{}:{line_no}", path.display()),
+                source,
+            })?;
+        match read {
+            Capped::End => break,
+            Capped::TooLong => {
+                return Err(err(format!(
+                    "longer than {MAX_LINE_BYTES} bytes: not a candump log (a binary file, or \
+                     no line ends?); nothing past it was read"
+                )));
+            }
+            Capped::Line => {}
+        }
+        // A byte-order mark from an editor or a Windows tool.
+        let line = if line_no == 1 {
+            text.trim_start_matches('\u{feff}')
+        } else {
+            &text
+        };
+        if line.trim().is_empty() {
+            continue;
+        }
+        if let Some(report) = drop_report(line) {
+            out.socket_drops += report.map_err(err)?;
+            out.first_drop_report_line.get_or_insert(line_no);
+            continue;
+        }
+        match parse_line(line).map_err(err)? {
             Line::NotOurs => out.skipped += 1,
             Line::Frame { t_s, frame } => {
                 if t_s < latest_s - BACKWARDS_TOLERANCE_S {
@@ -192,6 +278,20 @@ pub fn read_from(reader: impl BufRead, path: &Path) -> Result<CandumpFile, Bring
     }
     out.epoch_s = first.unwrap_or(0.0);
     Ok(out)
+}
+
+/// The interface name a recording of the simulated car (`sim`, `sim:PATH`) carries: `can0`,
+/// the car's, so a rehearsal's file goes through the same commands as the car's
+/// (`log2asc -I bus.candump can0`, cantools, python-can) without being told of `sim`.
+pub const SIM_RECORDING_IFACE: &str = "can0";
+
+/// The interface name to write for a transport called `name`.
+pub fn recorded_iface(name: &str) -> &str {
+    if name == "sim" || name.starts_with("sim:") {
+        SIM_RECORDING_IFACE
+    } else {
+        name
+    }
 }
 
 /// One candump line for `frame` at `epoch_s + t_us`.
@@ -340,6 +440,76 @@ mod tests {
             .collect();
         // Half a millisecond back is within the tolerance: kept, at the latest time.
         assert_eq!(kept, [(0, 0), (10_000, 1), (10_000, 3), (30_000, 4)]);
+    }
+
+    /// What other tools write for `candump -l` logs reads as the same frames.
+    #[test]
+    fn other_tools_candump_logs_read_as_the_same_frames() {
+        let plain =
+            parse("(1700000000.000100) can0 101#0102\n(1700000000.010100) can0 080#\n").unwrap();
+        for (tool, text) in [
+            (
+                "python-can CanutilsLogWriter, candump -l -x",
+                "(1700000000.000100) vcan0 101#0102 R\n(1700000000.010100) vcan0 080# T\n",
+            ),
+            (
+                "a byte-order mark and CRLF",
+                "\u{feff}(1700000000.000100) can0 101#0102\r\n(1700000000.010100) can0 080#\r\n",
+            ),
+            (
+                "candump -ta, spelled out",
+                "(1700000000.000100)  can0  101   [2]  01 02\n(1700000000.010100)  can0  080   [0]\n",
+            ),
+            (
+                "nanosecond stamps",
+                "(1700000000.000100000) can0 101#0102\n(1700000000.010100000) can0 080#\n",
+            ),
+        ] {
+            let f = parse(text).unwrap_or_else(|e| panic!("{tool}: {e}"));
+            assert_eq!(f.frames, plain.frames, "{tool}");
+            assert_eq!(f.epoch_s, plain.epoch_s, "{tool}");
+        }
+        // SavvyCAN stamps from the start of its capture, zero-padded.
+        let savvy =
+            parse("(0000000003.800000) vcan0 101#0102\n(0000000003.810000) vcan0 080#\n").unwrap();
+        assert_eq!(savvy.frames, plain.frames);
+        assert_eq!(savvy.epoch_s, 3.8);
+        // A raw DLC above 8 is 8 bytes of data.
+        let raw = parse("(1.0) can0 101#0011223344556677_9\n").unwrap();
+        assert_eq!(
+            raw.frames[0].frame.data(),
+            [0, 0x11, 0x22, 0x33, 0x44, 0x55, 0x66, 0x77]
+        );
+        // Anything else after the frame is still an error.
+        assert!(matches!(
+            parse("(1.0) can0 101#00 X\n"),
+            Err(BringupError::Candump { line: 1, .. })
+        ));
+    }
+
+    #[test]
+    fn candump_drop_reports_are_counted_not_refused() {
+        let text = "(1.00) can0 101#00\n\
+                    DROPCOUNT: dropped 3 CAN frames on 'can0' socket (total drops 3)\n\
+                    (1.01) can0 101#01\n\
+                    DROPCOUNT: dropped 1 CAN frame on 'can0' socket (total drops 4)\n";
+        let f = parse(text).unwrap();
+        assert_eq!(f.frames.len(), 2);
+        assert_eq!((f.socket_drops, f.first_drop_report_line), (4, Some(2)));
+    }
+
+    /// A line past the cap is refused with its number, having read about the cap only.
+    #[test]
+    fn an_overlong_line_is_refused_without_reading_it_whole() {
+        let mut text = String::from("(1.0) can0 101#00\n");
+        text.push_str(&"\0".repeat(4 * 1024 * 1024));
+        match parse(&text) {
+            Err(BringupError::Candump { line, message, .. }) => {
+                assert_eq!(line, 2);
+                assert!(message.contains("longer than 4096 bytes"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

@@ -6,14 +6,15 @@
 //! ([`Outcome`]) besides printing it, so `rehearse` judges values, not text.
 
 use super::campaign::{self, Campaign, Live};
-use super::decode::{Decoder, faults_in_words};
+use super::decode::{Decoded, Decoder, faults_in_words};
+use super::liveplot::{self, LivePlot};
 use super::logbuild::{self, Rows};
 use super::monitor::Monitor;
 use super::profile::{self, Profile, parse_as_state};
 use super::simcar;
 use super::{BringupError, Transport, candump, epos, pump};
 use canlink::reference::ReferenceSender;
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use host_io::scenario::Sweep;
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
@@ -35,11 +36,16 @@ use steering_ecu::protocol::PERIOD_US;
 )]
 pub struct Cli {
     /// SocketCAN interface (`can0`); `sim` for a simulated car of this call alone; `sim:PATH`
-    /// for the car `steer-can sim-car --socket PATH` serves to every call.
+    /// for the car `steer-can sim-car --socket PATH` serves to every call. `rehearse`: `sim`.
     #[arg(long, global = true, default_value = "can0")]
     pub iface: String,
     /// The EPOS4's CANopen node ID.
-    #[arg(long, global = true, default_value_t = 1)]
+    #[arg(
+        long,
+        global = true,
+        default_value_t = 1,
+        allow_negative_numbers = true
+    )]
     pub node: u8,
     /// With `--iface sim`: run as fast as the CPU allows instead of in step with the wall
     /// clock (tests, quick rehearsals).
@@ -77,6 +83,53 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// The global options that mean nothing to a command, by command: hidden from its `--help`.
+/// `convert` reads a file (only `--node` matters to it: the EPOS4's PDO IDs); `sim-car` is the
+/// simulated car itself, so it has no interface to name.
+const NOT_FOR: &[(&str, &[&str])] = &[
+    (
+        "convert",
+        &["iface", "fast", "sim_column_deg", "controller", "drive"],
+    ),
+    ("sim-car", &["iface", "fast"]),
+];
+
+/// The command line as `main` parses it: [`Cli`]'s, with each command's `--help` listing only
+/// the global options that apply to it.
+pub fn command() -> clap::Command {
+    let mut cmd = Cli::command();
+    // A subcommand that has an option of a global's name does not get the global copied into
+    // it: give it a hidden copy instead, still accepted (a script that passes `--iface` to
+    // every call keeps working) but not listed. Its value stays with the subcommand, which
+    // does not read it.
+    for (sub, hidden) in NOT_FOR {
+        let copies: Vec<clap::Arg> = cmd
+            .get_arguments()
+            .filter(|a| hidden.contains(&a.get_id().as_str()))
+            .map(|a| a.clone().global(false).hide(true))
+            .collect();
+        cmd = cmd.mut_subcommand(*sub, |c| c.args(copies));
+    }
+    cmd
+}
+
+impl Cli {
+    /// The defaults that depend on the command: `rehearse` runs on the simulated car only, so
+    /// there `--iface` means `sim` unless it is given.
+    pub fn with_command_defaults(mut self, matches: &clap::ArgMatches) -> Cli {
+        let iface_given = matches!(
+            matches.value_source("iface"),
+            Some(clap::parser::ValueSource::CommandLine | clap::parser::ValueSource::EnvVariable)
+        ) || matches.subcommand().is_some_and(|(_, sub)| {
+            sub.value_source("iface") == Some(clap::parser::ValueSource::CommandLine)
+        });
+        if matches!(self.command, Command::Rehearse { .. }) && !iface_given {
+            self.iface = "sim".into();
+        }
+        self
+    }
+}
+
 /// `--controller`: which steering controller the simulated ECU runs.
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ControllerArg {
@@ -109,14 +162,23 @@ pub enum Command {
     /// with counters, CRC errors and the fault bits in words.
     Monitor {
         /// Stop after this long, s (default: until Ctrl-C).
-        #[arg(long, value_name = "S")]
+        #[arg(long, value_name = "S", allow_negative_numbers = true)]
         duration_s: Option<f64>,
         /// Print every frame, decoded, besides the summary.
         #[arg(long)]
         each: bool,
         /// Summary every this many seconds.
-        #[arg(long, default_value_t = 1.0, value_name = "S")]
+        #[arg(
+            long,
+            default_value_t = 1.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         refresh_s: f64,
+        /// Draw reference, column angle, motor angle and current scrolling in the terminal
+        /// (the last 10 s, redrawn 10 times a second), with state, faults and counters below.
+        #[arg(long, conflicts_with = "each")]
+        plot: bool,
     },
     /// The EPOS4 by SDO reads: NMT state, mode, the gains and the drive's limits (current,
     /// following error, speed, software position limits) against ours, error register and
@@ -148,12 +210,13 @@ pub enum Command {
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
         /// Stop after this long, s (default: until Ctrl-C).
-        #[arg(long, value_name = "S")]
+        #[arg(long, value_name = "S", allow_negative_numbers = true)]
         duration_s: Option<f64>,
     },
     /// The README's first day on the simulated car, in one session: each `steer-can` step the
     /// README's bring-up list names, its result beside what the README expects, pass or fail
-    /// (exit 1 if any step fails). `--iface sim` only; `--fast` to run it at CPU speed.
+    /// (exit 1 if any step fails). On the simulated car only (the default `--iface` here);
+    /// `--fast` to run it at CPU speed.
     Rehearse {
         /// Where the steps' files go (sweep.csv.gz, track.csv.gz, profile.csv, bus.candump,
         /// log.csv).
@@ -191,25 +254,55 @@ pub enum SendProfile {
     /// A step at the wheel (sent as a ramp at the ECU's 400 deg/s).
     Step {
         /// Height of the step at the steering wheel, deg.
-        #[arg(long, default_value_t = 2.0, value_name = "DEG")]
+        #[arg(
+            long,
+            default_value_t = 2.0,
+            value_name = "DEG",
+            allow_negative_numbers = true
+        )]
         amplitude_deg: f64,
         /// When the step starts, s after the first frame.
-        #[arg(long, default_value_t = 0.5, value_name = "S")]
+        #[arg(
+            long,
+            default_value_t = 0.5,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         at_s: f64,
         /// Length of the whole profile, s.
-        #[arg(long, default_value_t = 2.0, value_name = "S")]
+        #[arg(
+            long,
+            default_value_t = 2.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         duration_s: f64,
     },
     /// A sine at the wheel.
     Sine {
         /// Amplitude at the steering wheel, deg.
-        #[arg(long, default_value_t = 2.0, value_name = "DEG")]
+        #[arg(
+            long,
+            default_value_t = 2.0,
+            value_name = "DEG",
+            allow_negative_numbers = true
+        )]
         amplitude_deg: f64,
         /// Frequency, Hz.
-        #[arg(long, default_value_t = 1.0, value_name = "HZ")]
+        #[arg(
+            long,
+            default_value_t = 1.0,
+            value_name = "HZ",
+            allow_negative_numbers = true
+        )]
         freq_hz: f64,
         /// Length of the profile, s.
-        #[arg(long, default_value_t = 5.0, value_name = "S")]
+        #[arg(
+            long,
+            default_value_t = 5.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         duration_s: f64,
     },
     /// The paper's chirp (section 4.2).
@@ -224,16 +317,36 @@ pub enum SendProfile {
 #[derive(Args, Debug, Clone)]
 pub struct SweepArgs {
     /// Amplitude of the chirp at the steering wheel, deg.
-    #[arg(long, default_value_t = 10.0, value_name = "DEG")]
+    #[arg(
+        long,
+        default_value_t = 10.0,
+        value_name = "DEG",
+        allow_negative_numbers = true
+    )]
     pub amplitude_deg: f64,
     /// Frequency at the start, Hz.
-    #[arg(long, default_value_t = 0.0, value_name = "HZ")]
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        value_name = "HZ",
+        allow_negative_numbers = true
+    )]
     pub f_start_hz: f64,
     /// Frequency at the end, Hz.
-    #[arg(long, default_value_t = 10.0, value_name = "HZ")]
+    #[arg(
+        long,
+        default_value_t = 10.0,
+        value_name = "HZ",
+        allow_negative_numbers = true
+    )]
     pub f_end_hz: f64,
     /// Length of the chirp, s.
-    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    #[arg(
+        long,
+        default_value_t = 10.0,
+        value_name = "S",
+        allow_negative_numbers = true
+    )]
     pub duration_s: f64,
 }
 
@@ -293,7 +406,11 @@ pub const EXIT_ABORTED: u8 = 3;
 
 /// Entry point of the binary.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let matches = command().get_matches();
+    let cli = match Cli::from_arg_matches(&matches) {
+        Ok(cli) => cli.with_command_defaults(&matches),
+        Err(e) => e.exit(),
+    };
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
@@ -388,7 +505,8 @@ pub struct CampaignOutcome {
 }
 
 fn run(cli: Cli) -> Result<ExitCode, BringupError> {
-    let node = NodeId::new(cli.node).ok_or_else(|| BringupError::Profile {
+    super::bounds::check(&cli)?;
+    let node = NodeId::new(cli.node).ok_or_else(|| BringupError::Usage {
         reason: format!("--node {}: a CANopen node ID is 1 to 127", cli.node),
     })?;
     let dec = decoder(node)?;
@@ -412,30 +530,42 @@ fn run(cli: Cli) -> Result<ExitCode, BringupError> {
         Command::SimCar { socket } => simcar::serve(&cli, socket)?,
         command => {
             let mut t = open(&cli)?;
-            execute(command, node, &dec, t.as_mut())?
+            execute(
+                command,
+                node,
+                &dec,
+                t.as_mut(),
+                &mut ReferenceSender::default(),
+            )?
         }
     };
     Ok(outcome.exit_code())
 }
 
 /// Runs one command that needs the bus on `t` (every command but `convert` and `rehearse`).
+/// `sender` holds the reference frames' alive counter for the session: the ECU expects each
+/// frame's counter one above the last it saw, so the `send`s of one session (`rehearse`)
+/// continue one counter rather than each starting from 0, which the ECU would count as a jump.
 pub(crate) fn execute(
     command: &Command,
     node: NodeId,
     dec: &Decoder,
     t: &mut dyn Transport,
+    sender: &mut ReferenceSender,
 ) -> Result<Outcome, BringupError> {
     match command {
         Command::Monitor {
             duration_s,
             each,
             refresh_s,
+            plot,
         } => Ok(Outcome::Monitor(monitor(
             t,
             dec,
             *duration_s,
             *each,
             *refresh_s,
+            plot.then(|| LivePlot::new(1000)),
         )?)),
         Command::Epos {
             what: EposCommand::Check,
@@ -454,6 +584,7 @@ pub(crate) fn execute(
             *as_state,
             !*no_finish,
             profile,
+            sender,
         )?)),
         Command::Record { out, duration_s } => {
             let (frames, monitor) = record(t, dec, out, *duration_s)?;
@@ -502,6 +633,15 @@ pub(crate) fn convert(
             file.first_dropped_line.unwrap_or(0)
         );
     }
+    if file.socket_drops > 0 {
+        eprintln!(
+            "steer-can: warning: {}: candump reports {} frames its socket lost while \
+             recording (the first report at line {}); the log has gaps there",
+            path.display(),
+            file.socket_drops,
+            file.first_drop_report_line.unwrap_or(0)
+        );
+    }
     let rows = if all_rows { Rows::All } else { Rows::Active };
     // The log builder knows frames, not files: name the file the frames came from.
     let built = logbuild::build(&file.frames, dec, rows).map_err(|e| match e {
@@ -537,11 +677,14 @@ fn monitor(
     duration_s: Option<f64>,
     each: bool,
     refresh_s: f64,
+    mut plot: Option<LivePlot>,
 ) -> Result<Monitor, BringupError> {
     let stop = stop_flag();
     let mut m = Monitor::new(*dec);
     let start = t.now_us();
     let end = duration_s.map(|d| start + (d * 1e6) as u64);
+    // The picture moves at 10 frames a second; the text summary at the refresh period.
+    let refresh_s = if plot.is_some() { 0.1 } else { refresh_s };
     let refresh_us = (refresh_s.max(0.05) * 1e6) as u64;
     let mut next = start + refresh_us;
     let mut any = false;
@@ -552,6 +695,9 @@ fn monitor(
             let d = m.on_frame(rx);
             if each {
                 lines.push(m.line(rx, &d));
+            }
+            if let (Some(p), Decoded::Status(Ok(_))) = (plot.as_mut(), &d) {
+                p.sample(&m);
             }
             true
         })?;
@@ -567,12 +713,22 @@ fn monitor(
             );
             any = true;
         }
-        if t.now_us() >= next {
-            say!("--- {} ---\n{}", t.name(), m.summary().trim_end());
-            next += refresh_us;
-        }
-        if end.is_some_and(|e| t.now_us() >= e) || stop.load(Ordering::SeqCst) {
+        // The end's summary follows below: one for the same instant is enough.
+        let ending = end.is_some_and(|e| t.now_us() >= e) || stop.load(Ordering::SeqCst);
+        if ending {
             break;
+        }
+        if t.now_us() >= next {
+            match &plot {
+                Some(p) => {
+                    let (w, h) = liveplot::terminal_size();
+                    let title = format!("steer-can monitor --plot on {}", t.name());
+                    let frame = p.render(&title, &liveplot::info_lines(&m), w, h);
+                    say!("{}{}", liveplot::REDRAW, frame.trim_end());
+                }
+                None => say!("--- {} ---\n{}", t.name(), m.summary().trim_end()),
+            }
+            next += refresh_us;
         }
     }
     say!("=== {} ===\n{}", t.name(), m.summary().trim_end());
@@ -596,7 +752,11 @@ fn record(
         source,
     };
     let file = std::fs::File::create(out).map_err(io)?;
-    let mut w = candump::Writer::new(std::io::BufWriter::new(file), t.epoch_s(), t.name());
+    let mut w = candump::Writer::new(
+        std::io::BufWriter::new(file),
+        t.epoch_s(),
+        candump::recorded_iface(t.name()),
+    );
     let mut m = Monitor::new(*dec);
     let start = t.now_us();
     let end = duration_s.map(|d| start + (d * 1e6) as u64);
@@ -723,7 +883,12 @@ fn campaign_cmd(
         p.push(".candump");
         PathBuf::from(p)
     });
-    candump::save(&record_path, t.epoch_s(), t.name(), &run.frames)?;
+    candump::save(
+        &record_path,
+        t.epoch_s(),
+        candump::recorded_iface(t.name()),
+        &run.frames,
+    )?;
     say!(
         "recording written to {} ({} frames)",
         record_path.display(),
@@ -779,6 +944,7 @@ fn send(
     as_state: Option<AsState>,
     finish: bool,
     which: &SendProfile,
+    sender: &mut ReferenceSender,
 ) -> Result<Monitor, BringupError> {
     let stop = stop_flag();
     let (profile, as_state, clear) = match which {
@@ -817,7 +983,6 @@ fn send(
         t.name(),
         profile.rate_limited
     );
-    let mut sender = ReferenceSender::default();
     let mut m = Monitor::new(*dec);
     let mut next = t.now_us();
     let n = profile.samples.len();
@@ -882,7 +1047,6 @@ fn send(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::CommandFactory;
 
     /// Every option and argument of every subcommand says what it is in `--help`.
     #[test]
@@ -901,6 +1065,39 @@ mod tests {
         let mut missing = Vec::new();
         walk(&Cli::command(), "steer-can", &mut missing);
         assert!(missing.is_empty(), "no help text: {missing:?}");
+    }
+
+    /// Two `send`s on one car in one session (`rehearse`): the second continues the first's
+    /// alive counter, so the ECU's E2E check counts no jump at its first frame.
+    #[cfg(feature = "sim")]
+    #[test]
+    fn a_second_send_in_a_session_continues_the_counter() {
+        let mut sim = host_sim::sim_ecu::SimEcu::new(host_sim::sim_ecu::SimCar::DEFAULT);
+        let node = NodeId::new(1).unwrap();
+        let dec = decoder(node).unwrap();
+        let step = Command::Send {
+            as_state: Some(AsState::Driving),
+            no_finish: false,
+            profile: SendProfile::Step {
+                amplitude_deg: 1.0,
+                at_s: 0.1,
+                duration_s: 0.3,
+            },
+        };
+        let jumps =
+            |sim: &host_sim::sim_ecu::SimEcu| sim.with_ecu(|e| e.e2e().drops().counter_jump);
+        let mut session = ReferenceSender::default();
+        execute(&step, node, &dec, &mut sim, &mut session).unwrap();
+        assert_eq!(jumps(&sim), 0);
+        execute(&step, node, &dec, &mut sim, &mut session).unwrap();
+        assert_eq!(
+            jumps(&sim),
+            0,
+            "the second send's first frame was a counter jump"
+        );
+        // A sender of its own, as a separate `steer-can send` has, starts from its own 0.
+        execute(&step, node, &dec, &mut sim, &mut ReferenceSender::default()).unwrap();
+        assert_eq!(jumps(&sim), 1);
     }
 
     /// The global options and the AS state are accepted before or after the subcommand.

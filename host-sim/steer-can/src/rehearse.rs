@@ -15,6 +15,7 @@ use super::cli::{self, Cli, Command, Outcome, SendProfile, say};
 use super::decode::{Decoder, ecu_state_words, faults_in_words, nmt_words};
 use super::monitor::Monitor;
 use super::{BringupError, Transport, WallPaced, simcar};
+use canlink::reference::ReferenceSender;
 use clap::Parser;
 use host_io::scenario;
 use host_sim::sim_ecu::SimEcu;
@@ -188,6 +189,8 @@ impl Car {
 struct Session {
     /// `send --no-finish` left the ECU to time out; the next monitor must see the fault.
     expect_timeout: bool,
+    /// The reference frames' alive counter, continued from one `send` to the next.
+    sender: ReferenceSender,
 }
 
 /// A step's verdict.
@@ -358,7 +361,7 @@ fn run_step(
         Command::Rehearse { .. } | Command::SimCar { .. } => {
             return fail("a first-day step", "not a step of a session".into());
         }
-        other => cli::execute(other, node, dec, car.transport()),
+        other => cli::execute(other, node, dec, car.transport(), &mut session.sender),
     };
     let outcome = match outcome {
         Ok(o) => o,

@@ -113,7 +113,7 @@ pub fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
                 ),
             });
         }
-        let at_s: f64 = at.parse().map_err(|_| bad())?;
+        let at_s = crate::bounds::inject_at_s(spec, at)?;
         sim.inject_at((at_s * 1e6) as u64, injection);
     }
     Ok(sim)

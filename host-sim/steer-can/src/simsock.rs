@@ -153,12 +153,15 @@ pub struct SimSocket {
 
 impl SimSocket {
     pub fn connect(socket: &Path) -> Result<SimSocket, LinkError> {
-        let no_car = |e: std::io::Error| LinkError::NoInterface {
-            iface: format!("sim:{}", socket.display()),
-            detail: format!(
-                "{e}; start the car with `steer-can sim-car --socket {}`",
+        // Not a CAN interface: `ip link` cannot help, a car served on the socket can.
+        let no_car = |source: std::io::Error| LinkError::Io {
+            context: format!(
+                "--iface sim:{0}: no simulated car serves this socket; start one in another \
+                 terminal with `steer-can sim-car --socket {0}`, or use `--iface sim` for a car \
+                 of this call alone",
                 socket.display()
             ),
+            source,
         };
         let stream = UnixStream::connect(socket).map_err(no_car)?;
         stream

@@ -140,6 +140,40 @@ fn a_missing_interface_says_how_to_bring_it_up() {
     );
 }
 
+/// A shared simulated car that is not there: the advice is to start one, not `ip link`.
+#[cfg(all(unix, feature = "sim"))]
+#[test]
+fn a_missing_simulated_car_says_how_to_start_one() {
+    let o = steer_can(&[
+        "--iface",
+        "sim:/nonexistent.sock",
+        "monitor",
+        "--duration-s",
+        "0.1",
+    ]);
+    assert_refused(
+        &o,
+        &[
+            "--iface sim:/nonexistent.sock: no simulated car serves this socket",
+            "steer-can sim-car --socket /nonexistent.sock",
+        ],
+    );
+    assert!(!stderr(&o).contains("ip link"), "{}", stderr(&o));
+}
+
+/// A file that is not a candump log, with no line end for megabytes (`truncate -s 2G`), is
+/// refused at its first line, without reading it whole.
+#[test]
+fn convert_refuses_an_overlong_line_without_reading_it_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("zeros.candump");
+    std::fs::write(&dump, vec![0u8; 8 * 1024 * 1024]).unwrap();
+    let out = dir.path().join("log.csv");
+    let o = steer_can(&["convert", s(&dump), "--out", s(&out)]);
+    assert_refused(&o, &["zeros.candump:1: longer than 4096 bytes"]);
+    assert!(!out.exists());
+}
+
 /// The laptop build has no simulated car: `--iface sim`, `--iface sim:PATH`, `rehearse` and
 /// `sim-car` each say so and how to get a build with one, before touching any bus or file.
 #[cfg(not(feature = "sim"))]

@@ -86,6 +86,126 @@ fn monitor_decodes_the_simulated_bus() {
     assert!(!out.contains("CRC errors 1"), "{out}");
 }
 
+/// A summary per refresh period and one at the end, never two for the same instant (a
+/// monitor as long as its refresh period printed the same summary twice).
+#[test]
+fn monitor_prints_each_summary_once() {
+    for (duration, periodic) in [("1", 0), ("2.5", 2), ("3", 2)] {
+        let o = steer_can(&["--iface", "sim", "monitor", "--duration-s", duration]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let out = stdout(&o);
+        let count = |head: &str| out.lines().filter(|l| l.starts_with(head)).count();
+        assert_eq!(
+            (count("--- sim ---"), count("=== sim ===")),
+            (periodic, 1),
+            "--duration-s {duration}: {out}"
+        );
+    }
+}
+
+/// `monitor --plot` redraws in place 10 times a second: three charts of the simulated car at
+/// its power-up angle, the state below them, and the text summary at the end.
+#[test]
+fn monitor_plot_draws_the_charts_in_place() {
+    let o = Command::new(env!("CARGO_BIN_EXE_steer-can"))
+        .args(["--iface", "sim", "--fast", "--sim-column-deg", "3"])
+        .args(["monitor", "--plot", "--duration-s", "1"])
+        .env("COLUMNS", "80")
+        .env("LINES", "30")
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    let frames: Vec<&str> = out.split("\x1b[H\x1b[J").skip(1).collect();
+    assert_eq!(frames.len(), 9, "redrawn every 0.1 s before the end");
+    // The last picture, without the text summary printed after it at the end.
+    let last = frames[frames.len() - 1]
+        .split("=== sim ===")
+        .next()
+        .unwrap();
+    for part in [
+        "angle at the wheel, deg",
+        "motor angle, rad",
+        "current, A",
+        "state idle, faults: none",
+    ] {
+        assert!(last.contains(part), "{part} not in {last}");
+    }
+    // The column sits at its power-up angle: one row of marks, inside the scale's ends.
+    let angle: Vec<&str> = last
+        .split("motor angle")
+        .next()
+        .unwrap()
+        .lines()
+        .filter(|l| l.contains('|'))
+        .collect();
+    assert_eq!(
+        angle.iter().filter(|l| l.contains('#')).count(),
+        1,
+        "{last}"
+    );
+    assert!(angle[0].trim_start().starts_with("+3.99|"), "{last}");
+    assert!(last.lines().all(|l| l.chars().count() <= 80), "{last}");
+    assert!(out.contains("=== sim ==="), "the summary at the end");
+}
+
+/// `rehearse` runs on the simulated car only: there `--iface` means `sim` unless given.
+#[test]
+fn rehearse_defaults_to_the_simulated_car() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = steer_can(&[
+        "--iface",
+        "can0",
+        "rehearse",
+        "--dir",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("simulated car only"), "{}", stderr(&o));
+    let o = steer_can(&["rehearse", "--dir", dir.path().to_str().unwrap()]);
+    assert!(o.status.success(), "{}\n{}", stdout(&o), stderr(&o));
+    assert!(stdout(&o).contains("rehearsal of the README's first day on the simulated car"));
+}
+
+/// `convert --help` lists what applies to a file: not the interface nor the simulated car's
+/// options; a command on the bus still lists them.
+#[test]
+fn convert_help_lists_only_the_options_that_apply() {
+    let help = |args: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_steer-can"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        stdout(&o)
+    };
+    let convert = help(&["convert", "--help"]);
+    for absent in [
+        "--iface",
+        "--fast",
+        "--sim-column-deg",
+        "--controller",
+        "--drive",
+    ] {
+        assert!(!convert.contains(absent), "{absent} in: {convert}");
+    }
+    assert!(
+        convert.contains("--node") && convert.contains("--all-rows"),
+        "{convert}"
+    );
+    let monitor = help(&["monitor", "--help"]);
+    for present in [
+        "--iface",
+        "--fast",
+        "--sim-column-deg",
+        "--controller",
+        "--drive",
+    ] {
+        assert!(monitor.contains(present), "{present} not in: {monitor}");
+    }
+}
+
 #[test]
 fn epos_check_compares_the_gains_with_ours() {
     let o = steer_can(&["--iface", "sim", "epos", "check"]);
@@ -350,10 +470,10 @@ fn record_on_sim_holds_the_vehicle_frames_and_converts_to_a_log() {
     assert!(lines[0].starts_with("(1700000000.000"), "{}", lines[0]);
     let count = |id: &str| lines.iter().filter(|l| l.contains(id)).count();
     // 0.3 s Ready + 2.01 s of sine + 0.2 s Finished + 0.2 s Off, one frame per 10 ms.
-    assert_eq!(count(" sim 100#"), 30 + 201 + 20 + 20, "{text:.400}");
-    assert!(count(" sim 101#") >= 299, "status frames");
+    assert_eq!(count(" can0 100#"), 30 + 201 + 20 + 20, "{text:.400}");
+    assert!(count(" can0 101#") >= 299, "status frames");
     // SYNC from the end of the link's configuration, every 10 ms.
-    assert!(count(" sim 080#") >= 290, "SYNC frames");
+    assert!(count(" can0 080#") >= 290, "SYNC frames");
 
     let log = dir.path().join("log.csv");
     let o = steer_can(&[
