@@ -89,7 +89,14 @@ pub struct Cli {
 const NOT_FOR: &[(&str, &[&str])] = &[
     (
         "convert",
-        &["iface", "fast", "sim_column_deg", "controller", "drive"],
+        &[
+            "iface",
+            "fast",
+            "sim_column_deg",
+            "controller",
+            "drive",
+            "plant_effects",
+        ],
     ),
     ("sim-car", &["iface", "fast"]),
 ];
