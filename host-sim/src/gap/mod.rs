@@ -234,10 +234,23 @@ impl Record {
                 let mid = origin + (k as f64 + 0.5) * dt;
                 let j = t.partition_point(|v| *v < mid).min(t.len() - 1);
                 // Rows missing before row j: its value is the reference of its own interval
-                // only; over the missing ones, the line from the row before.
+                // only; over the missing ones, the cubic through the neighbours' (each at its
+                // interval's middle). The controller's acceleration feedforward acts on the
+                // reference's second difference, so a straight line across a lost row of a
+                // sine would be a current spike the car never had.
                 if j > 0 && t[j] - t[j - 1] > 1.5 * row_dt && mid < t[j] - row_dt {
-                    let s = ((mid - t[j - 1]) / (t[j] - row_dt - t[j - 1])).clamp(0.0, 1.0);
-                    reference[j - 1] + s * (reference[j] - reference[j - 1])
+                    let lo = j.saturating_sub(2);
+                    let hi = (j + 1).min(t.len() - 1);
+                    let at = |i: usize| t[i] - 0.5 * row_dt;
+                    (lo..=hi)
+                        .map(|i| {
+                            let w: f64 = (lo..=hi)
+                                .filter(|&m| m != i)
+                                .map(|m| (mid - at(m)) / (at(i) - at(m)))
+                                .product();
+                            w * reference[i]
+                        })
+                        .sum()
                 } else {
                     reference[j]
                 }
