@@ -21,13 +21,23 @@ fn chirp(amplitude: f64, f1: f64, duration_s: f64) -> Vec<f64> {
 
 /// A log of the paper rig with `effects`, written as `t,ref_sw_deg,sw_deg,motor_rad,current_a`.
 fn write_log(dir: &std::path::Path, name: &str, effects: Effects) -> std::path::PathBuf {
+    write_log_of(dir, name, effects, chirp(6.0, 4.0, 10.0))
+}
+
+/// [`write_log`] with its own reference.
+fn write_log_of(
+    dir: &std::path::Path,
+    name: &str,
+    effects: Effects,
+    reference: Vec<f64>,
+) -> std::path::PathBuf {
     let rig = Rig::paper();
     let case = Case {
         index: 3,
         scenario: "chirp".into(),
         hidden: vec![],
         effects,
-        reference: chirp(6.0, 4.0, 10.0),
+        reference,
     };
     let rec = record_of(&rig, &case, 11);
     let per = motor_per_pinion();
@@ -76,15 +86,21 @@ fn nominal_log_gets_no_effect_and_coulomb_log_gets_coulomb() {
     let mut fx = Effects::nominal();
     fx.coulomb = 0.15;
     let friction = write_log(dir.path(), "coulomb.csv", fx);
+    // The validation log: the same car, another excitation.
+    let second = write_log_of(dir.path(), "coulomb2.csv", fx, chirp(8.0, 3.0, 10.0));
     let rec = rig.load_record(&friction).expect("load coulomb");
     let d = diagnose(
         &rig,
         &rec,
-        Some(&rig.load_record(&nominal).expect("nominal")),
+        Some(&rig.load_record(&second).expect("second")),
         &opts(),
     );
     println!("{}", d.summary());
     assert_eq!(d.verdict.effects, vec!["coulomb_friction".to_string()]);
+    assert!(
+        d.verdict.gof_validation.unwrap() > d.baseline_validation.unwrap().gof,
+        "the validation log agrees"
+    );
     assert!(d.verdict.gof_after > d.baseline_gof + 0.05);
     let fc = d.ranking[0].params["torque_nm"];
     assert!((0.1..0.2).contains(&fc), "fitted {fc} Nm, hidden 0.15 Nm");
@@ -107,6 +123,46 @@ fn nominal_log_gets_no_effect_and_coulomb_log_gets_coulomb() {
             .is_some_and(|r| r.len() == 4)
     );
     assert!(json["where"]["segment"].is_string());
+}
+
+/// An honest verdict: an effect whose fit leaves the validation log further from the car than
+/// the nominal model is not named. The friction car's log validated on an effect-free car's:
+/// the friction fitted on the first makes the second worse (GoF 92.8 -> 48.0 %); it was named
+/// before.
+#[test]
+fn an_effect_the_validation_log_refutes_is_not_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let rig = Rig::paper();
+    let nominal = write_log(dir.path(), "nominal.csv", Effects::nominal());
+    let mut fx = Effects::nominal();
+    fx.coulomb = 0.15;
+    let friction = write_log(dir.path(), "coulomb.csv", fx);
+    let d = diagnose(
+        &rig,
+        &rig.load_record(&friction).expect("coulomb"),
+        Some(&rig.load_record(&nominal).expect("nominal")),
+        &opts(),
+    );
+    println!("{}", d.summary());
+    assert!(
+        !d.verdict
+            .effects
+            .iter()
+            .any(|e| e == "coulomb_friction" || e == "parameters"),
+        "{:?}: {}",
+        d.verdict.effects,
+        d.verdict.reason
+    );
+    assert!(
+        d.verdict.reason.contains("below the nominal"),
+        "{}",
+        d.verdict.reason
+    );
+    let v = d.verdict.gof_validation.unwrap();
+    assert!(
+        v >= d.baseline_validation.unwrap().gof,
+        "the verdict's validation GoF {v} is not below the nominal's"
+    );
 }
 
 #[test]
