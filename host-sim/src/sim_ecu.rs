@@ -114,28 +114,28 @@ impl SimCar {
 /// The direct-drive car's plant: the linear one of eqs. 1-8, or with effects the effect plant.
 #[derive(Debug)]
 enum CarPlant {
-    Linear(LinearPlant),
-    Effects(EffectPlant),
+    Linear(Box<LinearPlant>),
+    Effects(Box<EffectPlant>),
 }
 
 impl CarPlant {
     fn new(effects: PlantEffects, dt: f64) -> CarPlant {
         if effects.is_none() {
-            CarPlant::Linear(
+            CarPlant::Linear(Box::new(
                 LinearPlant::new(PlantParams::PAPER, dt).expect("the paper plant discretises"),
-            )
+            ))
         } else {
-            CarPlant::Effects(
+            CarPlant::Effects(Box::new(
                 EffectPlant::new(PlantParams::PAPER, effects, dt)
                     .expect("the paper plant discretises"),
-            )
+            ))
         }
     }
 
     fn get(&mut self) -> &mut dyn Actuator {
         match self {
-            CarPlant::Linear(p) => p,
-            CarPlant::Effects(p) => p,
+            CarPlant::Linear(p) => p.as_mut(),
+            CarPlant::Effects(p) => p.as_mut(),
         }
     }
 }
