@@ -10,7 +10,7 @@
 use host_sim::gap::drive::{self, LogSays, Source};
 use host_sim::gap::generator::{GenCase, Rows, rows_of};
 use host_sim::gap::rig::{CarDrive, Rig};
-use host_sim::gap::{Options, VerdictKind, diagnose};
+use host_sim::gap::{EffectKind, Options, VerdictKind, diagnose};
 use host_sim::sim::Controller;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -98,7 +98,9 @@ fn verdict_on(path: &Path) -> (Vec<String>, VerdictKind, drive::CarChoice) {
         &rig,
         &rec,
         None,
+        // The candidates `host-sim gap` fits on this rig, as the command sets them.
         &Options {
+            effects: EffectKind::for_rig(&rig),
             threads: 2,
             ..Options::default()
         },

@@ -252,16 +252,19 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         .and_then(|c| c.reference_shift_rows)
         .unwrap_or(0);
     let val = val.map(|v| super::drive::shifted_reference(&v, shift));
+    // What the diagnosis took the car and the log to be: printed first, and on the page.
+    let mut preamble = String::new();
     if let Some(car) = &car {
-        println!("{}", car.describe());
+        preamble.push_str(&format!("{}\n", car.describe()));
     }
-    println!(
-        "log timing: {} rows {:.2} ms apart, stamp jitter {:.2} ms RMS, {} rows missing",
+    preamble.push_str(&format!(
+        "log timing: {} rows {:.2} ms apart, stamp jitter {:.2} ms RMS, {} rows missing\n",
         timing.rows,
         1e3 * timing.row_dt_s,
         1e3 * timing.jitter_s,
         timing.missing_rows
-    );
+    ));
+    print!("{preamble}");
     let mut refit = None;
     if args.refit_linear {
         let id = super::identify::identify(&rig, &rec, 10, true)?;
@@ -288,7 +291,8 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         }
     }
     if let Some(path) = &args.report {
-        report_html(args, log, &rig, &rec, &d, &json, &summary).save(path)?;
+        let printed = format!("{preamble}{summary}");
+        report_html(args, log, &rig, &rec, &d, &json, &printed).save(path)?;
         println!("report written to {}", path.display());
     }
     Ok(())

@@ -128,7 +128,7 @@ impl CarChoice {
     pub fn describe(&self) -> String {
         let from = |s: Source| match s {
             Source::Option => "given",
-            Source::Header => "from the log's header",
+            Source::Header => "from the header of the log",
             Source::Fitted => "fitted",
         };
         let mut line = format!(
@@ -155,7 +155,7 @@ impl CarChoice {
             None => {}
         }
         line.push_str(&format!(
-            "; a delay is named only beyond {:.1} ms (what the log's timing can explain)",
+            "; a delay is named only beyond {:.1} ms (what the timing of the log can explain)",
             1e3 * self.timing_bound_s.max(0.010)
         ));
         let others: Vec<String> = self

@@ -2034,11 +2034,13 @@ impl Diagnosis {
         );
         let _ = writeln!(s, "\nwhere:");
         s.push_str(&self.where_.summary());
-        let _ = writeln!(s, "\nwhich (ranked):");
+        // Ranked by what the fits minimise, the cost (each signal's residual over its noise),
+        // printed as a share of the nominal cost; the GoF beside it need not fall in order.
+        let _ = writeln!(s, "\nwhich (ranked by the cost left, % of the nominal):");
         let _ = writeln!(
             s,
-            "  {:<28} {:>7} {:>7} {:>7} {:>9}  params",
-            "effect", "GoF %", "out %", "eff %", "valid. %"
+            "  {:<28} {:>7} {:>7} {:>7} {:>7} {:>9}  params",
+            "effect", "cost %", "GoF %", "out %", "eff %", "valid. %"
         );
         for c in &self.ranking {
             let params: Vec<String> = c
@@ -2048,8 +2050,9 @@ impl Diagnosis {
                 .collect();
             let _ = writeln!(
                 s,
-                "  {:<28} {:>7.1} {:>7.1} {:>7.1} {:>9}  {}",
+                "  {:<28} {:>7.1} {:>7.1} {:>7.1} {:>7.1} {:>9}  {}",
                 c.effect,
+                100.0 * c.cost / self.baseline_cost.max(1e-300),
                 100.0 * c.gof,
                 100.0 * c.fit.gof_output,
                 100.0 * c.fit.gof_effort,
