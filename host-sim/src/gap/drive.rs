@@ -12,7 +12,7 @@
 
 use super::model::Effects;
 use super::rig::{CarDrive, Rig, RigModel};
-use super::{Fit, Record, Scorer, simulate};
+use super::{Fit, Record, Scorer, parallel_map, simulate};
 use crate::sim::Controller;
 
 /// What a log's comment lines before its header say of the car and the logger.
@@ -416,37 +416,4 @@ pub fn choose(
     }
     let record = records[index_of(best.reference_shift_rows)].clone();
     (chosen, record, Some(choice))
-}
-
-/// `f` over `items` on up to `threads` threads, results in the items' order.
-fn parallel_map<T: Sync, R: Send>(
-    items: &[T],
-    threads: usize,
-    f: impl Fn(&T) -> R + Sync,
-) -> Vec<R> {
-    let threads = threads.clamp(1, items.len().max(1));
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let mut out: Vec<(usize, R)> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|_| {
-                s.spawn(|| {
-                    let mut done = Vec::new();
-                    loop {
-                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(item) = items.get(i) else {
-                            break;
-                        };
-                        done.push((i, f(item)));
-                    }
-                    done
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .collect()
-    });
-    out.sort_by_key(|(i, _)| *i);
-    out.into_iter().map(|(_, r)| r).collect()
 }

@@ -86,7 +86,7 @@ pub(crate) fn interp_at(t: &[f64], y: &[f64], tk: f64) -> f64 {
 /// A log's timing, as its stamps show it: the logger's, not the car's.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct LogTiming {
-    /// The typical row spacing (median), s.
+    /// The row spacing: the slope of the least-squares line through the stamps, s.
     pub row_dt_s: f64,
     /// Where the row grid starts: one spacing before the first row's place on the grid that
     /// fits every stamp best (median), s.
@@ -1140,41 +1140,21 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let mut ranking: Vec<Candidate> = Vec::new();
     let jobs: Vec<EffectKind> = opts.effects.clone();
     let threads = opts.threads.max(1);
-    // From a queue, not in fixed chunks: the fits differ in length (a two-parameter effect
-    // takes longer), and a chunk of long ones would leave a core idle.
-    let next_job = AtomicUsize::new(0);
-    let results: Vec<(EffectKind, FitOut)> = std::thread::scope(|s| {
-        let mut out = Vec::new();
-        for _ in 0..threads.min(jobs.len()) {
-            let handle = s.spawn(|| {
-                let mut done = Vec::new();
-                while let Some(&k) = jobs.get(next_job.fetch_add(1, Ordering::Relaxed)) {
-                    let fitted = fit_effects(
-                        rig,
-                        frec,
-                        fscorer,
-                        &[k],
-                        None,
-                        &nominal,
-                        opts.fit,
-                        &progress,
-                    );
-                    done.push((k, fitted));
-                }
-                done
-            });
-            out.push(handle);
-        }
-        // A worker that panicked fails the run: dropping its candidates would rank the rest
-        // and print a verdict as if nothing had happened.
-        out.into_iter()
-            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .collect()
-    });
     // In the candidates' order whichever thread finished first, so equal costs (two effects
     // both fitted to nothing) rank the same on every run.
-    let mut results = results;
-    results.sort_by_key(|(k, _)| jobs.iter().position(|j| j == k));
+    let results: Vec<(EffectKind, FitOut)> = parallel_map(&jobs, threads, |&k| {
+        let fitted = fit_effects(
+            rig,
+            frec,
+            fscorer,
+            &[k],
+            None,
+            &nominal,
+            opts.fit,
+            &progress,
+        );
+        (k, fitted)
+    });
     for (k, (values, errs, c, evals)) in results {
         ranking.push(make_candidate(
             rig,
@@ -2113,4 +2093,40 @@ impl Diagnosis {
         }
         s
     }
+}
+
+/// `f` over `items` on up to `threads` threads, results in the items' order. The items come
+/// off a queue, not in fixed chunks: jobs differ in length, and a chunk of long ones would
+/// leave a core idle. A worker that panicked fails the call: dropping its results would let
+/// the caller go on as if nothing had happened.
+pub(crate) fn parallel_map<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    let threads = threads.clamp(1, items.len().max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut out: Vec<(usize, R)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(item) = items.get(i) else {
+                            break;
+                        };
+                        done.push((i, f(item)));
+                    }
+                    done
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    });
+    out.sort_by_key(|(i, _)| *i);
+    out.into_iter().map(|(_, r)| r).collect()
 }
