@@ -7,7 +7,7 @@
 //! not depend on the logger.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
-use host_sim::gap::drive::{self, LogSays, Source};
+use host_sim::gap::drive;
 use host_sim::gap::generator::{GenCase, Rows, rows_of};
 use host_sim::gap::rig::{CarDrive, Rig};
 use host_sim::gap::{EffectKind, Options, VerdictKind, diagnose};
@@ -81,16 +81,13 @@ fn verdict_on(path: &Path) -> (Vec<String>, VerdictKind, drive::CarChoice) {
     let rig = Rig::paper();
     let loaded = rig.load_log(path).unwrap();
     let header = drive::LogHeader::parse(&loaded.comments).unwrap();
-    let says = LogSays {
-        reference_stated: header.reference.is_some(),
-        timing: loaded.timing,
-    };
-    let (rig, rec, choice) = drive::choose(
+    let (rig, rec, choice) = drive::choose_for_log(
         &rig,
         &loaded.record,
-        Some((CarDrive::Direct, Source::Option)),
-        Some((Controller::Paper, Source::Option)),
-        says,
+        &header,
+        loaded.timing,
+        Some(CarDrive::Direct),
+        Some(Controller::Paper),
         2,
     );
     let choice = choice.unwrap();

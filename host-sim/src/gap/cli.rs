@@ -1,6 +1,6 @@
 //! The `gap` and `identify` subcommands: arguments and what they print and write.
 
-use super::drive::{CarChoice, LogHeader, Source, controller_from_name};
+use super::drive::{CarChoice, LogHeader, controller_from_name};
 use super::rig::CarDrive;
 use super::rig::Rig;
 use super::{EffectKind, Options, diagnose, selftest};
@@ -119,20 +119,18 @@ fn car_for(
     threads: usize,
 ) -> Result<(Rig, super::Record, Option<CarChoice>)> {
     let drive = match &args.drive {
-        Some(d) => Some((
+        Some(d) => Some(
             CarDrive::from_name(d)
                 .ok_or_else(|| format!("--drive {d:?}: expected `epos4` or `direct`"))?,
-            Source::Option,
-        )),
-        None => header.drive.map(|d| (d, Source::Header)),
+        ),
+        None => None,
     };
     let controller = match &args.controller {
-        Some(c) => Some((
+        Some(c) => Some(
             controller_from_name(c)
                 .ok_or_else(|| format!("--controller {c:?}: expected `paper` or `ecu`"))?,
-            Source::Option,
-        )),
-        None => header.controller.map(|c| (c, Source::Header)),
+        ),
+        None => None,
     };
     if !matches!(rig.model, super::rig::RigModel::Paper(_)) {
         if args.drive.is_some() || args.controller.is_some() {
@@ -144,12 +142,8 @@ fn car_for(
         }
         return Ok((rig.clone(), rec.clone(), None));
     }
-    let says = super::drive::LogSays {
-        reference_stated: header.reference.is_some(),
-        timing,
-    };
-    Ok(super::drive::choose(
-        rig, rec, drive, controller, says, threads,
+    Ok(super::drive::choose_for_log(
+        rig, rec, header, timing, drive, controller, threads,
     ))
 }
 

@@ -417,3 +417,30 @@ pub fn choose(
     let record = records[index_of(best.reference_shift_rows)].clone();
     (chosen, record, Some(choice))
 }
+
+/// The car for a log as `host-sim gap` takes it: a `drive` or `controller` given (the command
+/// line) wins over the log's header lines; what neither says, and the reference convention a
+/// header does not state, is fitted ([`choose`]).
+pub fn choose_for_log(
+    rig: &Rig,
+    rec: &Record,
+    header: &LogHeader,
+    timing: super::LogTiming,
+    drive: Option<CarDrive>,
+    controller: Option<Controller>,
+    threads: usize,
+) -> (Rig, Record, Option<CarChoice>) {
+    let drive = match drive {
+        Some(d) => Some((d, Source::Option)),
+        None => header.drive.map(|d| (d, Source::Header)),
+    };
+    let controller = match controller {
+        Some(c) => Some((c, Source::Option)),
+        None => header.controller.map(|c| (c, Source::Header)),
+    };
+    let says = LogSays {
+        reference_stated: header.reference.is_some(),
+        timing,
+    };
+    choose(rig, rec, drive, controller, says, threads)
+}

@@ -52,18 +52,8 @@ fn diagnosed(car: SimCar, profile: Profile) -> (host_sim::gap::Diagnosis, drive:
         SimDrive::Direct => CarDrive::Direct,
     };
     assert_eq!(header.drive, Some(want), "the log's header names the drive");
-    let says = drive::LogSays {
-        reference_stated: header.reference.is_some(),
-        timing: loaded.timing,
-    };
-    let (rig, rec, choice) = drive::choose(
-        &rig,
-        &rec,
-        header.drive.map(|d| (d, Source::Header)),
-        header.controller.map(|c| (c, Source::Header)),
-        says,
-        2,
-    );
+    let (rig, rec, choice) =
+        drive::choose_for_log(&rig, &rec, &header, loaded.timing, None, None, 2);
     let choice = choice.unwrap();
     println!("{}", choice.describe());
     let d = diagnose(
