@@ -272,7 +272,7 @@ impl Ode {
 
 /// The world's plant as an [`Actuator`], so `sim::run_on` can close any of the firmware's
 /// loops around it: a second plant, integrated and written independently of
-/// `effect_plant.rs`, to check figures measured on that one (issue 14's track with play and
+/// `effect_plant.rs`, to check figures measured on that one (the track with play and
 /// friction).
 #[derive(Debug, Clone)]
 pub struct RkPlant {

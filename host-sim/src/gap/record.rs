@@ -1,0 +1,290 @@
+//! The log on the rig's grid ([`Record`]) and what its stamps say of the logger
+//! ([`LogTiming`]).
+
+/// A log on the rig's grid. For the paper rig the grid is the 10 ms reference period, and
+/// each step `k` holds what the log means (README, log format): the reference in force over
+/// the period, the column and motor angles at the instant the period ends, and the mean
+/// motor current over the period. The model computes the same quantities at the same
+/// instants. EMPS samples are taken as they are.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Record {
+    /// Grid step, s.
+    pub dt: f64,
+    /// Reference in force over each step.
+    pub reference: Vec<f64>,
+    /// Output at the end of each step.
+    pub output: Vec<f64>,
+    /// Mean effort over each step.
+    pub effort: Vec<f64>,
+    /// Motor angle in output units through the rigid gearing, at the end of each step; for
+    /// the segment analysis.
+    pub motor: Option<Vec<f64>>,
+    /// A known disturbance added to the effort (EMPS pulses).
+    pub disturbance: Option<Vec<f64>>,
+    /// The measured supply at each step, V; 0 while the drive is off (BAM: torque disabled).
+    pub supply_v: Option<Vec<f64>>,
+}
+
+/// What a log's current column holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum CurrentSamples {
+    /// The mean over the interval that ends at the row's time (the 0x102 frame, the EPOS4's
+    /// averaged current, host-sim's own logs): the default.
+    #[default]
+    IntervalMean,
+    /// Instantaneous samples (`# current: instantaneous`): the inner loop's chatter is then
+    /// in them, which the likelihood weighs by its measured noise.
+    Instantaneous,
+}
+
+/// Linear interpolation of `y(t)` at `tk`, held at the ends.
+pub(crate) fn interp_at(t: &[f64], y: &[f64], tk: f64) -> f64 {
+    let j = t.partition_point(|v| *v < tk);
+    if j == 0 {
+        y[0]
+    } else if j >= t.len() {
+        y[t.len() - 1]
+    } else {
+        let s = (tk - t[j - 1]) / (t[j] - t[j - 1]).max(1e-12);
+        y[j - 1] + s * (y[j] - y[j - 1])
+    }
+}
+
+/// A log's timing, as its stamps show it: the logger's, not the car's.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct LogTiming {
+    /// The row spacing: the slope of the least-squares line through the stamps, s.
+    pub row_dt_s: f64,
+    /// Where the row grid starts: one spacing before the first row's place on the grid that
+    /// fits every stamp best (median), s.
+    pub grid_origin_s: f64,
+    /// Stamp jitter around that grid: the RMS of the stamps' offsets (median absolute
+    /// deviation x 1.48, robust to a few far ones), s.
+    pub jitter_s: f64,
+    /// Rows missing from the grid (gaps of more than 1.5 spacings, counted in spacings).
+    pub missing_rows: usize,
+    pub rows: usize,
+}
+
+impl LogTiming {
+    /// From a log's (increasing) stamps. Each row is placed on the grid by its gap to the row
+    /// before (so a clock a little off the nominal rate does not drift the count), and the
+    /// grid is the least-squares line through those places.
+    pub fn of(t: &[f64]) -> LogTiming {
+        LogTiming::with_places(t).0
+    }
+
+    /// [`LogTiming::of`], with each row's place on the grid.
+    pub fn with_places(t: &[f64]) -> (LogTiming, Vec<u64>) {
+        if t.len() < 2 {
+            return (
+                LogTiming {
+                    rows: t.len(),
+                    ..LogTiming::default()
+                },
+                (0..t.len() as u64).collect(),
+            );
+        }
+        let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        gaps.sort_by(|a, b| a.total_cmp(b));
+        let median_gap = gaps[gaps.len() / 2].max(1e-9);
+        let mut places = Vec::with_capacity(t.len());
+        let mut place = 0u64;
+        places.push(0);
+        for w in t.windows(2) {
+            place += (((w[1] - w[0]) / median_gap).round() as u64).max(1);
+            places.push(place);
+        }
+        // t = a + b * place by least squares.
+        let n = t.len() as f64;
+        let mx = places.iter().map(|&p| p as f64).sum::<f64>() / n;
+        let my = t.iter().sum::<f64>() / n;
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for (&p, &tj) in places.iter().zip(t) {
+            let dx = p as f64 - mx;
+            sxy += dx * (tj - my);
+            sxx += dx * dx;
+        }
+        let b = if sxx > 0.0 { sxy / sxx } else { median_gap };
+        let b = if b.is_finite() && b > 0.0 {
+            b
+        } else {
+            median_gap
+        };
+        let a = my - b * mx;
+        let mut offsets: Vec<f64> = places
+            .iter()
+            .zip(t)
+            .map(|(&p, &tj)| tj - (a + b * p as f64))
+            .collect();
+        offsets.sort_by(|x, y| x.total_cmp(y));
+        let median = offsets[offsets.len() / 2];
+        let mut dev: Vec<f64> = offsets.iter().map(|o| (o - median).abs()).collect();
+        dev.sort_by(|x, y| x.total_cmp(y));
+        let missing_rows = (place + 1).saturating_sub(t.len() as u64) as usize;
+        (
+            LogTiming {
+                row_dt_s: b,
+                grid_origin_s: a + median - b,
+                jitter_s: 1.4826 * dev[dev.len() / 2],
+                missing_rows,
+                rows: t.len(),
+            },
+            places,
+        )
+    }
+
+    /// The stamps are a regular grid with jitter (not an irregular sampling): the jitter is
+    /// under a fifth of the spacing.
+    pub fn is_regular(&self) -> bool {
+        self.row_dt_s > 0.0 && self.jitter_s < 0.2 * self.row_dt_s
+    }
+}
+
+impl Record {
+    /// Log rows at any rate (>= the grid's is best) onto a grid of step `dt`. The grid
+    /// starts where the first row's interval starts (its time minus the typical row
+    /// spacing), so a log written from t = one row interval on, as host-sim writes them,
+    /// lands on the reference periods exactly. Rows need not sit on the grid: angles are
+    /// interpolated to the step ends, interval means are weighted by their overlap with
+    /// each step.
+    pub fn from_samples(
+        t: &[f64],
+        reference: &[f64],
+        output: &[f64],
+        effort: &[f64],
+        motor: Option<Vec<f64>>,
+        dt: f64,
+        current: CurrentSamples,
+    ) -> Record {
+        if t.len() < 2 {
+            return Record {
+                dt,
+                ..Record::default()
+            };
+        }
+        let (timing, places) = LogTiming::with_places(t);
+        // A logger that stamps rows of a regular sampling with jitter (a CAN recording's
+        // receive times): each row is taken at its place on the grid, not at its stamp. Stamps
+        // already on a grid are kept as they are.
+        let snapped: Vec<f64>;
+        let t = if timing.is_regular() && timing.jitter_s > 1e-7 {
+            snapped = places
+                .iter()
+                .map(|&p| timing.grid_origin_s + timing.row_dt_s * (p + 1) as f64)
+                .collect();
+            &snapped[..]
+        } else {
+            t
+        };
+        let row_dt = if timing.is_regular() {
+            timing.row_dt_s
+        } else {
+            let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+            gaps.sort_by(|a, b| a.total_cmp(b));
+            gaps[gaps.len() / 2].max(1e-9)
+        };
+        // The grid from every row's stamp, not the first one's alone: a logger's stamps jitter,
+        // and the first row's jitter would shift every step of the log by as much.
+        let origin = if timing.is_regular() {
+            timing.grid_origin_s
+        } else {
+            t[0] - row_dt
+        };
+        let last = t[t.len() - 1];
+        // A millionth of a step for the rounding of binary fractions of 0.01 s.
+        let n = (((last - origin) / dt + 1e-6).floor() as usize).max(1);
+        let end = |k: usize| origin + (k + 1) as f64 * dt;
+        let reference = (0..n)
+            .map(|k| {
+                // The row whose interval holds the middle of the step.
+                let mid = origin + (k as f64 + 0.5) * dt;
+                let j = t.partition_point(|v| *v < mid).min(t.len() - 1);
+                // Rows missing before row j: its value is the reference of its own interval
+                // only; over the missing ones, the cubic through the neighbours' (each at its
+                // interval's middle). The controller's acceleration feedforward acts on the
+                // reference's second difference, so a straight line across a lost row of a
+                // sine would be a current spike the car never had.
+                if j > 0 && t[j] - t[j - 1] > 1.5 * row_dt && mid < t[j] - row_dt {
+                    let lo = j.saturating_sub(2);
+                    let hi = (j + 1).min(t.len() - 1);
+                    let at = |i: usize| t[i] - 0.5 * row_dt;
+                    (lo..=hi)
+                        .map(|i| {
+                            let w: f64 = (lo..=hi)
+                                .filter(|&m| m != i)
+                                .map(|m| (mid - at(m)) / (at(i) - at(m)))
+                                .product();
+                            w * reference[i]
+                        })
+                        .sum()
+                } else {
+                    reference[j]
+                }
+            })
+            .collect();
+        let effort = match current {
+            CurrentSamples::IntervalMean => (0..n)
+                .map(|k| {
+                    let (a, b) = (end(k) - dt, end(k));
+                    let (mut sum, mut w) = (0.0, 0.0);
+                    let j0 = t.partition_point(|v| *v <= a);
+                    for j in j0..t.len() {
+                        let lo = if j == 0 { t[0] - row_dt } else { t[j - 1] };
+                        if lo >= b {
+                            break;
+                        }
+                        let overlap = t[j].min(b) - lo.max(a);
+                        if overlap > 0.0 && effort[j].is_finite() {
+                            sum += overlap * effort[j];
+                            w += overlap;
+                        }
+                    }
+                    if w > 0.0 {
+                        sum / w
+                    } else {
+                        interp_at(t, effort, b - 0.5 * dt)
+                    }
+                })
+                .collect(),
+            CurrentSamples::Instantaneous => (0..n)
+                .map(|k| {
+                    let (a, b) = (end(k) - dt, end(k));
+                    let j0 = t.partition_point(|v| *v <= a + 1e-9 * dt);
+                    let j1 = t.partition_point(|v| *v <= b + 1e-9 * dt);
+                    let vals: Vec<f64> = effort[j0..j1]
+                        .iter()
+                        .copied()
+                        .filter(|v| v.is_finite())
+                        .collect();
+                    if vals.is_empty() {
+                        interp_at(t, effort, b - 0.5 * dt)
+                    } else {
+                        vals.iter().sum::<f64>() / vals.len() as f64
+                    }
+                })
+                .collect(),
+        };
+        Record {
+            dt,
+            reference,
+            output: (0..n).map(|k| interp_at(t, output, end(k))).collect(),
+            effort,
+            motor: motor.map(|m| (0..n).map(|k| interp_at(t, &m, end(k))).collect()),
+            disturbance: None,
+            supply_v: None,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.reference.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.reference.is_empty()
+    }
+
+    pub fn duration_s(&self) -> f64 {
+        self.len() as f64 * self.dt
+    }
+}
