@@ -16,7 +16,7 @@
 //! current as the mean over the row's interval plus sensor noise; the rows' stamps are late
 //! by 0-3 ms against the instants the samples were taken (a logger stamps on receipt).
 
-use super::selftest::Rng;
+use super::rng::Rng;
 use super::{CurrentSamples, Record};
 use crate::plant::{Actuator, PlantParams};
 use crate::scenario::Sweep;

@@ -30,6 +30,7 @@ pub mod model;
 pub mod plots;
 mod record;
 pub mod rig;
+pub mod rng;
 mod score;
 mod search;
 pub mod selftest;
