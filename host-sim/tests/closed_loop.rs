@@ -87,8 +87,8 @@ fn large_step_recovers_without_windup_overshoot() {
 /// Paper mode on the paper's plant is held back by the soft belt, not by the supply: its -3 dB
 /// point is what the linear model of the same loop says (a second method: the lifted discrete
 /// closed loop of `linear_model.rs`, no limits), the same at 1 deg as at 10 deg, and well below
-/// what the 20 A / 24 V allow at 10 deg. (Before the acceleration-feedforward fix of issue 10 it
-/// read 4.27 Hz: the motor ran ahead of its own set-point at the current limit.)
+/// what the 20 A / 24 V allow at 10 deg. (With the interpolator's old acceleration-feedforward
+/// defect it read 4.27 Hz: the motor ran ahead of its own set-point at the current limit.)
 #[test]
 fn paper_mode_bandwidth_is_belt_limited_as_the_linear_model_says() {
     let (big, _) = report::sweep(&Sweep::PAPER, &paper()).unwrap();
