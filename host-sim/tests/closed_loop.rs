@@ -215,9 +215,9 @@ fn higher_supply_raises_the_bandwidth_only_where_the_voltage_binds() {
     assert!(run(&Sweep::PAPER.samples(), &bad).is_err());
 }
 
-/// The current guard holds the sweep's peak within the 20 A limit (README: 19.95 A); without
-/// it, the PI following a set-point that jumps by 20 A every 0.5 ms overshoots. The switch is
-/// a typed option (`--no-current-guard`), no longer an environment variable.
+/// The current guard holds the sweep's peak within the 20 A limit (`src/FIRMWARE.md`: 19.94 A);
+/// without it, the PI following a set-point that jumps by 20 A every 0.5 ms overshoots. The switch
+/// is a typed option (`--no-current-guard`), no longer an environment variable.
 #[test]
 fn the_current_guard_keeps_the_peak_within_the_limit_and_can_be_switched_off() {
     let sweep = host_sim::scenario::Sweep::PAPER.samples();
