@@ -1,7 +1,7 @@
 #!/bin/sh
-# Mutation testing of the safety core (issue 12), after panda's tests/safety/mutation.sh: every
+# Mutation testing of the safety core, after panda's tests/safety/mutation.sh: every
 # mutant cargo-mutants makes in the files below must be caught by the library's unit tests, or
-# be listed in the README with the reason it is equivalent.
+# be listed in src/FIRMWARE.md ("Mutation testing") with the reason it is equivalent.
 #
 # Needs cargo-mutants (`cargo install cargo-mutants`). Not in CI: each mutant rebuilds and runs
 # the library's tests (about 16 s on two cores), and these files give about 500.

@@ -389,7 +389,7 @@ mod acknowledge_tests {
     }
 }
 
-// Tests for what `.ci/mutation.sh` found missed in this file (issue 12).
+// Tests for what `.ci/mutation.sh` found missed in this file.
 #[cfg(test)]
 mod mutation_tests {
     use super::*;

@@ -9,11 +9,14 @@
 //! - [`units`]: typed angles, currents and voltages; the gear chain wheel <-> motor ([`gearing`]).
 //! - [`sensors`]: Hall counts and the 12-bit column encoder as angles.
 //! - [`gains`]: the EPOS4 gains of the paper's Table 3, converted once to SI.
-//! - [`reference`]: the 100 Hz reference, interpolated with one sample of lag.
+//! - [`reference`](mod@reference): the 100 Hz reference, interpolated with one sample of lag.
 //! - [`control`]: position PID + feedforward, PI current loop, their anti-windup.
 //! - [`paper_mode`]: the cascade at the paper's rates, as the firmware and host-sim both run it.
 //! - `chip` (built for the chip only): the bridge's PWM set-up and force-off and the CAN set-up,
 //!   shared by the firmware and the board suite.
+//!
+//! The rest of this page is the firmware's theory of operation (`src/FIRMWARE.md`).
+#![doc = include_str!("FIRMWARE.md")]
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 // No input may make the firmware panic: the sites where a panic could hide (an index out of

@@ -1,4 +1,4 @@
-//! The gate in front of the chip's independent watchdog (IWDG, issue 12 defect 10): it says
+//! The gate in front of the chip's independent watchdog (IWDG): it says
 //! "feed" only when both halves of the firmware have shown progress since the last feed, so a
 //! hung or starved half stops the feeding and the IWDG resets the MCU.
 //!

@@ -113,7 +113,8 @@ mod tests {
     /// Round trip of one 8-byte frame in loopback, us: 135 bit times at 1 Mbit/s worst case
     /// with stuffing, plus the interrupt and the executor's wake-up; 300 us is two frame times.
     const CAN_ROUND_TRIP_US: u32 = 300;
-    /// 5 % of the 20 kHz period, and of the 2 kHz period, at 180 MHz (issue 5).
+    /// 5 % of the 20 kHz period, and of the 2 kHz period, at 180 MHz: what the control steps may
+    /// take of the core, leaving the rest to the tasks and the CAN traffic.
     const CURRENT_BUDGET_CYCLES: u32 = CORE_HZ / 20_000 / 20;
     const POSITION_BUDGET_CYCLES: u32 = CORE_HZ / 2_000 / 20;
 

@@ -101,7 +101,8 @@ impl PlantEffects {
         tire_dahl: false,
     };
 
-    /// Issue 14's plant with effects (`backlash_deg=1.5,coulomb_n=200`): 1.5 deg of play in
+    /// The plant with effects that ECU mode's targets name (`backlash_deg=1.5,coulomb_n=200`):
+    /// 1.5 deg of play in
     /// the belt/nut at the wheel and 200 N of Coulomb friction at the rack. ECU mode's track
     /// target is measured on it, and the firmware's task tests run ECU mode against it.
     pub const PLAY_AND_FRICTION: PlantEffects = PlantEffects {

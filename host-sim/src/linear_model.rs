@@ -68,13 +68,13 @@
 //! # How it is checked
 //!
 //! `tests/analytic_vs_sim.rs`: on a steady 0.5 deg multisine (0.2-10 Hz) the simulation's H1
-//! estimate and this model agree to 5e-7 dB and 2e-6 deg, for the column and the motor (the
-//! rest is the firmware's f32 arithmetic). A loop built there from the firmware's own parts
-//! with issue 10's defective acceleration feedforward (`slope / T`) matches this model with
-//! [`AccelFeedforward::SlopeOverPeriod`] as closely, and misses the fixed model by 5.8 dB and
-//! 21 deg: the comparison would have caught the defect.
+//! estimate and this model agree to 5e-7 dB and 2e-6 deg, for the column and the motor (the rest is
+//! the firmware's f32 arithmetic). A loop built there from the firmware's own parts with a
+//! defective acceleration feedforward (`slope / T`, every on-time sample taken for a late one)
+//! matches this model with [`AccelFeedforward::SlopeOverPeriod`] as closely, and misses the fixed
+//! model by 5.8 dB and 21 deg: the comparison would have caught the defect.
 //!
-//! # The physical limit (issue 14)
+//! # The physical limit
 //!
 //! [`PhysicalLimit`] answers a different question from the same plant: whatever the controller,
 //! what current and voltage amplitude does the motor need to hold a sinusoidal pinion angle
@@ -114,8 +114,8 @@ pub enum AccelFeedforward {
     /// The change of slope per period, `(s[n] - s[n-1]) / T`: `reference.rs` since the fix.
     #[default]
     ChangeOfSlope,
-    /// `s[n] / T`, the defect of issue 10 (every on-time sample taken as late). Kept so that a
-    /// test can show the model tells the two apart.
+    /// `s[n] / T`, a defect the interpolator once had (every on-time sample taken as late). Kept
+    /// so that a test can show the model tells the two apart.
     SlopeOverPeriod,
 }
 
@@ -777,7 +777,7 @@ pub enum LimitedBy {
     Voltage,
 }
 
-/// What the plant allows whatever the controller (issue 14): the current and voltage needed for
+/// What the plant allows whatever the controller: the current and voltage needed for
 /// a sinusoidal pinion angle, from the continuous plant of eqs. 1-8.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PhysicalLimit {
@@ -1014,7 +1014,7 @@ mod tests {
             );
         }
         // The bound is where the largest amplitude falls to -3 dB of the sweep's.
-        for (amplitude, issue_says) in [(10.0, 3.8), (2.0, 8.6)] {
+        for (amplitude, coarse_table_hz) in [(10.0, 3.8), (2.0, 8.6)] {
             let b = lim
                 .bandwidth_bound_hz(amplitude)
                 .expect("bounded below 50 Hz");
@@ -1025,9 +1025,9 @@ mod tests {
             );
             assert!(lim.largest_amplitude_deg(b + 0.05) < MINUS_3_DB * amplitude);
             assert!(lim.largest_amplitude_deg(b - 0.05) > MINUS_3_DB * amplitude);
-            // The issue reads "about 3.8 Hz" and "about 8.6 Hz" off its coarse table; the
+            // A coarse table of the plant reads "about 3.8 Hz" and "about 8.6 Hz"; the
             // crossings are 3.79 Hz (voltage-bound) and 8.47 Hz (current-bound).
-            assert!((b - issue_says).abs() < 0.2, "{amplitude} deg: {b} Hz");
+            assert!((b - coarse_table_hz).abs() < 0.2, "{amplitude} deg: {b} Hz");
         }
     }
 

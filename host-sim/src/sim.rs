@@ -68,9 +68,9 @@ pub struct RunConfig {
     pub supply_v: f64,
     /// Log rate, Hz; must divide the 2 kHz position-loop rate. 0 = no log (benchmarks).
     pub log_rate_hz: u32,
-    /// The current guard (README, "Current guard"): the voltage clamp that keeps the current
-    /// predicted at the end of each period within the limit. `false` runs without it, to see
-    /// the overshoot it prevents; it replaces an undocumented environment switch.
+    /// The current guard (`src/FIRMWARE.md`, "Current guard"): the voltage clamp that keeps the
+    /// current predicted at the end of each period within the limit. `false` runs without it, to
+    /// see the overshoot it prevents; it replaces an undocumented environment switch.
     pub current_guard: bool,
     pub controller: Controller,
     /// What the log's angle columns hold (the control loop is not affected).

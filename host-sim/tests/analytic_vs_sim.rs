@@ -1,4 +1,4 @@
-//! The time-domain simulation against the linear model (issue 10, part 2): two independent
+//! The time-domain simulation against the linear model: two independent
 //! methods for the same closed loop must give the same small-signal frequency response.
 //!
 //! `sim::run` (the firmware's cascade in f32 against the exactly discretised plant, exact
@@ -9,11 +9,11 @@
 //! lifted state-space model. They must agree within 0.5 dB and 5 deg from 0.2 to 10 Hz, for
 //! reference -> column (delta_P) and reference -> motor.
 //!
-//! The defect of issue 10 (acceleration feedforward `slope / T`) is reproduced by a loop built
-//! here from the firmware's own interpolator, position loop and current loop with the
-//! acceleration replaced by `velocity / T` before the position loop sees it: the model with the
-//! old feedforward matches that loop, and the model with the fixed one does not, so this
-//! comparison would have caught the defect.
+//! A defect the interpolator once had (acceleration feedforward `slope / T`) is reproduced by a
+//! loop built here from the firmware's own interpolator, position loop and current loop with the
+//! acceleration replaced by `velocity / T` before the position loop sees it: the model with the old
+//! feedforward matches that loop, and the model with the fixed one does not, so this comparison
+//! would have caught the defect.
 
 use host_sim::analysis::{FrequencyResponse, h1_estimate};
 use host_sim::linear_model::{AccelFeedforward, LinearModel, Output};
@@ -38,12 +38,12 @@ const FREQS_HZ: [f64; 16] = [
 ];
 const PEAK_DEG: f64 = 0.5;
 const LOG_RATE_HZ: u32 = 1000;
-/// The issue's tolerance.
+/// The tolerance asked of the two methods.
 const TOL_DB: f64 = 0.5;
 const TOL_DEG: f64 = 5.0;
 /// What the two methods achieve on the steady-state multisine (measured: 5e-7 dB and 2e-6 deg,
 /// the f32 arithmetic of the firmware's loops against the model's f64), with a wide margin: a
-/// drift beyond this is a modelling difference even while within the issue's tolerance.
+/// drift beyond this is a modelling difference even while within the tolerance.
 const EXACT_DB: f64 = 0.01;
 const EXACT_DEG: f64 = 0.1;
 
@@ -166,7 +166,7 @@ fn simulated_small_signal_response_matches_the_linear_model() {
         );
         assert!(
             db <= EXACT_DB && deg <= EXACT_DEG,
-            "{output:?}: {db:.2e} dB / {deg:.2e} deg: within the issue's tolerance but the \
+            "{output:?}: {db:.2e} dB / {deg:.2e} deg: within the tolerance but the \
              two methods no longer agree to rounding\n{table}"
         );
     }
@@ -176,7 +176,7 @@ fn simulated_small_signal_response_matches_the_linear_model() {
 /// (chirp, 2 s Welch segments), against the model from 1 to 9 Hz: the analytic curve drawn
 /// beside the measured one is the same quantity. (A chirp is not a steady state: it passes
 /// each 0.5 Hz bin in half a second, and the first and last second of the record see half a
-/// segment's worth of it, so this holds the issue's tolerance, not the multisine's precision;
+/// segment's worth of it, so this holds the tolerance, not the multisine's precision;
 /// at 0.5 Hz and 9.5 Hz the chirp's own estimate is off by up to 0.45 dB and 4.5 deg.)
 #[test]
 fn the_sweep_commands_estimate_matches_the_linear_model() {
@@ -211,7 +211,7 @@ fn the_sweep_commands_estimate_matches_the_linear_model() {
 }
 
 /// The closed loop of `sim::run` with exact sensors, built here from the firmware's own parts so
-/// that the acceleration feedforward can be given the defect of issue 10: `acceleration =
+/// that the acceleration feedforward can be given the old defect: `acceleration =
 /// velocity / T` (the slope taken from rest on every sample). Returns (reference staircase,
 /// column angle) at 1 kHz, deg, as the log has them.
 fn loop_with_accel(reference_deg: &[f64], defect: bool) -> (Vec<f64>, Vec<f64>) {
@@ -319,7 +319,8 @@ fn poles_and_limits_commands_report_the_model() {
         .expect("phase margin");
     assert_eq!(Some(gm), margins.gain_margin_db);
     assert_eq!(Some(pm), margins.phase_margin_deg);
-    // Table 3's gains: a stable loop with issue 14's minimum margins (6 dB, 40 deg) to spare.
+    // Table 3's gains: a stable loop with the minimum margins ECU mode is held to (6 dB, 40 deg) to
+    // spare.
     assert!(gm > 6.0 && pm > 40.0, "{gm} dB, {pm} deg");
 
     let limits_path = dir.path().join("limits.json");
@@ -331,7 +332,7 @@ fn poles_and_limits_commands_report_the_model() {
         .iter()
         .find(|r| r["f_hz"].as_f64() == Some(3.0))
         .expect("3 Hz row");
-    // Issue 14's row for 3 Hz (7.07 deg: 11.3 A, 17.4 V; 9.75 deg within the limits).
+    // The bound's row for 3 Hz (7.07 deg: 11.3 A, 17.4 V; 9.75 deg within the limits).
     assert!((at_3["current_a"].as_f64().expect("A") - 11.3).abs() < 0.1);
     assert!((at_3["voltage_v"].as_f64().expect("V") - 17.4).abs() < 0.1);
     assert!((at_3["largest_amplitude_deg"].as_f64().expect("deg") - 9.75).abs() < 0.01);

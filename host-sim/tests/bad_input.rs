@@ -1,4 +1,5 @@
-//! Issue 13's bad-input table, row by row, through the real binaries: every input has a defined
+//! The bad-input table (host-sim/README.md, "The log format"), row by row, through the real
+//! binaries: every input has a defined
 //! outcome (handled with a warning, or refused with file, line and reason), never a panic and
 //! never a plausible-looking answer computed from garbage. Row 4 (`steer-can convert`) is in
 //! steer-can's own `tests/bad_input.rs`.

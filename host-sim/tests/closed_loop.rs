@@ -87,8 +87,8 @@ fn large_step_recovers_without_windup_overshoot() {
 /// Paper mode on the paper's plant is held back by the soft belt, not by the supply: its -3 dB
 /// point is what the linear model of the same loop says (a second method: the lifted discrete
 /// closed loop of `linear_model.rs`, no limits), the same at 1 deg as at 10 deg, and well below
-/// what the 20 A / 24 V allow at 10 deg. (Before the acceleration-feedforward fix of issue 10 it
-/// read 4.27 Hz: the motor ran ahead of its own set-point at the current limit.)
+/// what the 20 A / 24 V allow at 10 deg. (With the interpolator's old acceleration-feedforward
+/// defect it read 4.27 Hz: the motor ran ahead of its own set-point at the current limit.)
 #[test]
 fn paper_mode_bandwidth_is_belt_limited_as_the_linear_model_says() {
     let (big, _) = report::sweep(&Sweep::PAPER, &paper()).unwrap();
@@ -215,9 +215,9 @@ fn higher_supply_raises_the_bandwidth_only_where_the_voltage_binds() {
     assert!(run(&Sweep::PAPER.samples(), &bad).is_err());
 }
 
-/// The current guard holds the sweep's peak within the 20 A limit (README: 19.95 A); without
-/// it, the PI following a set-point that jumps by 20 A every 0.5 ms overshoots. The switch is
-/// a typed option (`--no-current-guard`), no longer an environment variable.
+/// The current guard holds the sweep's peak within the 20 A limit (`src/FIRMWARE.md`: 19.94 A);
+/// without it, the PI following a set-point that jumps by 20 A every 0.5 ms overshoots. The switch
+/// is a typed option (`--no-current-guard`), no longer an environment variable.
 #[test]
 fn the_current_guard_keeps_the_peak_within_the_limit_and_can_be_switched_off() {
     let sweep = host_sim::scenario::Sweep::PAPER.samples();

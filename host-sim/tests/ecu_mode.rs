@@ -1,6 +1,7 @@
 //! ECU mode (the ECU's own controller, `steering_ecu::ecu_mode`) against the paper's plant,
 //! driven through `sim::run` exactly as `host-sim --controller ecu` runs it, with paper mode
-//! measured beside it on the same plant. The targets are issue 14's.
+//! measured beside it on the same plant, each against the target ECU mode was designed to
+//! (host-sim/README.md, "ECU mode").
 #![allow(clippy::unwrap_used)] // test helpers: a failed unwrap is a failed test
 
 use host_sim::analysis::tracking_error;
@@ -64,8 +65,8 @@ fn ecu_mode_tracks_the_builtin_profile_within_1_3_deg_rmse() {
     assert_eq!(ecu.summary.rejected_references, 0);
 }
 
-/// Issue 14's plant with effects: 1.5 deg of play in the belt/nut (at the wheel) and 200 N of
-/// Coulomb friction at the rack.
+/// The plant with effects ECU mode's targets name: 1.5 deg of play in the belt/nut (at the wheel)
+/// and 200 N of Coulomb friction at the rack.
 const PLAY_AND_FRICTION: &str = "backlash_deg=1.5,coulomb_n=200";
 
 #[test]
@@ -156,7 +157,7 @@ fn holding_still_the_current_set_point_stays_quiet_in_ecu_mode() {
 }
 
 /// The plant is not the model: ECU mode keeps its Table 4 tuning while the belt, the wheel
-/// inertia and the steering damping change (issue 14's robustness set). It must stay stable,
+/// inertia and the steering damping change (the robustness set). It must stay stable,
 /// reach at least 75 % of what that plant allows at 10 deg (the sinusoidal bound of
 /// `linear_model::PhysicalLimit`), never beat the saturated bound (a physics check on the
 /// measurement), hold still without a limit cycle, and settle a step.
@@ -210,7 +211,7 @@ fn ecu_mode_is_robust_to_the_plant_it_was_not_tuned_for() {
 }
 
 /// ECU mode's loop, from the linear model (`LinearModel::ecu_loop_transfer`): the margins
-/// issue 14 asks for on the paper plant and on the robustness set; and the model reduces to
+/// it is held to on the paper plant and on the robustness set; and the model reduces to
 /// paper mode's loop when the column terms are taken out (the D term on the motor speed is the
 /// same feedback path as on the error), which checks the added terms against the tested ones.
 #[test]

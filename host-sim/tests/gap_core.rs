@@ -1,6 +1,6 @@
 //! The diagnosis end to end on logs written to disk in the project log format: a nominal log
 //! gets the verdict "none", a log with hidden Coulomb friction gets "coulomb_friction", and the
-//! JSON carries the fields the issue names.
+//! JSON carries the fields a team reads (baseline GoF, verdict, ranking, where).
 
 use host_sim::gap::model::Effects;
 use host_sim::gap::rig::Rig;

@@ -80,39 +80,39 @@ fn named_right(index: usize, hidden: &[&str]) -> host_sim::gap::selftest::CaseRe
     case
 }
 
-/// Case 109 of the independent world (seed 1): 2.0 deg of play in the belt and 1050 N of
-/// creeping friction at the rack under a 5 deg sweep. Fitted alone the friction grows to
-/// stand in for the play (1570 N, sharp), and a pair fit that starts there keeps the play at
-/// zero, 10 times the noise floor; started where the two share the work it finds both. The
-/// diagnosis is run as `host-sim gap selftest --case 109` runs it.
+/// A car of the independent world (seed 1, the index below): 2.0 deg of play in the belt and 1050 N
+/// of creeping friction at the rack under a 5 deg sweep. Fitted alone the friction grows to stand
+/// in for the play (1570 N, sharp), and a pair fit that starts there keeps the play at zero, 10
+/// times the noise floor; started where the two share the work it finds both. The diagnosis is run
+/// as `host-sim gap selftest --case` runs it.
 #[test]
 fn play_in_the_belt_beside_rack_friction_is_named_on_a_sweep() {
     named_right(109, &["backlash", "coulomb_friction"]);
 }
 
-/// Case 30 of the independent world (seed 1): a Dahl tyre alone, under a 5 deg sweep logged
-/// at 100 Hz with stamps 1.85 ms late. Belt play beside the tyre removed 46 % of what the
-/// tyre alone left, and the pair was named; the tyre with the log's lag fitted beside it
-/// leaves less than the pair does, so the play was standing in for the clock. Run as `gap
-/// selftest --case 30` runs it.
+/// A car of the independent world (seed 1, the index below): a Dahl tyre alone, under a 5 deg sweep
+/// logged at 100 Hz with stamps 1.85 ms late. Belt play beside the tyre removed 46 % of what the
+/// tyre alone left, and the pair was named; the tyre with the log's lag fitted beside it leaves
+/// less than the pair does, so the play was standing in for the clock. Run as `gap selftest --case`
+/// runs it.
 #[test]
 fn a_late_clock_is_not_named_as_a_second_effect() {
     let case = named_right(30, &["tire_ground"]);
     assert!(case.reason.contains("stamps"), "{}", case.reason);
 }
 
-/// Case 27 of the independent world (seed 1): 1050 N of rack friction alone on a 120 s track
-/// logged at 200 Hz with stamps 2.05 ms late. With the delay's minimum at half a reference
-/// period, a 5.2 ms delay beside the friction was named (a delay the car does not have); a
-/// delay under one 10 ms period is within the frame's own jitter and the logger's clock.
+/// A car of the independent world (seed 1, the index below): 1050 N of rack friction alone on a
+/// 120 s track logged at 200 Hz with stamps 2.05 ms late. With the delay's minimum at half a
+/// reference period, a 5.2 ms delay beside the friction was named (a delay the car does not
+/// have); a delay under one 10 ms period is within the frame's own jitter and the logger's clock.
 #[test]
 fn a_delay_under_one_reference_period_is_not_named() {
     named_right(27, &["coulomb_friction"]);
 }
 
-/// Case 14 of the independent world (seed 1): a 52 ms late reference and a Dahl tyre under a
-/// 5 deg sweep at 1 kHz. Column play at 3 deg removes the most alone (85 %), the delay alone
-/// nearly as much (82 %); fitted on top of the play, a 26 ms delay was named with the play.
+/// A car of the independent world (seed 1, the index below): a 52 ms late reference and a Dahl tyre
+/// under a 5 deg sweep at 1 kHz. Column play at 3 deg removes the most alone (85 %), the delay
+/// alone nearly as much (82 %); fitted on top of the play, a 26 ms delay was named with the play.
 /// The pairs grown from the runner-up (the delay) find the tyre beside it.
 #[test]
 fn a_pair_is_also_grown_from_the_runner_up() {
@@ -120,33 +120,33 @@ fn a_pair_is_also_grown_from_the_runner_up() {
     assert!(case.reason.starts_with("backlash"), "{}", case.reason);
 }
 
-/// Case 46 of the independent world (seed 1): 2.4 deg of play in the belt and 860 N of
-/// creeping friction at the rack on a 120 s track logged at 1 kHz, stamps 2.3 ms late. Each
-/// alone stands in for both (the friction at 1710 N removes 98 % of the nominal cost, the play
-/// at its 4 deg limit 78 %); grown from the friction, the pair kept the play at 0.66 deg and
-/// removed 15 % of what the friction left, and the tyre beside the friction, the best pair,
-/// was the log's lag. Started where the two share the work (the play at its size alone, the
-/// friction at half its own), the pair finds both.
+/// A car of the independent world (seed 1, the index below): 2.4 deg of play in the belt and 860 N
+/// of creeping friction at the rack on a 120 s track logged at 1 kHz, stamps 2.3 ms late. Each
+/// alone stands in for both (the friction at 1710 N removes 98 % of the nominal cost, the play at
+/// its 4 deg limit 78 %); grown from the friction, the pair kept the play at 0.66 deg and removed
+/// 15 % of what the friction left, and the tyre beside the friction, the best pair, was the log's
+/// lag. Started where the two share the work (the play at its size alone, the friction at half its
+/// own), the pair finds both.
 #[test]
 fn play_and_rack_friction_that_share_the_work_are_both_named_on_a_track() {
     named_right(46, &["backlash", "coulomb_friction"]);
 }
 
-/// Case 75 of the independent world (seed 1): 750 N of rack friction and a 20 ms late reference
-/// under a 10 deg sweep. Column play at its 4 deg limit removes the most alone (92 %), and the
-/// delay beside it was named with it. The runner-up family is friction, whose two places nearly
-/// tie alone (at the motor 80.4 %, at the rack 79.9 %): the pairs are grown from both, and the
-/// rack friction beside the delay explains the log.
+/// A car of the independent world (seed 1, the index below): 750 N of rack friction and a 20 ms
+/// late reference under a 10 deg sweep. Column play at its 4 deg limit removes the most alone (92
+/// %), and the delay beside it was named with it. The runner-up family is friction, whose two
+/// places nearly tie alone (at the motor 80.4 %, at the rack 79.9 %): the pairs are grown from
+/// both, and the rack friction beside the delay explains the log.
 #[test]
 fn a_pair_is_grown_from_every_place_of_the_runner_up_family() {
     let case = named_right(75, &["coulomb_friction", "delay"]);
     assert!(case.reason.starts_with("backlash"), "{}", case.reason);
 }
 
-/// Case 151 of the independent world (seed 1): a 28 ms late reference alone under a 5 deg
-/// sweep at 1 kHz, Table 4 off by 8-10 % in four parameters. Belt play at 0.58 deg beside the
-/// delay removed 63 % of what the delay left and was named; rack friction at 160 N and a tyre
-/// at 125 N, both under their minimum size, removed more. What is left is then no effect.
+/// A car of the independent world (seed 1, the index below): a 28 ms late reference alone under a 5
+/// deg sweep at 1 kHz, Table 4 off by 8-10 % in four parameters. Belt play at 0.58 deg beside the
+/// delay removed 63 % of what the delay left and was named; rack friction at 160 N and a tyre at
+/// 125 N, both under their minimum size, removed more. What is left is then no effect.
 #[test]
 fn a_second_effect_that_one_below_its_minimum_outdoes_is_not_named() {
     let case = named_right(151, &["delay"]);
@@ -157,21 +157,21 @@ fn a_second_effect_that_one_below_its_minimum_outdoes_is_not_named() {
     );
 }
 
-/// Case 164 of the independent world (seed 1): a wheel 2.1 times heavier and 0.34 times as
-/// damped as Table 4's, on a 120 s track logged at 100 Hz. The refit from the table's own
-/// values left 6 times the noise floor and the log was called `unexplained`; from a start with
-/// the wheel far off the table it explains the log, and the verdict is `parameters`.
+/// A car of the independent world (seed 1, the index below): a wheel 2.1 times heavier and 0.34
+/// times as damped as Table 4's, on a 120 s track logged at 100 Hz. The refit from the table's own
+/// values left 6 times the noise floor and the log was called `unexplained`; from a start with the
+/// wheel far off the table it explains the log, and the verdict is `parameters`.
 #[test]
 fn a_car_far_off_the_table_is_not_called_unexplained() {
     let case = named_right(164, &["parameters"]);
     assert!(case.reason.contains("j_w"), "{}", case.reason);
 }
 
-/// Case 60 of the independent world (seed 1): J_W x0.37 and beta_sw x0.49 under a 5 deg sweep
-/// logged at 100 Hz, stamps 0.95 ms late. From the table's own values the refit stays within
-/// x1.5 (1.5 times the noise floor) and the log was called `none`; Table 4 with the log's lag
-/// fitted beside it, from a start with the wheel's inertia at x0.4, finds the lighter wheel
-/// and removes from what the best car within x1.5 leaves what a second effect would have to:
+/// A car of the independent world (seed 1, the index below): J_W x0.37 and beta_sw x0.49 under a 5
+/// deg sweep logged at 100 Hz, stamps 0.95 ms late. From the table's own values the refit stays
+/// within x1.5 (1.5 times the noise floor) and the log was called `none`; Table 4 with the log's
+/// lag fitted beside it, from a start with the wheel's inertia at x0.4, finds the lighter wheel and
+/// removes from what the best car within x1.5 leaves what a second effect would have to:
 /// `parameters`.
 #[test]
 fn a_lighter_wheel_is_found_from_a_far_start() {
@@ -190,7 +190,7 @@ fn a_lighter_wheel_is_found_from_a_far_start() {
 /// world on a 1 kHz log of an 8 deg sweep, against the chatter two nearly equal cars already
 /// show (beta_bs x1.01): k_tb x3 changes the log less than that chatter; beta_sw x3 changes
 /// it more, and beta_bs raised by the reflected amount (x1.13) takes away only part of it
-/// (the bar's corner, k_tb / beta_sw = 104 rad/s, is near the sweep's top). The README's
+/// (the bar's corner, k_tb / beta_sw = 104 rad/s, is near the sweep's top). host-sim/README.md's
 /// account of the selftest's `parameters` misses rests on these figures.
 #[test]
 fn the_steering_wheel_side_seen_through_the_torsion_bar() {
@@ -241,12 +241,12 @@ fn the_steering_wheel_side_seen_through_the_torsion_bar() {
     );
 }
 
-/// Case 87 of the independent world (seed 1): J_W at x0.46 of Table 4 (the rest within 10 %),
-/// logged 2.6 ms late. A lighter wheel answers sooner, and the late stamps take that lead
-/// back: on the log as drawn the table's car leaves less than the true car does, and with
-/// the stamps on time the true car is at the noise and the table's far above it. The lag is
-/// the log's and unknown (0-3 ms in the world); this is why a lighter wheel is named
-/// `parameters` in so few of the selftest's cars (README, "Where it fails").
+/// A car of the independent world (seed 1, the index below): J_W at x0.46 of Table 4 (the rest
+/// within 10 %), logged 2.6 ms late. A lighter wheel answers sooner, and the late stamps take that
+/// lead back: on the log as drawn the table's car leaves less than the true car does, and with the
+/// stamps on time the true car is at the noise and the table's far above it. The lag is the log's
+/// and unknown (0-3 ms in the world); this is why a lighter wheel is named `parameters` in so few
+/// of the selftest's cars (host-sim/README.md, "Where it fails").
 #[test]
 fn a_lighter_wheel_hides_behind_late_stamps() {
     use host_sim::gap::generator::draw;

@@ -1,4 +1,4 @@
-//! `host-sim gap selftest --help` shows the selftest's own options (issue 13 section 4), and
+//! `host-sim gap selftest --help` shows the selftest's own options, and
 //! `gap --help` still shows the diagnosis's.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 

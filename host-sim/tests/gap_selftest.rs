@@ -1,8 +1,8 @@
-//! The withheld-effect checks. On the diagnosis's own model (`World::Model`): 50 logs with a
-//! hidden effect (or none, or two) in the candidate forms, diagnosed blind; at least 90 % must
-//! be named right. It checks the search and the verdict rules. On the independent world
-//! (`World::Independent`, the README's figure, `host-sim gap selftest`): its first 50 cases,
-//! which check the model.
+//! The withheld-effect checks. On the diagnosis's own model (`World::Model`): 50 logs with a hidden
+//! effect (or none, or two) in the candidate forms, diagnosed blind; at least 90 % must be named
+//! right. It checks the search and the verdict rules. On the independent world
+//! (`World::Independent`, host-sim/README.md's figure, `host-sim gap selftest`): its first 50
+//! cases, which check the model.
 
 use host_sim::gap::selftest;
 
@@ -42,8 +42,8 @@ fn selftest_names_at_least_90_percent_of_withheld_effects() {
     );
 }
 
-/// The independent world's first 50 cases (seed 1; the README's 200 are a superset): 44 named
-/// right (88 %; 182 of all 200), every effect-free car `none`. The bar is the figure less one
+/// The independent world's first 50 cases (seed 1; host-sim/README.md's 200 are a superset): 44
+/// named right (88 %), every effect-free car `none`. The bar is the figure less one
 /// case: a change to the diagnosis that loses two of these fails here, before anyone runs the
 /// 18-minute 200.
 #[test]

@@ -20,11 +20,12 @@
 //! firmware specification as the paper's Table 3 and `crate::gains` use them; they are not
 //! re-checked against a device file.
 //!
-//! What the EDS says where the issue's object list was loose or wrong:
+//! What the EDS says where the object list this link was first specified with was loose or
+//! wrong:
 //! - 0x30D1 "Current actual values" (ARRAY) has sub 1 = "Current actual value averaged" and
 //!   sub 2 = "Current actual value", both **INTEGER32** (`DataType=0x4`), ro, mappable. The
 //!   filtered sub 1 is what the paper's current plots show; sub 2 is the unfiltered value.
-//!   [`Epos4Config::current_object`] picks one; the default is sub 2 (the name the issue used).
+//!   [`Epos4Config::current_object`] picks one; the default is sub 2 (the name that list used).
 //! - 0x60C2 sub 1 "Interpolation time period value" is **UNSIGNED8** with `HighLimit=100`; sub 2
 //!   "Interpolation time index" is **INTEGER8**, default -3 (i.e. the value is in ms). A 10 ms
 //!   period is written as sub 1 = 10, sub 2 = -3.
@@ -64,65 +65,65 @@ use crate::units::{Amps, MotorRad};
 pub mod od {
     use super::ObjectAddress;
 
-    /// [1017] Producer heartbeat time, UNSIGNED16, rw, ms.
+    /// \[1017\] Producer heartbeat time, UNSIGNED16, rw, ms.
     pub const PRODUCER_HEARTBEAT: ObjectAddress = ObjectAddress::new(0x1017, 0);
-    /// [Consumer 1 heartbeat time] UNSIGNED32 rw: node << 16 | ms.
+    /// \[Consumer 1 heartbeat time\] UNSIGNED32 rw: node << 16 | ms.
     pub const CONSUMER_HEARTBEAT: ObjectAddress = ObjectAddress::new(0x1016, 1);
-    /// [1400] Receive PDO 1 parameter / [1600] mapping.
+    /// \[1400\] Receive PDO 1 parameter / \[1600\] mapping.
     pub const RPDO1_COMMUNICATION: u16 = 0x1400;
-    /// [1800] / [1801] Transmit PDO 1 / 2 parameter (subs 0..=3).
+    /// \[1800\] / \[1801\] Transmit PDO 1 / 2 parameter (subs 0..=3).
     pub const TPDO1_COMMUNICATION: u16 = 0x1800;
-    /// [30A0sub1] Current controller P gain, UNSIGNED32, rww, µV/A.
+    /// \[30A0sub1\] Current controller P gain, UNSIGNED32, rww, µV/A.
     pub const CURRENT_P: ObjectAddress = ObjectAddress::new(0x30A0, 1);
-    /// [30A0sub2] Current controller I gain, UNSIGNED32, rww, µV/(A·ms).
+    /// \[30A0sub2\] Current controller I gain, UNSIGNED32, rww, µV/(A·ms).
     pub const CURRENT_I: ObjectAddress = ObjectAddress::new(0x30A0, 2);
-    /// [30A1sub1] Position controller P gain, UNSIGNED32, rww, µA/rad.
+    /// \[30A1sub1\] Position controller P gain, UNSIGNED32, rww, µA/rad.
     pub const POSITION_P: ObjectAddress = ObjectAddress::new(0x30A1, 1);
-    /// [30A1sub2] Position controller I gain, UNSIGNED32, rww, µA/(rad·s).
+    /// \[30A1sub2\] Position controller I gain, UNSIGNED32, rww, µA/(rad·s).
     pub const POSITION_I: ObjectAddress = ObjectAddress::new(0x30A1, 2);
-    /// [30A1sub3] Position controller D gain, UNSIGNED32, rww, µA·s/rad.
+    /// \[30A1sub3\] Position controller D gain, UNSIGNED32, rww, µA·s/rad.
     pub const POSITION_D: ObjectAddress = ObjectAddress::new(0x30A1, 3);
-    /// [30A1sub4] Position controller FF velocity gain, UNSIGNED32, rww, µA·s/rad.
+    /// \[30A1sub4\] Position controller FF velocity gain, UNSIGNED32, rww, µA·s/rad.
     pub const POSITION_FF_VELOCITY: ObjectAddress = ObjectAddress::new(0x30A1, 4);
-    /// [30A1sub5] Position controller FF acceleration gain, UNSIGNED32, rww, µA·s²/rad.
+    /// \[30A1sub5\] Position controller FF acceleration gain, UNSIGNED32, rww, µA·s²/rad.
     pub const POSITION_FF_ACCELERATION: ObjectAddress = ObjectAddress::new(0x30A1, 5);
-    /// [30D1sub1] Current actual value averaged, INTEGER32, ro, mappable, mA.
+    /// \[30D1sub1\] Current actual value averaged, INTEGER32, ro, mappable, mA.
     pub const CURRENT_ACTUAL_AVERAGED: ObjectAddress = ObjectAddress::new(0x30D1, 1);
-    /// [30D1sub2] Current actual value, INTEGER32, ro, mappable, mA.
+    /// \[30D1sub2\] Current actual value, INTEGER32, ro, mappable, mA.
     pub const CURRENT_ACTUAL: ObjectAddress = ObjectAddress::new(0x30D1, 2);
-    /// [6040] Controlword, UNSIGNED16, rww, mappable.
+    /// \[6040\] Controlword, UNSIGNED16, rww, mappable.
     pub const CONTROLWORD: ObjectAddress = ObjectAddress::new(0x6040, 0);
-    /// [6041] Statusword, UNSIGNED16, ro, mappable.
+    /// \[6041\] Statusword, UNSIGNED16, ro, mappable.
     pub const STATUSWORD: ObjectAddress = ObjectAddress::new(0x6041, 0);
-    /// [6060] Modes of operation, INTEGER8, rww.
+    /// \[6060\] Modes of operation, INTEGER8, rww.
     pub const MODES_OF_OPERATION: ObjectAddress = ObjectAddress::new(0x6060, 0);
-    /// [6061] Modes of operation display, INTEGER8, ro.
+    /// \[6061\] Modes of operation display, INTEGER8, ro.
     pub const MODES_OF_OPERATION_DISPLAY: ObjectAddress = ObjectAddress::new(0x6061, 0);
-    /// [6064] Position actual value, INTEGER32, ro, mappable, inc.
+    /// \[6064\] Position actual value, INTEGER32, ro, mappable, inc.
     pub const POSITION_ACTUAL: ObjectAddress = ObjectAddress::new(0x6064, 0);
-    /// [607A] Target position, INTEGER32, rww, mappable, inc.
+    /// \[607A\] Target position, INTEGER32, rww, mappable, inc.
     pub const TARGET_POSITION: ObjectAddress = ObjectAddress::new(0x607A, 0);
-    /// [60C2sub1] Interpolation time period value, UNSIGNED8, rww, 0..=100.
+    /// \[60C2sub1\] Interpolation time period value, UNSIGNED8, rww, 0..=100.
     pub const INTERPOLATION_PERIOD: ObjectAddress = ObjectAddress::new(0x60C2, 1);
-    /// [60C2sub2] Interpolation time index, INTEGER8, rww (10^index s; default -3).
+    /// \[60C2sub2\] Interpolation time index, INTEGER8, rww (10^index s; default -3).
     pub const INTERPOLATION_INDEX: ObjectAddress = ObjectAddress::new(0x60C2, 2);
 
     /// Motor data: output current limit, UNSIGNED32, mA (EPOS4 firmware specification; not
     /// checked against the EDS in this repository).
     pub const OUTPUT_CURRENT_LIMIT: ObjectAddress = ObjectAddress::new(0x3001, 2);
-    /// [6065] Following error window, UNSIGNED32, inc (CiA 402).
+    /// \[6065\] Following error window, UNSIGNED32, inc (CiA 402).
     pub const FOLLOWING_ERROR_WINDOW: ObjectAddress = ObjectAddress::new(0x6065, 0);
-    /// [607F] Max profile velocity, UNSIGNED32, rpm (CiA 402; the EPOS4's default velocity
+    /// \[607F\] Max profile velocity, UNSIGNED32, rpm (CiA 402; the EPOS4's default velocity
     /// unit).
     pub const MAX_PROFILE_VELOCITY: ObjectAddress = ObjectAddress::new(0x607F, 0);
-    /// [607Dsub1] Software position limit: min position limit, INTEGER32, inc (CiA 402).
+    /// \[607Dsub1\] Software position limit: min position limit, INTEGER32, inc (CiA 402).
     pub const MIN_POSITION_LIMIT: ObjectAddress = ObjectAddress::new(0x607D, 1);
-    /// [607Dsub2] Software position limit: max position limit, INTEGER32, inc (CiA 402).
+    /// \[607Dsub2\] Software position limit: max position limit, INTEGER32, inc (CiA 402).
     pub const MAX_POSITION_LIMIT: ObjectAddress = ObjectAddress::new(0x607D, 2);
 
     /// 0x6060 value of cyclic synchronous position mode (CiA 402).
     pub const MODE_CSP: i8 = 8;
-    /// [60C2sub1] HighLimit.
+    /// \[60C2sub1\] HighLimit.
     pub const INTERPOLATION_PERIOD_MAX: u8 = 100;
     /// Interpolation time index -3: the period is in ms.
     pub const INTERPOLATION_INDEX_MS: i8 = -3;

@@ -19,8 +19,8 @@ use embassy_stm32::timer::simple_pwm::PwmPin;
 /// for gate drivers and MOSFETs of the 20 A class; check your bridge's datasheet.
 pub const DEAD_TIME_TICKS: u16 = 90;
 
-/// The bridge's timer and outputs (the README's wiring table): TIM1 CH1..3 on PA8, PA9, PA10
-/// (high sides), CH1N..3N on PB13, PB14, PB15 (low sides).
+/// The bridge's timer and outputs (the wiring table of `src/FIRMWARE.md`): TIM1 CH1..3 on PA8, PA9,
+/// PA10 (high sides), CH1N..3N on PB13, PB14, PB15 (low sides).
 #[derive(Debug)]
 pub struct Pins {
     pub tim: Peri<'static, TIM1>,

@@ -56,7 +56,7 @@ const HALL_PHASE_OFFSET: u8 = 0;
 const CURRENT_ZERO_COUNTS: f32 = 2048.0;
 const AMPS_PER_COUNT: f32 = 25.0 / 2048.0;
 
-/// The pins and peripherals of the direct drive (the README's wiring table).
+/// The pins and peripherals of the direct drive (the wiring table of `src/FIRMWARE.md`).
 pub struct Pins {
     /// TIM1 and its six outputs.
     pub bridge: tim1_bridge::Pins,

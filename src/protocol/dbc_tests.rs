@@ -137,9 +137,9 @@ fn reference_range_and_as_state_table_agree() {
     );
 }
 
-/// The README's worked CRC example, byte for byte, is what the codec sends: reference,
-/// counter 1, AS Driving, 12.34 deg. The ID goes into the CRC low byte first (0x00, 0x01);
-/// high byte first would give 0x71.
+/// The worked CRC example of `src/FIRMWARE.md` ("The vehicle protocol"), byte for byte, is what the
+/// codec sends: reference, counter 1, AS Driving, 12.34 deg. The ID goes into the CRC low byte
+/// first (0x00, 0x01); high byte first would give 0x71.
 #[test]
 fn readme_crc_example_is_what_the_codec_sends() {
     let cfg = ProtocolConfig::DEFAULT;

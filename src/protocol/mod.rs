@@ -151,7 +151,7 @@ pub const MOTOR_ID: StandardId = match StandardId::new(0x102) {
     Some(id) => id,
     None => panic!("0x102 is an 11-bit ID"), // evaluated at compile time
 };
-/// Diagnostic-frame ID (issue 12): the fault ring and the counters, one page per frame, sent
+/// Diagnostic-frame ID: the fault ring and the counters, one page per frame, sent
 /// every status period by [`crate::tasks::status_task`].
 pub const DIAGNOSTIC_ID: StandardId = match StandardId::new(0x103) {
     Some(id) => id,

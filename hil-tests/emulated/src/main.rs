@@ -47,9 +47,10 @@ static CASES: &[u8] = include_bytes!("../../vectors/cases.bin");
 static ECU_SWEEP: &[u8] = include_bytes!("../../vectors/ecu_sweep.bin");
 static ECU_TRACK: &[u8] = include_bytes!("../../vectors/ecu_track.bin");
 
-/// Budgets: 5 % of the period at the F446's 180 MHz (issue 5). They are cycle budgets; an
-/// instruction takes at least one cycle on the Cortex-M4, so an instruction count above the
-/// budget is a cycle count above it too (the converse needs the board: hil-tests/tests/board.rs).
+/// Budgets: 5 % of the period at the F446's 180 MHz (the rest is the tasks'). They are cycle
+/// budgets; an instruction takes at least one cycle on the Cortex-M4, so an instruction count
+/// above the budget is a cycle count above it too (the converse needs the board:
+/// hil-tests/tests/board.rs).
 const CORE_HZ: u32 = 180_000_000;
 const CURRENT_BUDGET: u32 = CORE_HZ / steering_ecu::paper_mode::CURRENT_LOOP_HZ / 20;
 const POSITION_BUDGET: u32 = CORE_HZ / steering_ecu::paper_mode::POSITION_LOOP_HZ / 20;

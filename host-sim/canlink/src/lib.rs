@@ -4,7 +4,7 @@
 //! - [`Transport`] (with its [`Clock`]): send a frame, receive until a deadline. The tool is
 //!   written against it alone; SocketCAN on the car, the simulated car in the tests.
 //! - [`canbus`]: the in-memory bus the simulated car's nodes share, with faults on purpose.
-//! - [`reference`]: the vehicle side's reference frames (counter, CRC, AS state), sent by the
+//! - [`reference`](mod@reference): the vehicle side's reference frames (counter, CRC, AS state), sent by the
 //!   tool on the car and by the simulated vehicle computer alike.
 //!
 //! Nothing here does numerics, so the laptop build of steer-can stays small.

@@ -2,8 +2,9 @@
 //! format: one row per reference period, `t,ref_sw_deg,sw_deg,motor_rad,current_a`, plus
 //! `as_state`, `ecu_state` and `faults` columns.
 //!
-//! Timing, so that a log means what a simulated one means (README, log format: the angles are
-//! instants at the row's time, the current is the mean over the interval that ends there):
+//! Timing, so that a log means what a simulated one means (host-sim/README.md, the log format: the
+//! angles are instants at the row's time, the current is the mean over the interval that ends
+//! there):
 //!
 //! - The time axis is the reference grid: reference `k` (counted from the first, lost frames
 //!   leave a gap) is in force over the period that ends at the row `t = (k + 1) x 10 ms`,

@@ -29,7 +29,7 @@ use steering_ecu::faults::Fault;
 use steering_ecu::steering::EcuState;
 
 /// The README this binary was built with.
-pub const README: &str = include_str!("../../../README.md");
+pub const README: &str = include_str!("../README.md");
 
 /// The heading of the bring-up section.
 const SECTION: &str = "### Bring-up on the car with `steer-can`";

@@ -1,4 +1,5 @@
-//! Issue 13's bad-input table, row 4 and the candump half of row 5, through the real binary:
+//! The bad-input table's `steer-can convert` rows (host-sim/README.md, "The log format"),
+//! through the real binary:
 //! `steer-can convert` refuses a file it cannot read honestly with file, line and reason, or
 //! drops what it must with a count and a warning; never a panic. In the laptop build (no
 //! `sim` feature) a request for the simulated car is bad input too, answered with how to get

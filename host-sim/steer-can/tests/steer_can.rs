@@ -258,7 +258,7 @@ fn epos_check_reads_the_simulated_drive_and_compares_the_gains() {
     assert!(report.text().contains("0x3210"));
 }
 
-/// Issue 12 defect 11: `epos check` shows the drive's limits beside ours, the software
+/// `epos check` shows the drive's limits beside ours, the software
 /// position limits as their span around the origin the ECU wrote them at.
 #[test]
 fn epos_check_shows_the_drive_limits_beside_ours() {
@@ -365,8 +365,8 @@ fn track_campaign_from_csv_runs_the_profile_it_was_given() {
     assert_eq!(sim.output().demand, DriveDemand::Disabled);
 }
 
-/// `--sim-column-deg`: the simulated car powered up off centre steers to the reference (issue
-/// 12 defect 1, the motor origin taken from the column encoder).
+/// `--sim-column-deg`: the simulated car powered up off centre steers to the reference (the
+/// motor origin is taken from the column encoder).
 #[test]
 fn a_simulated_car_powered_up_off_centre_steers_to_the_reference() {
     use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};

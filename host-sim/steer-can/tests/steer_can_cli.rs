@@ -359,7 +359,7 @@ fn campaign_sweep_writes_a_log_that_convert_reproduces_from_the_recording() {
     let out = stdout(&o);
     assert!(out.contains("completed: 501 profile samples sent"), "{out}");
     // Piped, as here, there is no progress bar: it redraws a line, so it is drawn only on a
-    // terminal (issue 13).
+    // terminal.
     assert!(!stderr(&o).contains('\r'), "progress bar in a pipe");
     let recording = dir.path().join("sweep.csv.candump");
     assert!(recording.exists());

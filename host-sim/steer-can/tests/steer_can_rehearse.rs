@@ -11,7 +11,7 @@ use std::process::{Command, Stdio};
 /// list on (outside fenced blocks), mentions of `rehearse` itself left out.
 fn readme_steer_can_commands() -> usize {
     let readme =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../README.md")).unwrap();
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
     let start = readme
         .find("### Bring-up on the car with `steer-can`")
         .unwrap();

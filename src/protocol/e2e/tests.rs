@@ -134,7 +134,8 @@ fn five_invalid_in_a_row_is_a_fault() {
 
 #[test]
 fn a_counter_repeated_in_four_of_five_frames_is_a_fault() {
-    // Issue 12 defect 7: one good frame in five must not wipe the four bad ones.
+    // One good frame in five must not wipe the four bad ones: the score saturates, it is not
+    // reset by a good frame.
     let mut c = checker();
     let mut counter = 0u8;
     let mut faulted = false;
@@ -265,7 +266,8 @@ fn early_frames_get_one_period_of_budget() {
 
 #[test]
 fn frames_sent_faster_than_the_period_cannot_beat_the_rate_limit() {
-    // Issue 12 defect 6: 20 frames 1 ms apart, +4 deg each (a period's full step each).
+    // A burst beats a per-frame limit: 20 frames 1 ms apart, +4 deg each (a period's full step
+    // each), must stay within the real-time window.
     let mut c = checker();
     let mut accepted = 0i16;
     for n in 0..20u8 {
@@ -457,7 +459,7 @@ proptest! {
     }
 }
 
-// The tests below kill what `.ci/mutation.sh` found missed in e2e.rs (issue 12).
+// The tests below kill what `.ci/mutation.sh` found missed in e2e.rs.
 
 /// The accessors say what the checker holds.
 #[test]
