@@ -457,6 +457,7 @@ pub struct BodePlot {
     coherence: Option<Panel>,
     markers: Vec<VLine>,
     colors: Vec<(String, Color)>,
+    wrap_phase: bool,
 }
 
 impl BodePlot {
@@ -475,6 +476,7 @@ impl BodePlot {
             coherence: None,
             markers: Vec::new(),
             colors: Vec::new(),
+            wrap_phase: false,
         }
     }
 
@@ -507,8 +509,17 @@ impl BodePlot {
         self
     }
 
-    /// Adds a frequency response in the next palette colour. Phase is drawn as given: unwrap it
-    /// first if it crosses ±180 deg.
+    /// Draws the phase wrapped into (-180, 180] deg on a fixed -180..180 axis (unless
+    /// [`BodePlot::phase_range`] sets another), the line broken where it wraps. For estimates
+    /// whose unwrapped phase runs off through bins of noise and would flatten the band that
+    /// matters.
+    pub fn wrap_phase(mut self) -> Self {
+        self.wrap_phase = true;
+        self
+    }
+
+    /// Adds a frequency response in the next palette colour. Phase is drawn as given (unwrap it
+    /// first if it crosses ±180 deg), or wrapped with [`BodePlot::wrap_phase`].
     pub fn series(self, name: &str, f_hz: &[f64], magnitude_db: &[f64], phase_deg: &[f64]) -> Self {
         self.series_styled(name, f_hz, magnitude_db, phase_deg, Style::new())
     }
@@ -569,11 +580,28 @@ impl BodePlot {
     }
 
     pub fn to_svg(&self) -> String {
-        render(&self.frame(), &self.panels())
+        let phase = self.phase_panel();
+        render(&self.frame(), &self.panels(&phase))
     }
 
     fn try_svg(&self) -> Result<String, String> {
-        try_render(&self.frame(), &self.panels())
+        let phase = self.phase_panel();
+        try_render(&self.frame(), &self.panels(&phase))
+    }
+
+    /// The phase panel as drawn: as given, or wrapped.
+    fn phase_panel(&self) -> std::borrow::Cow<'_, Panel> {
+        if !self.wrap_phase {
+            return std::borrow::Cow::Borrowed(&self.phase);
+        }
+        let mut panel = self.phase.clone();
+        for series in &mut panel.series {
+            (series.x, series.y) = wrapped_phase(&series.x, &series.y);
+        }
+        if panel.y_range.is_none() {
+            panel.y_range = Some((-180.0, 180.0));
+        }
+        std::borrow::Cow::Owned(panel)
     }
 
     fn frame(&self) -> Frame<'_> {
@@ -588,8 +616,8 @@ impl BodePlot {
         }
     }
 
-    fn panels(&self) -> Vec<&Panel> {
-        let mut panels = vec![&self.magnitude, &self.phase];
+    fn panels<'a>(&'a self, phase: &'a Panel) -> Vec<&'a Panel> {
+        let mut panels = vec![&self.magnitude, phase];
         panels.extend(self.coherence.as_ref());
         panels
     }
@@ -623,6 +651,29 @@ impl BodePlot {
         });
         self
     }
+}
+
+/// Phase in degrees wrapped into (-180, 180], with a NaN sample (a break in the line) between
+/// two neighbours whose wrapped values lie more than 180 deg apart: there the curve crossed
+/// ±180 deg, and a line joining them would run straight across the panel.
+fn wrapped_phase(x: &[f64], phase_deg: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let wrap = |p: f64| p - 360.0 * ((p - 180.0) / 360.0).ceil();
+    let mut out_x = Vec::with_capacity(x.len());
+    let mut out_y = Vec::with_capacity(phase_deg.len());
+    let mut previous: Option<(f64, f64)> = None;
+    for (&xv, &p) in x.iter().zip(phase_deg) {
+        let w = wrap(p);
+        if let Some((px, pw)) = previous
+            && (w - pw).abs() > 180.0
+        {
+            out_x.push(0.5 * (px + xv));
+            out_y.push(f64::NAN);
+        }
+        previous = w.is_finite().then_some((xv, w));
+        out_x.push(xv);
+        out_y.push(w);
+    }
+    (out_x, out_y)
 }
 
 /// Tick positions at 1-2-5 steps (times a power of ten) inside `lo..=hi`, as many as fit within
@@ -2029,5 +2080,23 @@ mod tests {
         let text = fs::read_to_string(&path).expect("read back");
         assert_well_formed(&text);
         assert_eq!(text, bode(100).to_svg());
+    }
+
+    #[test]
+    fn wrapped_phase_stays_in_half_open_circle_and_breaks_at_the_wrap() {
+        let x = [1.0, 2.0, 3.0, 4.0, 5.0];
+        let (wx, wy) = wrapped_phase(&x, &[-170.0, -190.0, -540.0, 180.0, f64::NAN]);
+        // -190 wraps to 170: a jump of 340 deg, so a break (NaN) sits between 1 and 2 Hz.
+        assert_eq!(wx, vec![1.0, 1.5, 2.0, 3.0, 4.0, 5.0]);
+        assert_eq!(wy[0], -170.0);
+        assert!(wy[1].is_nan());
+        assert_eq!(&wy[2..5], &[170.0, 180.0, 180.0]);
+        assert!(wy[5].is_nan());
+        let svg = BodePlot::new("wrapped")
+            .wrap_phase()
+            .series("h", &x, &[0.0; 5], &[-170.0, -190.0, -540.0, -3400.0, 10.0])
+            .to_svg();
+        assert_well_formed(&svg);
+        assert!(!svg.contains(">\n-3400") && !svg.contains(">\n-3000"));
     }
 }
