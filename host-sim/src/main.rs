@@ -45,7 +45,7 @@ enum Command {
         #[arg(long, value_name = "PATH")]
         json: Option<PathBuf>,
     },
-    /// What the paper plant allows whatever the controller (issue 14): the current and voltage
+    /// What the paper plant allows whatever the controller: the current and voltage
     /// a sinusoidal pinion angle needs, the largest amplitude within 20 A and the supply, and
     /// the bound this puts on a sweep's -3 dB bandwidth.
     Limits {
@@ -183,6 +183,55 @@ fn dispatch(command: Command) -> Result<()> {
                 say!("{}: {} B", write.join(v.name).display(), v.bytes.len());
             }
             Ok(())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// Every text `--help` can show, of `cmd` and its subcommands, with where it comes from.
+    fn help_texts(cmd: &clap::Command, path: &str, out: &mut Vec<(String, String)>) {
+        let texts = [cmd.get_about(), cmd.get_long_about()];
+        for text in texts.into_iter().flatten() {
+            out.push((path.to_string(), text.to_string()));
+        }
+        for arg in cmd.get_arguments() {
+            for text in [arg.get_help(), arg.get_long_help()].into_iter().flatten() {
+                out.push((format!("{path} --{}", arg.get_id()), text.to_string()));
+            }
+        }
+        for sub in cmd.get_subcommands() {
+            help_texts(sub, &format!("{path} {}", sub.get_name()), out);
+        }
+    }
+
+    /// Help says what and why; which issue, session or selftest case a line came from is
+    /// history, kept in the commits.
+    #[test]
+    fn help_names_no_issue_session_or_case_number() {
+        let mut texts = Vec::new();
+        help_texts(&Cli::command(), "host-sim", &mut texts);
+        assert!(texts.len() > 50, "{} help texts", texts.len());
+        for (path, text) in &texts {
+            let words: Vec<String> = text
+                .split_whitespace()
+                .map(|w| {
+                    w.trim_matches(|c: char| !c.is_alphanumeric())
+                        .to_lowercase()
+                })
+                .collect();
+            for pair in words.windows(2) {
+                let numbered = pair[1].starts_with(|c: char| c.is_ascii_digit());
+                assert!(
+                    !(["issue", "session", "case"].contains(&pair[0].as_str()) && numbered),
+                    "{path}: `{} {}` in `{text}`",
+                    pair[0],
+                    pair[1]
+                );
+            }
         }
     }
 }

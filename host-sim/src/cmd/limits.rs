@@ -6,7 +6,7 @@ use host_sim::linear_model::{LimitedBy, MINUS_3_DB, PhysicalLimit};
 use host_sim::sim::RunConfig;
 use std::path::Path;
 
-/// The physical limit of issue 14 for a run's plant and supply (20 A, as the cascade's limit).
+/// What the run's plant and supply allow whatever the controller (20 A, as the cascade's limit).
 pub(crate) fn physical_limit(cfg: &RunConfig) -> PhysicalLimit {
     PhysicalLimit {
         params: cfg.plant,
