@@ -160,6 +160,23 @@ pub fn pictures(rig: &Rig, rec: &Record, d: &Diagnosis) -> Vec<Picture> {
 /// magnitude and phase say nothing about the rig.
 const MIN_COHERENCE: f64 = 0.5;
 
+/// Fewest neighbouring bins above [`MIN_COHERENCE`] that count as a band: among bins of noise
+/// the estimate crosses 0.5 now and then by chance, one or two bins at a time.
+const MIN_COHERENT_BINS: usize = 3;
+
+/// `mask` with its runs of `true` shorter than `min_run` cleared.
+fn drop_short_runs(mut mask: Vec<bool>, min_run: usize) -> Vec<bool> {
+    let mut k = 0;
+    while k < mask.len() {
+        let run = mask[k..].iter().take_while(|&&ok| ok).count();
+        if run > 0 && run < min_run {
+            mask[k..k + run].iter_mut().for_each(|ok| *ok = false);
+        }
+        k += run.max(1);
+    }
+    mask
+}
+
 /// The Bode plot of the measured, nominal and verdict responses: in colour where the
 /// measurement's coherence holds, grey elsewhere; the magnitude axis spans the coloured part,
 /// the phase is wrapped.
@@ -182,7 +199,10 @@ fn bode_plot(rig_name: &str, f: &Frequency, after_name: &str) -> BodePlot {
     ];
     let masks: Vec<Vec<bool>> = responses
         .iter()
-        .map(|(_, r, _)| r.freq_hz.iter().map(|&x| coherent(x)).collect())
+        .map(|(_, r, _)| {
+            let mask = r.freq_hz.iter().map(|&x| coherent(x)).collect();
+            drop_short_runs(mask, MIN_COHERENT_BINS)
+        })
         .collect();
     let mut bode = BodePlot::new(&format!("Reference -> output, rig {rig_name}")).wrap_phase();
     let mut magnitude_range = (f64::INFINITY, f64::NEG_INFINITY);
@@ -355,13 +375,19 @@ mod tests {
             phase_deg: freq.iter().map(|&f| phase(f)).collect(),
             coherence: freq
                 .iter()
-                .map(|&f| if f <= 10.0 { 0.95 } else { 0.2 })
+                // One bin above 0.5 by chance among the noise.
+                .map(|&f| match f {
+                    f if f <= 10.0 => 0.95,
+                    f if (f - 30.0).abs() < 1e-9 => 0.6,
+                    _ => 0.2,
+                })
                 .collect(),
         }
     }
 
-    /// A sweep that stops at 10 Hz, estimated to 50 Hz: above 10 Hz the coherence is 0.2 and
-    /// the unwrapped phase runs off to -3 400 deg, as on a car's 100 Hz log.
+    /// A sweep that stops at 10 Hz, estimated to 50 Hz: above 10 Hz the coherence is 0.2 (0.6
+    /// in the one bin at 30 Hz) and the unwrapped phase runs off to -3 400 deg, as on a car's
+    /// 100 Hz log.
     fn sweep_to_10_hz() -> Frequency {
         let freq: Vec<f64> = (1..=200).map(|k| 0.25 * f64::from(k)).collect();
         let phase = |f: f64| {
@@ -444,7 +470,12 @@ mod tests {
             m.coherence[k]
         };
         let (mut coloured, mut grey, mut phase_points) = (0, 0, 0);
-        for (stroke, points) in polylines(&svg) {
+        // Lines, and the dots a lone sample between gaps is drawn as.
+        let dots = elements(&svg, "circle").into_iter().map(|(tag, _)| {
+            let colour = attr(tag, "fill").unwrap_or("").to_lowercase();
+            (colour, vec![(num(tag, "cx"), num(tag, "cy"))])
+        });
+        for (stroke, points) in polylines(&svg).into_iter().chain(dots) {
             for &p in &points {
                 let in_bode = inside(magnitude, p) || inside(phase, p);
                 if !in_bode {
@@ -454,7 +485,7 @@ mod tests {
                     coloured += 1;
                     let hz = 10f64.powf(log_f(p.0));
                     assert!(
-                        coherence_at(hz) >= MIN_COHERENCE,
+                        coherence_at(hz) >= MIN_COHERENCE && hz <= 10.1,
                         "a {stroke} point at {hz:.2} Hz, where the coherence is {}",
                         coherence_at(hz)
                     );
@@ -475,6 +506,17 @@ mod tests {
             coloured > 50 && grey > 20 && phase_points > 50,
             "{coloured} {grey} {phase_points}"
         );
+    }
+
+    #[test]
+    fn a_band_is_three_or_more_coherent_bins() {
+        let mask = |bits: &str| bits.chars().map(|c| c == '1').collect::<Vec<_>>();
+        assert_eq!(
+            drop_short_runs(mask("1110100110111"), 3),
+            mask("1110000000111")
+        );
+        assert_eq!(drop_short_runs(mask("11"), 3), mask("00"));
+        assert_eq!(drop_short_runs(Vec::new(), 3), Vec::<bool>::new());
     }
 
     #[test]
