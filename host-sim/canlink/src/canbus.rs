@@ -25,7 +25,7 @@ pub enum Fault {
         us: u64,
     },
     /// Flip bit `bit` of the frame: 0..=10 are the identifier, 11.. the data bytes
-    /// (bit 11 = data[0] bit 0); out-of-range bits wrap over the frame's bits.
+    /// (bit 11 = `data[0]` bit 0); out-of-range bits wrap over the frame's bits.
     FlipBit {
         bit: u32,
     },

@@ -79,7 +79,7 @@ impl XorShift64Star {
     }
 }
 
-/// SplitMix64: a counter stepped by `GAMMA`, each value passed through [`mix`].
+/// SplitMix64: a counter stepped by `GAMMA`, each value through SplitMix64's output function.
 #[derive(Debug, Clone)]
 pub struct SplitMix64(u64);
 

@@ -1,5 +1,5 @@
 //! What each `steer-can` command does on a bus: `monitor`, `epos check`, `send`, `record`,
-//! `campaign` ([`execute`]) and `convert`, with the confirmation prompt, Ctrl-C and progress
+//! `campaign` (`execute`) and `convert`, with the confirmation prompt, Ctrl-C and progress
 //! on stderr, results on stdout. Each returns what it found ([`Outcome`]) besides printing it,
 //! so `rehearse` judges values, not text.
 

@@ -116,7 +116,7 @@ pub fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
     Ok(sim)
 }
 
-/// Let the simulated vehicle computer steer while `record` listens ([`record_vehicle_script`]).
+/// Let the simulated vehicle computer steer while `record` listens (`record_vehicle_script`).
 #[cfg(feature = "sim")]
 pub fn vehicle_for_record(sim: &mut SimEcu) -> Result<(), BringupError> {
     eprintln!(
