@@ -8,6 +8,7 @@
 //! controller would drop it on the CRC, but delivering it exercises the decoders' handling of
 //! arbitrary frames, which is the point of a stricter fake.
 
+use det_rng::XorShift64Star;
 use std::collections::BTreeMap;
 use steering_ecu::can::{Frame, StandardId};
 
@@ -49,36 +50,6 @@ pub struct BusStats {
     pub delivered: u64,
 }
 
-/// Deterministic xorshift64* generator (no external crate, same sequence everywhere).
-#[derive(Debug, Clone)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        // splitmix64 of the seed, so neighbouring seeds give unrelated streams; xorshift must
-        // not start at 0.
-        let mut z = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        Rng(if z == 0 { 1 } else { z })
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        let mut x = self.0;
-        x ^= x >> 12;
-        x ^= x << 25;
-        x ^= x >> 27;
-        self.0 = x;
-        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 #[derive(Debug, Clone)]
 struct InFlight {
     from: Port,
@@ -90,7 +61,7 @@ struct InFlight {
 pub struct CanBus {
     ports: usize,
     latency_us: u64,
-    rng: Rng,
+    rng: XorShift64Star,
     random: RandomFaults,
     /// Faults for the n-th frame sent (0-based), applied before random faults.
     schedule: BTreeMap<u64, Fault>,
@@ -107,7 +78,7 @@ impl CanBus {
         CanBus {
             ports: 0,
             latency_us,
-            rng: Rng::new(seed),
+            rng: XorShift64Star::seeded(seed),
             random: RandomFaults::default(),
             schedule: BTreeMap::new(),
             silenced: Vec::new(),

@@ -4,7 +4,7 @@
 //! zero-length run, a wrapped angle or a profile too large to hold in memory.
 
 use crate::BringupError;
-use crate::cli::{CampaignKind, Cli, Command, SendProfile, SweepArgs};
+use crate::args::{CampaignKind, Cli, Command, SendProfile, SweepArgs};
 use steering_ecu::protocol::ProtocolConfig;
 
 /// An interval of allowed values with its unit and the reason for its ends.

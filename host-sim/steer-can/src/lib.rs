@@ -32,10 +32,12 @@
 //! feature `sim`; without it (`--no-default-features`, the laptop on the car) the tool builds
 //! without the simulator's numerics and says so when asked for the simulated car.
 
+pub mod args;
 pub mod bounds;
 pub mod campaign;
 pub mod candump;
 pub mod cli;
+pub mod commands;
 pub mod decode;
 pub mod epos;
 pub mod liveplot;

@@ -226,7 +226,7 @@ mod tests {
     fn the_history_scrolls_and_both_angles_show() {
         let mut p = LivePlot::new(20);
         let node = steering_ecu::canopen::NodeId::new(1).unwrap();
-        let m = Monitor::new(crate::cli::decoder(node).unwrap());
+        let m = Monitor::new(crate::commands::decoder(node).unwrap());
         for _ in 0..25 {
             p.sample(&m);
         }

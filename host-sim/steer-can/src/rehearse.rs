@@ -11,7 +11,8 @@
 //! still latched when the next `monitor` looks, and `send clear-faults` clears it. The files
 //! the steps write (logs, recordings, the track profile) go to `--dir`.
 
-use super::cli::{self, Cli, Command, Outcome, SendProfile, say};
+use super::args::{self, Cli, Command, SendProfile};
+use super::commands::{self, Outcome, say};
 use super::decode::{Decoder, ecu_state_words, faults_in_words, nmt_words};
 use super::monitor::Monitor;
 use super::{BringupError, Transport, WallPaced, simcar};
@@ -202,7 +203,7 @@ struct Verdict {
 
 /// Runs the rehearsal; prints each step and returns whether all matched.
 pub fn rehearse(outer: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
-    if outer.drive != cli::DriveArg::Epos4 {
+    if outer.drive != args::DriveArg::Epos4 {
         return Err(BringupError::Usage {
             reason: "rehearse follows the README's list for the default firmware (EPOS4 mode); \
                      leave out --drive direct"
@@ -217,7 +218,7 @@ pub fn rehearse(outer: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
     let node = NodeId::new(outer.node).ok_or_else(|| BringupError::Usage {
         reason: format!("--node {}: a CANopen node ID is 1 to 127", outer.node),
     })?;
-    let dec = cli::decoder(node)?;
+    let dec = commands::decoder(node)?;
     let sim = simcar::sim_car(outer)?;
     let mut car = if outer.fast {
         Car::Fast(sim)
@@ -233,7 +234,7 @@ pub fn rehearse(outer: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
         },
         dir.display()
     );
-    let stop = cli::stop_flag();
+    let stop = commands::stop_flag();
     let mut session = Session::default();
     let mut passed = 0;
     let mut failed = 0;
@@ -333,8 +334,8 @@ fn run_step(
         }
         Command::Campaign { kind } => {
             let (common, csv) = match kind {
-                cli::CampaignKind::Sweep { common, .. } => (common, None),
-                cli::CampaignKind::Track { common, track } => (common, track.csv.as_deref()),
+                args::CampaignKind::Sweep { common, .. } => (common, None),
+                args::CampaignKind::Track { common, track } => (common, track.csv.as_deref()),
             };
             // The operator's `yes`.
             common.yes = true;
@@ -357,11 +358,11 @@ fn run_step(
             candump,
             out,
             all_rows,
-        } => cli::convert(candump, out, dec, *all_rows).map(Outcome::Convert),
+        } => commands::convert(candump, out, dec, *all_rows).map(Outcome::Convert),
         Command::Rehearse { .. } | Command::SimCar { .. } => {
             return fail("a first-day step", "not a step of a session".into());
         }
-        other => cli::execute(other, node, dec, car.transport(), &mut session.sender),
+        other => commands::execute(other, node, dec, car.transport(), &mut session.sender),
     };
     let outcome = match outcome {
         Ok(o) => o,
@@ -594,13 +595,13 @@ fn in_dir(command: &mut Command, dir: &Path) {
     };
     match command {
         Command::Campaign { kind } => match kind {
-            cli::CampaignKind::Sweep { common, .. } => {
+            args::CampaignKind::Sweep { common, .. } => {
                 join(&mut common.out);
                 if let Some(r) = &mut common.record {
                     join(r);
                 }
             }
-            cli::CampaignKind::Track { track, common } => {
+            args::CampaignKind::Track { track, common } => {
                 join(&mut common.out);
                 if let Some(r) = &mut common.record {
                     join(r);

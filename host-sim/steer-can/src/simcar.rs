@@ -4,12 +4,15 @@
 //! (`--no-default-features`, no simulator numerics) answers each of these with
 //! [`BringupError::NoSimCar`], which says how to get a build that has it.
 
-use crate::cli::{Cli, Outcome};
+use crate::args::Cli;
+use crate::commands::Outcome;
 use crate::{BringupError, Transport};
 use std::path::Path;
 
 #[cfg(feature = "sim")]
-use crate::cli::{Command, DriveArg, stop_flag};
+use crate::args::{Command, DriveArg};
+#[cfg(feature = "sim")]
+use crate::commands::stop_flag;
 #[cfg(feature = "sim")]
 use crate::profile;
 #[cfg(feature = "sim")]
@@ -39,12 +42,6 @@ pub fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
         return Ok(Box::new(sim));
     }
     Ok(Box::new(crate::WallPaced::new(sim)))
-}
-
-/// `rehearse`: the README's first day on one simulated car.
-#[cfg(feature = "sim")]
-pub fn rehearse(cli: &Cli, dir: &Path) -> Result<Outcome, BringupError> {
-    crate::rehearse::rehearse(cli, dir)
 }
 
 /// `sim-car`: one simulated car served on a Unix socket until Ctrl-C.
@@ -119,7 +116,7 @@ pub fn sim_car(cli: &Cli) -> Result<SimEcu, BringupError> {
     Ok(sim)
 }
 
-/// Let the simulated vehicle computer steer while `record` listens ([`record_vehicle_script`]).
+/// Let the simulated vehicle computer steer while `record` listens (`record_vehicle_script`).
 #[cfg(feature = "sim")]
 pub fn vehicle_for_record(sim: &mut SimEcu) -> Result<(), BringupError> {
     eprintln!(
@@ -135,14 +132,6 @@ pub fn vehicle_for_record(sim: &mut SimEcu) -> Result<(), BringupError> {
 pub fn open(cli: &Cli) -> Result<Box<dyn Transport>, BringupError> {
     Err(BringupError::NoSimCar {
         asked: format!("--iface {}", cli.iface),
-    })
-}
-
-/// Without the `sim` feature: no car to rehearse on.
-#[cfg(not(feature = "sim"))]
-pub fn rehearse(_cli: &Cli, _dir: &Path) -> Result<Outcome, BringupError> {
-    Err(BringupError::NoSimCar {
-        asked: "rehearse".into(),
     })
 }
 

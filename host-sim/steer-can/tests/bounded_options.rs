@@ -207,7 +207,7 @@ fn the_table_covers_every_numeric_option_help_lists() {
         }
     }
     let mut found = Vec::new();
-    walk(&steer_can::cli::Cli::command(), "", &mut found);
+    walk(&steer_can::args::Cli::command(), "", &mut found);
     assert!(found.len() >= TABLE.len());
     for (path, long) in found {
         let covered = TABLE.iter().any(|r| {
