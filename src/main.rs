@@ -201,8 +201,7 @@ mod firmware {
         .await
     }
 
-    /// Rate of the loop that will run the control step (the later issue hangs CAN and the EPOS4
-    /// off it).
+    /// Rate of the loop that runs the control step (CAN and the EPOS4 hang off it).
     const CONTROL_RATE_HZ: u64 = 100;
     /// Control ticks between two heartbeat log lines: one per second.
     const TICKS_PER_HEARTBEAT: u32 = 100;

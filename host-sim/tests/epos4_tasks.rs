@@ -195,7 +195,7 @@ fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) 
     let ecu_port = bus.attach();
     let drive_port = bus.attach();
     bus.set_random_faults(faults);
-    // ECU mode drives the plant with issue 14's play and friction, as a car has them; paper
+    // ECU mode drives the plant with 1.5 deg of belt play and 200 N of rack friction, as a car has them; paper
     // mode the paper's linear plant.
     let effects = match (PLANT_EFFECTS.lock().map(|e| *e).unwrap_or(None), kind) {
         (Some(effects), _) => effects,
@@ -660,7 +660,7 @@ fn on_a_lossy_bus_the_drive_comes_up_and_tracks_or_the_ecu_names_the_fault_in() 
     assert!(tracked >= 2, "only {tracked} of 4 lossy runs tracked");
 }
 
-/// Issue 12 defect 1, EPOS4 mode: the drive's position counts from where the motor stood at
+/// EPOS4 mode: the drive's position counts from where the motor stood at
 /// power-up; the CSP target must be the drive's position plus the column-derived offset.
 #[test]
 fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up() {
@@ -689,7 +689,7 @@ fn the_epos4_target_is_aligned_to_the_column_wherever_the_car_powers_up_in() {
     }
 }
 
-/// Issue 12 defect 3, EPOS4 mode: the first cyclic target is the drive's own position, and the
+/// EPOS4 mode: the first cyclic target is the drive's own position, and the
 /// target then ramps to a far reference at the documented rate instead of stepping to it.
 #[test]
 fn an_epos4_enable_ramps_the_target_from_the_measured_position() {
@@ -722,7 +722,7 @@ fn an_epos4_enable_ramps_the_target_from_the_measured_position_in() {
     assert!(s.iter().all(|x| x.faults == 0));
 }
 
-/// Issue 12 defect 11: the bring-up writes the drive's own limits (current, following error,
+/// The bring-up writes the drive's own limits (current, following error,
 /// speed) and reads them back; the drive holds them.
 #[test]
 fn the_bring_up_writes_the_drive_limits() {
@@ -751,7 +751,7 @@ fn the_bring_up_writes_the_drive_limits_in() {
     assert_eq!(velocity_rpm, Some(5_400), "max profile velocity");
 }
 
-/// Issue 12 defect 11: every enable writes the drive's software position limits (0x607D)
+/// Every enable writes the drive's software position limits (0x607D)
 /// around the origin the ECU took from the column, +-(90 + 20) deg at the wheel in the drive's
 /// increments, and reads them back before enabling; the drive holds every target within them
 /// and full lock stays reachable.

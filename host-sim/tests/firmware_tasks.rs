@@ -193,7 +193,7 @@ fn run_logged(
     }))));
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
-    // ECU mode runs against the plant with issue 14's play and friction, as a car has them;
+    // ECU mode runs against the plant with 1.5 deg of belt play and 200 N of rack friction, as a car has them;
     // paper mode against the paper's linear plant, its figures' own.
     let effects = match (PLANT_EFFECTS.lock().map(|e| *e).unwrap_or(None), kind) {
         (Some(effects), _) => effects,
@@ -441,7 +441,7 @@ fn sensor_faults_latch(kind: ControllerKind) {
     }
 }
 
-/// Issue 12 defect 9: a drive that runs away from the reference while the loop pushes toward
+/// A drive that runs away from the reference while the loop pushes toward
 /// it with all it has is a fault within 50 ms of the push, not after the tracking check's
 /// 20 deg for 200 ms.
 #[test]
@@ -490,7 +490,7 @@ fn a_runaway_latches_within_50_ms_of_the_saturated_push_in() {
     }
 }
 
-/// Issue 12 defect 1: the Hall count starts at 0 wherever the motor stands at power-up, so the
+/// The Hall count starts at 0 wherever the motor stands at power-up, so the
 /// motor's origin must be taken from the column encoder, or the ECU steers to the wrong angle
 /// (or latches the disagreement for good).
 #[test]
@@ -573,7 +573,7 @@ fn bus_off_ends_reception_and_latches_the_fault_in() {
     );
 }
 
-/// Issue 12 defect 12: the counters and the fault ring leave the ECU on 0x103, one page per
+/// The counters and the fault ring leave the ECU on 0x103, one page per
 /// status period, and `steer-can monitor`'s decoding shows them by name.
 #[test]
 fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() {
@@ -751,7 +751,7 @@ fn ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant() {
     }
 }
 
-/// Issue 12 defect 10: the watchdog is fed every feed period while the tasks and the fast loop
+/// The watchdog is fed every feed period while the tasks and the fast loop
 /// run, and not once while the fast loop is stopped, so the IWDG resets the MCU.
 #[test]
 fn the_watchdog_is_fed_only_while_the_fast_loop_and_the_tasks_run() {

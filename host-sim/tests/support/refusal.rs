@@ -1,5 +1,5 @@
 //! Shared by host-sim's and steer-can's `bad_input` tests (each package's test can run only its
-//! own binaries): what "refused" means for issue 13's bad-input table, and the small file
+//! own binaries): what "refused" means for the bad-input table, and the small file
 //! helpers both use to make bad files.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
@@ -19,7 +19,7 @@ pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// Refused as the issue asks: a failure exit (not the 101 of a panic), no panic message, and
+/// Refused: a failure exit (not the 101 of a panic), no panic message, and
 /// every piece of `expected` in the error.
 pub fn assert_refused(o: &Output, expected: &[&str]) {
     let err = stderr(o);
