@@ -18,7 +18,7 @@ use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
 use steering_ecu::controller::ControllerKind;
 use steering_ecu::direct::FastLoop;
-use steering_ecu::ecu::{Drive, Ecu};
+use steering_ecu::ecu::{Drive, DriveChoice, Ecu, EcuBuild};
 use steering_ecu::faults::Fault;
 use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
@@ -187,10 +187,8 @@ fn run_logged(
         .lock()
         .map(|c| *c)
         .unwrap_or(ControllerKind::Paper);
-    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(match kind {
-        ControllerKind::Paper => Ecu::paper().unwrap(),
-        ControllerKind::Ecu => Ecu::ecu_direct().unwrap(),
-    }))));
+    let ecu = Ecu::build(EcuBuild::new(kind, DriveChoice::Direct), 0).unwrap();
+    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(ecu))));
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
     // ECU mode runs against the plant with 1.5 deg of belt play and 200 N of rack friction, as a car has them;

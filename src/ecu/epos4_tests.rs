@@ -144,7 +144,11 @@ fn step(ecu: &mut Ecu, drive: &mut FakeEpos4, t: u64) -> Vec<Frame> {
 /// An EPOS4-mode ECU (paper mode) whose drive powered up at `position_inc`, started at 0.
 fn epos4_ecu(position_inc: i32) -> (Ecu, FakeEpos4, Vec<Frame>) {
     let config = Epos4Config::paper(node());
-    let mut ecu = Ecu::paper_epos4(Epos4Link::new(config, 0).unwrap()).unwrap();
+    let mut ecu = Ecu::build(
+        EcuBuild::new(ControllerKind::Paper, DriveChoice::Epos4(config)),
+        0,
+    )
+    .unwrap();
     let mut drive = FakeEpos4::new(position_inc);
     let sent = ecu.drive_start(0).to_vec();
     for f in &sent {
@@ -598,7 +602,7 @@ fn an_epos4_that_does_not_follow_latches_a_tracking_error() {
 /// brings it up and steers it.
 #[test]
 fn ecu_mode_runs_its_cascade_direct_and_its_feedforward_on_the_epos4() {
-    let ecu = Ecu::ecu_direct().unwrap();
+    let ecu = Ecu::build(EcuBuild::new(ControllerKind::Ecu, DriveChoice::Direct), 0).unwrap();
     assert!(matches!(
         ecu.drive(),
         Drive::Direct(SteeringController::Ecu(_))
@@ -619,7 +623,11 @@ fn ecu_mode_runs_its_cascade_direct_and_its_feedforward_on_the_epos4() {
 
     let mut config = Epos4Config::paper(node());
     config.gains = gains;
-    let mut ecu = Ecu::ecu_epos4(Epos4Link::new(config, 0).unwrap()).unwrap();
+    let mut ecu = Ecu::build(
+        EcuBuild::new(ControllerKind::Ecu, DriveChoice::Epos4(config)),
+        0,
+    )
+    .unwrap();
     let mut drive = FakeEpos4::new(500);
     for f in ecu.drive_start(0) {
         let answers = drive.on_frame(&f);

@@ -42,8 +42,8 @@
 
 use crate::as_state::AsState;
 use crate::can::Frame;
-use crate::canopen::epos4::{Epos4Link, LinkError, Outbox, Phase};
-use crate::controller::SteeringController;
+use crate::canopen::epos4::{Epos4Config, Epos4Link, LinkError, Outbox, Phase};
+use crate::controller::{ControllerKind, SteeringController};
 use crate::ecu_mode::{ColumnCascade, ColumnShaper, EcuTuning};
 use crate::enable_ramp::EnableRamp;
 use crate::gains::EposGains;
@@ -212,19 +212,92 @@ pub struct Ecu {
     shaper: Option<ColumnShaper>,
 }
 
+/// Which drive an ECU commands, as the firmware's build chooses it (its `drive-epos4` and
+/// `drive-direct` features).
+#[derive(Debug, Clone, Copy)]
+pub enum DriveChoice {
+    /// The ECU's own bridge: it runs the controller's cascade itself.
+    Direct,
+    /// An EPOS4 in cyclic synchronous position mode, brought up with these link settings
+    /// (ECU mode writes its own feedforward gains over theirs, [`Ecu::ecu_mode_epos4_gains`]).
+    Epos4(Epos4Config),
+}
+
+/// What [`Ecu::build`] makes: the controller, the drive and the settings.
+#[derive(Debug, Clone, Copy)]
+pub struct EcuBuild {
+    pub controller: ControllerKind,
+    pub drive: DriveChoice,
+    pub protocol: ProtocolConfig,
+    pub config: Config,
+}
+
+impl EcuBuild {
+    /// `controller` on `drive`, the default protocol and state-machine settings.
+    pub const fn new(controller: ControllerKind, drive: DriveChoice) -> Self {
+        EcuBuild {
+            controller,
+            drive,
+            protocol: ProtocolConfig::DEFAULT,
+            config: Config::DEFAULT,
+        }
+    }
+}
+
 impl Ecu {
-    /// A direct-drive ECU with these settings; `None` if the protocol configuration is refused.
-    pub fn new(
-        protocol: ProtocolConfig,
-        config: Config,
-        cascade: impl Into<SteeringController>,
-    ) -> Option<Self> {
-        Self::with_drive(protocol, config, Drive::Direct(cascade.into()))
+    /// The one way to make an ECU (the firmware, host-sim's simulated car, the golden vectors
+    /// and the tests all come through here): `None` if a setting is refused.
+    ///
+    /// - Paper mode, direct: the paper's cascade ([`Cascade::paper`]) on the ECU's bridge.
+    /// - ECU mode, direct: [`ColumnCascade`] with Table 3's gains and [`EcuTuning::PAPER`].
+    /// - Paper mode over an EPOS4: the link alone; the drive runs the paper's loops.
+    /// - ECU mode over an EPOS4: the ECU runs the column side ([`ColumnShaper`]: inverse belt
+    ///   model and column feedback) once per reference period and sends the result as the CSP
+    ///   target; the drive runs its own loops with the feedforward of
+    ///   [`Ecu::ecu_mode_epos4_gains`], written at bring-up.
+    ///
+    /// `now_us` starts the EPOS4 link's clock.
+    pub fn build(build: EcuBuild, now_us: u64) -> Option<Self> {
+        let EcuBuild {
+            controller,
+            drive,
+            protocol,
+            config,
+        } = build;
+        let gearing = config.gearing();
+        let (drive, shaper) = match (drive, controller) {
+            (DriveChoice::Direct, ControllerKind::Paper) => {
+                (Drive::Direct(Cascade::paper().into()), None)
+            }
+            (DriveChoice::Direct, ControllerKind::Ecu) => {
+                let gains = EposGains::PAPER.to_si().ok()?;
+                let cascade = ColumnCascade::new(&gains, gearing, EcuTuning::PAPER);
+                (Drive::Direct(cascade.into()), None)
+            }
+            (DriveChoice::Epos4(link), ControllerKind::Paper) => {
+                (Drive::Epos4(Epos4Link::new(link, now_us).ok()?), None)
+            }
+            (DriveChoice::Epos4(mut link), ControllerKind::Ecu) => {
+                link.gains = Self::ecu_mode_epos4_gains();
+                let shaper = ColumnShaper::new(gearing, EcuTuning::PAPER, 1);
+                (
+                    Drive::Epos4(Epos4Link::new(link, now_us).ok()?),
+                    Some(shaper),
+                )
+            }
+        };
+        let mut ecu = Self::assemble(protocol, config, drive)?;
+        ecu.shaper = shaper;
+        Some(ecu)
     }
 
-    /// An ECU driving the motor as `drive` says; `None` if the protocol configuration is
-    /// refused.
-    pub fn with_drive(protocol: ProtocolConfig, config: Config, drive: Drive) -> Option<Self> {
+    /// Shorthand for the paper's controller on the ECU's bridge with the default settings
+    /// ([`Ecu::build`]).
+    pub fn paper() -> Option<Self> {
+        Self::build(EcuBuild::new(ControllerKind::Paper, DriveChoice::Direct), 0)
+    }
+
+    fn assemble(protocol: ProtocolConfig, config: Config, drive: Drive) -> Option<Self> {
         let e2e = E2eChecker::new(protocol).ok()?;
         let gearing = config.gearing();
         let overcurrent_threshold = config.overcurrent().0;
@@ -275,30 +348,6 @@ impl Ecu {
         })
     }
 
-    /// The paper's actuator driven directly, the default protocol and state-machine settings.
-    pub fn paper() -> Option<Self> {
-        Self::new(ProtocolConfig::default(), Config::DEFAULT, Cascade::paper())
-    }
-
-    /// ECU mode ([`crate::ecu_mode`]) on the paper's actuator, driven directly.
-    pub fn ecu_direct() -> Option<Self> {
-        let gains = EposGains::PAPER.to_si().ok()?;
-        let config = Config::DEFAULT;
-        let cascade = ColumnCascade::new(&gains, config.gearing(), EcuTuning::PAPER);
-        Self::new(ProtocolConfig::default(), config, cascade)
-    }
-
-    /// ECU mode over an EPOS4: the ECU runs the column side ([`ColumnShaper`]: inverse belt
-    /// model and column feedback) once per reference period and sends the result as the CSP
-    /// target; the drive runs its own loops, with the feedforward of
-    /// [`Ecu::ecu_mode_epos4_gains`] written at bring-up.
-    pub fn ecu_epos4(link: Epos4Link) -> Option<Self> {
-        let config = Config::DEFAULT;
-        let mut ecu = Self::with_drive(ProtocolConfig::default(), config, Drive::Epos4(link))?;
-        ecu.shaper = Some(ColumnShaper::new(config.gearing(), EcuTuning::PAPER, 1));
-        Some(ecu)
-    }
-
     /// The EPOS4's gains in ECU mode: Table 3's PID with the model's feedforward
     /// ([`EcuTuning::PAPER`], converted to the drive's mA s/rad and mA s^2/rad).
     pub fn ecu_mode_epos4_gains() -> EposGains {
@@ -307,16 +356,6 @@ impl Ecu {
             ff_acceleration_ma_s2_per_rad: EcuTuning::PAPER.ff_acceleration * 1000.0,
             ..EposGains::PAPER
         }
-    }
-
-    /// The paper's car: an EPOS4 with the link's settings, the default protocol and
-    /// state-machine settings.
-    pub fn paper_epos4(link: Epos4Link) -> Option<Self> {
-        Self::with_drive(
-            ProtocolConfig::default(),
-            Config::DEFAULT,
-            Drive::Epos4(link),
-        )
     }
 
     pub fn drive(&self) -> &Drive {

@@ -222,7 +222,10 @@ fn a_wrong_origin_latches_once_the_drive_rests() {
 #[test]
 fn an_enable_beyond_90_deg_ramps_from_the_column() {
     for (column, target) in [(105.0f32, 80.0f32), (-108.0, -60.0), (100.0, 95.0)] {
-        for mut ecu in [Ecu::paper().unwrap(), Ecu::ecu_direct().unwrap()] {
+        for mut ecu in [
+            Ecu::paper().unwrap(),
+            Ecu::build(EcuBuild::new(ControllerKind::Ecu, DriveChoice::Direct), 0).unwrap(),
+        ] {
             let mut vehicle = Vehicle::new();
             let mut position = column;
             let mut previous = None;
@@ -386,7 +389,14 @@ fn a_disabling_as_state_is_honoured_in_a_frame_that_fails_only_its_counter() {
     for (actuation, as_state) in cases {
         for repeat in [false, true] {
             let config = Config::DEFAULT.with_actuation(actuation);
-            let mut ecu = Ecu::new(ProtocolConfig::default(), config, Cascade::paper()).unwrap();
+            let mut ecu = Ecu::build(
+                EcuBuild {
+                    config,
+                    ..EcuBuild::new(ControllerKind::Paper, DriveChoice::Direct)
+                },
+                0,
+            )
+            .unwrap();
             let mut vehicle = Vehicle::new();
             let mut t = 0;
             for _ in 0..5 {
@@ -483,7 +493,11 @@ fn tracking_is_not_reported_before_the_epos4_is_enabled() {
     use crate::canopen::NodeId;
     use crate::canopen::epos4::Epos4Config;
     let config = Epos4Config::paper(NodeId::new(1).unwrap());
-    let mut ecu = Ecu::paper_epos4(Epos4Link::new(config, 0).unwrap()).unwrap();
+    let mut ecu = Ecu::build(
+        EcuBuild::new(ControllerKind::Paper, DriveChoice::Epos4(config)),
+        0,
+    )
+    .unwrap();
     let _ = ecu.drive_start(0);
     let mut vehicle = Vehicle::new();
     // The drive never answers: the link stays in its bring-up.
