@@ -840,7 +840,7 @@ fn enable_current(drive: SimDrive, controller: ControllerKind, target_deg: f64) 
         t_us += STEP_US;
         car.run_until(t_us);
         let setpoint = car.with_ecu(|e| match e.drive() {
-            Drive::Direct(cascade) => f64::from(cascade.current_setpoint().0),
+            Drive::Direct(d) => f64::from(d.controller().current_setpoint().0),
             Drive::Epos4(_) => 0.0,
         });
         let winding = car.current_a();

@@ -5,11 +5,14 @@
 use super::tests::Vehicle;
 use super::*;
 use crate::canopen::cia402::{self, State};
+use crate::canopen::epos4::Phase;
 use crate::canopen::epos4::{Epos4Config, od};
 use crate::canopen::nmt::{self, NmtCommand, NmtState};
 use crate::canopen::sdo::{self, ServerRequest, Width};
 use crate::canopen::{NodeId, ObjectAddress, cob_id, function};
+use crate::controller::SteeringController;
 use crate::faults::Fault;
+use crate::sensors::{HALL_COUNTS_PER_REV, hall_from_motor, motor_from_hall};
 use std::collections::HashMap;
 
 const MS: u64 = 1000;
@@ -605,7 +608,7 @@ fn ecu_mode_runs_its_cascade_direct_and_its_feedforward_on_the_epos4() {
     let ecu = Ecu::build(EcuBuild::new(ControllerKind::Ecu, DriveChoice::Direct), 0).unwrap();
     assert!(matches!(
         ecu.drive(),
-        Drive::Direct(SteeringController::Ecu(_))
+        Drive::Direct(d) if matches!(d.controller(), SteeringController::Ecu(_))
     ));
     let gains = Ecu::ecu_mode_epos4_gains();
     assert!((gains.ff_velocity_ma_s_per_rad / 1000.0 - EcuTuning::PAPER.ff_velocity).abs() < 1e-6);
@@ -740,6 +743,7 @@ fn a_resync_restarts_the_cascade_at_the_motor() {
     let Drive::Direct(cascade) = ecu.drive() else {
         panic!("direct mode")
     };
+    let cascade = cascade.controller();
     let at = cascade.setpoint().position;
     assert!(
         (at.0 - motor_from_hall(hall).0).abs() < 1e-4,

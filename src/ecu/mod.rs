@@ -40,34 +40,23 @@
 //! reports AS Off (the driver steers, nothing is powered); when it is back in Standby the
 //! cause is gone and the clear request in AS Off clears the latched fault.
 
+mod drive;
+
+use drive::PENDING_DEPTH;
+pub use drive::{DirectDrive, Drive, Epos4Drive};
+
 use crate::as_state::AsState;
 use crate::can::Frame;
-use crate::canopen::epos4::{Epos4Config, Epos4Link, LinkError, Outbox, Phase};
-use crate::controller::{ControllerKind, SteeringController};
+use crate::canopen::epos4::{Epos4Config, Epos4Link, LinkError, Outbox};
+use crate::controller::ControllerKind;
 use crate::ecu_mode::{ColumnCascade, ColumnShaper, EcuTuning};
 use crate::enable_ramp::EnableRamp;
 use crate::gains::EposGains;
 use crate::gearing::Gearing;
 use crate::paper_mode::Cascade;
 use crate::protocol::{AliveCounter, E2eChecker, E2eVerdict, MotorStatus, ProtocolConfig, Status};
-use crate::sensors::{HALL_COUNTS_PER_REV, hall_from_motor, motor_from_hall};
 use crate::steering::{Config, DriveDemand, EcuState, Output, SteeringStateMachine};
 use crate::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts};
-
-/// How the motor is driven; see the module docs.
-#[derive(Debug, Clone)]
-// One per ECU, made once: the size difference does not matter.
-#[allow(clippy::large_enum_variant)]
-pub enum Drive {
-    /// The ECU runs the cascade on its own bridge: paper mode or ECU mode.
-    Direct(SteeringController),
-    /// An EPOS4 in cyclic synchronous position mode runs the loops.
-    Epos4(Epos4Link),
-}
-
-/// Frames a demand change left for the drive task; a disable is one frame, so 4 is room for
-/// several changes within one drive-task period.
-const PENDING_DEPTH: usize = 4;
 
 /// What one drive call puts on the bus: the pending demand-change frames and the link's.
 pub type DriveFrames = heapless::Vec<Frame, { PENDING_DEPTH + 4 }>;
@@ -166,17 +155,10 @@ pub struct Ecu {
     bus_offs: u16,
     diagnostic_counter: AliveCounter,
     diagnostic_page: u8,
-    /// EPOS4 mode: frames from demand changes, for the next drive call.
-    pending: heapless::Vec<Frame, PENDING_DEPTH>,
     /// Pending frames that did not fit (saturating); the link's supervision covers a lost one.
     pending_overflow: u16,
     /// The firmware's stack high-water mark, as it last measured it (`None` off the chip).
     stack: Option<crate::stack::StackUsage>,
-    /// EPOS4 mode: the link was up (Standby, Disabling or Cyclic) at the last supervision.
-    link_up: bool,
-    link_error: Option<LinkError>,
-    last_link_reset_us: Option<u64>,
-    current_seen_us: u64,
     /// The last reference sample the drive was given (wheel deg), for the tracking check.
     reference: Option<SteeringDeg>,
     /// The motor sensor's count (Hall count in direct mode, EPOS4 increments) that reads as
@@ -193,23 +175,12 @@ pub struct Ecu {
     /// The enable ramp ([`ENABLE_RAMP_DPS`]); `None` once it has met the vehicle's
     /// reference.
     ramp: Option<EnableRamp>,
-    /// Position ticks since the last reference sample was pushed (direct drive), saturating:
-    /// the rate limit's time base ([`Ecu::rate_limited`]).
-    ticks_since_push: u32,
-    /// EPOS4 mode: the reference sample the drive's target came from at the last SYNC, and
-    /// when that SYNC and the one before it went out: the rate limit's anchor and time base.
-    synced_reference: Option<SteeringDeg>,
-    last_sync_us: Option<u64>,
-    sync_interval_us: u64,
     /// The state machine's over-current threshold (its configuration never changes).
     overcurrent_threshold: Amps,
     motor_counter: AliveCounter,
     /// Measured current summed since the last motor frame, A, and the number of samples.
     current_sum: f32,
     current_samples: u32,
-    /// ECU mode over an EPOS4: the column side of the controller, which makes the CSP target.
-    /// `None` in paper mode and in direct drive (where the controller holds its own).
-    shaper: Option<ColumnShaper>,
 }
 
 /// Which drive an ECU commands, as the firmware's build chooses it (its `drive-epos4` and
@@ -265,30 +236,27 @@ impl Ecu {
             config,
         } = build;
         let gearing = config.gearing();
-        let (drive, shaper) = match (drive, controller) {
+        let drive = match (drive, controller) {
             (DriveChoice::Direct, ControllerKind::Paper) => {
-                (Drive::Direct(Cascade::paper().into()), None)
+                Drive::Direct(DirectDrive::new(Cascade::paper().into()))
             }
             (DriveChoice::Direct, ControllerKind::Ecu) => {
                 let gains = EposGains::PAPER.to_si().ok()?;
                 let cascade = ColumnCascade::new(&gains, gearing, EcuTuning::PAPER);
-                (Drive::Direct(cascade.into()), None)
+                Drive::Direct(DirectDrive::new(cascade.into()))
             }
             (DriveChoice::Epos4(link), ControllerKind::Paper) => {
-                (Drive::Epos4(Epos4Link::new(link, now_us).ok()?), None)
+                let link = Epos4Link::new(link, now_us).ok()?;
+                Drive::Epos4(Epos4Drive::new(link, None, protocol.period_us))
             }
             (DriveChoice::Epos4(mut link), ControllerKind::Ecu) => {
                 link.gains = Self::ecu_mode_epos4_gains();
+                let link = Epos4Link::new(link, now_us).ok()?;
                 let shaper = ColumnShaper::new(gearing, EcuTuning::PAPER, 1);
-                (
-                    Drive::Epos4(Epos4Link::new(link, now_us).ok()?),
-                    Some(shaper),
-                )
+                Drive::Epos4(Epos4Drive::new(link, Some(shaper), protocol.period_us))
             }
         };
-        let mut ecu = Self::assemble(protocol, config, drive)?;
-        ecu.shaper = shaper;
-        Some(ecu)
+        Self::assemble(protocol, config, drive)
     }
 
     /// Shorthand for the paper's controller on the ECU's bridge with the default settings
@@ -324,27 +292,17 @@ impl Ecu {
             bus_offs: 0,
             diagnostic_counter: AliveCounter::wrapping(0),
             diagnostic_page: 0,
-            pending: heapless::Vec::new(),
             pending_overflow: 0,
             stack: None,
-            link_up: false,
-            link_error: None,
-            last_link_reset_us: None,
-            current_seen_us: 0,
             reference: None,
             origin_counts: None,
             origin_candidates: heapless::Deque::new(),
             rest: None,
             ramp: None,
-            ticks_since_push: u32::MAX,
-            synced_reference: None,
-            last_sync_us: None,
-            sync_interval_us: u64::from(protocol.period_us),
             overcurrent_threshold,
             motor_counter: AliveCounter::wrapping(0),
             current_sum: 0.0,
             current_samples: 0,
-            shaper: None,
         })
     }
 
@@ -365,7 +323,7 @@ impl Ecu {
     /// The EPOS4 link, in EPOS4 mode.
     pub fn link(&self) -> Option<&Epos4Link> {
         match &self.drive {
-            Drive::Epos4(link) => Some(link),
+            Drive::Epos4(d) => Some(d.link()),
             Drive::Direct(_) => None,
         }
     }
@@ -387,31 +345,16 @@ impl Ecu {
     /// The motor sensor's raw count: the Hall count (it starts at 0 wherever the motor stands
     /// at power-up), or the EPOS4's position actual once the drive has reported one.
     fn motor_counts(&self) -> Option<i32> {
-        match &self.drive {
-            Drive::Direct(_) => Some(self.hall_count),
-            Drive::Epos4(link) => link
-                .position_known()
-                .then_some(link.feedback().position_inc),
-        }
+        self.drive.motor_counts(self.hall_count)
     }
 
     /// The nearest count of a motor angle, in the drive's unit; `None` if not finite.
     fn counts_from_motor(&self, motor: MotorRad) -> Option<i32> {
-        match &self.drive {
-            Drive::Direct(_) => motor.is_finite().then(|| {
-                // `hall_from_motor` floors: half a count more rounds to the nearest.
-                let half_count = core::f64::consts::PI / f64::from(HALL_COUNTS_PER_REV);
-                hall_from_motor(f64::from(motor.0) + half_count)
-            }),
-            Drive::Epos4(link) => link.scale().inc_from_motor(motor),
-        }
+        self.drive.counts_from_motor(motor)
     }
 
     fn motor_from_counts(&self, counts: i32) -> MotorRad {
-        match &self.drive {
-            Drive::Direct(_) => motor_from_hall(counts),
-            Drive::Epos4(link) => link.scale().motor_from_inc(counts),
-        }
+        self.drive.motor_from_counts(counts)
     }
 
     /// The motor's count relative to the origin: what the cascade and the disagreement check
@@ -428,9 +371,7 @@ impl Ecu {
     /// written around it at each enable.
     fn set_origin(&mut self, origin: Option<i32>) {
         self.origin_counts = origin;
-        if let Drive::Epos4(link) = &mut self.drive {
-            link.set_position_origin(origin);
-        }
+        self.drive.set_origin(origin);
     }
 
     /// Takes the motor origin from the last column sample: the motor count now, less the
@@ -581,8 +522,10 @@ impl Ecu {
             // The first reference sample after enabling is the one to track (the enable ramp
             // bounds its motion, not the rate limit: there is no previous sample).
             self.reference = None;
-            self.synced_reference = None;
-            self.ticks_since_push = u32::MAX;
+            match &mut self.drive {
+                Drive::Direct(d) => d.enabled(),
+                Drive::Epos4(d) => d.enabled(),
+            }
             // Every enable takes the motor origin from the column encoder afresh: the motor
             // may have been turned (driver, tyres) while the drive was off, and the Hall
             // count or the drive's position only ever counted relative steps. From the
@@ -597,25 +540,27 @@ impl Ecu {
             self.ramp = Some(EnableRamp::at_rest(self.column, now_us));
         }
         let aligned = self.aligned_counts();
-        if out.drive_just_enabled
-            && let Some(shaper) = &mut self.shaper
-        {
-            // ECU mode over the EPOS4 starts from rest where the column is.
-            shaper.reset(
-                self.gearing
-                    .motor_from_steering(SteeringRad::from(self.column)),
-            );
-        }
+        let column_motor = self
+            .gearing
+            .motor_from_steering(SteeringRad::from(self.column));
         match &mut self.drive {
-            Drive::Direct(cascade) => {
+            Drive::Direct(d) => {
                 if out.drive_just_enabled {
-                    cascade.reset(aligned.unwrap_or(self.hall_count));
+                    d.controller_mut().reset(aligned.unwrap_or(self.hall_count));
                 }
             }
-            Drive::Epos4(link) => {
-                let frames = link.set_power(out.demand != DriveDemand::Disabled, now_us);
+            Drive::Epos4(d) => {
+                if out.drive_just_enabled
+                    && let Some(shaper) = d.shaper_mut()
+                {
+                    // ECU mode over the EPOS4 starts from rest where the column is.
+                    shaper.reset(column_motor);
+                }
+                let frames = d
+                    .link_mut()
+                    .set_power(out.demand != DriveDemand::Disabled, now_us);
                 for f in frames {
-                    if self.pending.push(f).is_err() {
+                    if !d.queue(f) {
                         self.pending_overflow = self.pending_overflow.saturating_add(1);
                     }
                 }
@@ -624,10 +569,7 @@ impl Ecu {
         // Power demanded is not power delivered: until the EPOS4 is in Operation enabled the
         // status says Arming, so the vehicle computer does not drive off on wheels nobody
         // steers.
-        if let Drive::Epos4(link) = &self.drive
-            && matches!(out.state, EcuState::Tracking | EcuState::Holding)
-            && link.phase() != Phase::Cyclic
-        {
+        if self.drive.arming() && matches!(out.state, EcuState::Tracking | EcuState::Holding) {
             out.state = EcuState::Arming;
         }
         self.last = out;
@@ -640,9 +582,7 @@ impl Ecu {
         let Some(ramp) = &mut self.ramp else {
             return target;
         };
-        if let Drive::Epos4(link) = &self.drive
-            && link.phase() != Phase::Cyclic
-        {
+        if self.drive.arming() {
             // The EPOS4 is not in Operation enabled yet (the link walks CiA 402 for a few
             // SDO round trips): the ramp waits at the measured column, at rest.
             self.ramp =
@@ -675,19 +615,19 @@ impl Ecu {
         let rate = self.protocol.max_rate_deg_per_s;
         let period_s = self.protocol.period_us as f32 * 1e-6;
         let (anchor, span_s) = match &self.drive {
-            Drive::Direct(_) => {
-                let ticks = self
-                    .ticks_since_push
+            Drive::Direct(d) => {
+                let ticks = d
+                    .ticks_since_push()
                     .min(crate::paper_mode::POSITION_TICKS_PER_REFERENCE);
                 (
                     self.reference,
                     ticks as f32 / crate::paper_mode::POSITION_LOOP_HZ as f32,
                 )
             }
-            Drive::Epos4(_) => (
-                self.synced_reference,
-                (self.sync_interval_us as f32 * 1e-6).min(period_s),
-            ),
+            Drive::Epos4(d) => {
+                let (anchor, interval_s) = d.rate_anchor();
+                (anchor, interval_s.min(period_s))
+            }
         };
         let Some(anchor) = anchor.filter(|a| a.is_finite()) else {
             return angle;
@@ -711,39 +651,26 @@ impl Ecu {
         let angle = self.ramped(now_us, target);
         let angle = self.rate_limited(angle);
         self.reference = Some(angle);
-        self.ticks_since_push = 0;
         match &mut self.drive {
             // The E2E check already bounds the angle to the cascade's range; a refusal here
             // keeps the ramp in progress, which is the documented outcome.
-            Drive::Direct(cascade) => {
+            Drive::Direct(d) => {
+                d.pushed();
+                let cascade = d.controller_mut();
                 let _ = if ramping {
                     cascade.push_unshaped(angle)
                 } else {
                     cascade.push_reference(angle)
                 };
             }
-            Drive::Epos4(link) => {
-                let mut motor = self.gearing.motor_from_steering(SteeringRad::from(angle));
-                if let Some(shaper) = &mut self.shaper {
-                    // ECU mode: the shaped target with the column terms. A refused sample
-                    // keeps the shaper's last target.
-                    let _ = if ramping {
-                        shaper.push_unshaped(angle)
-                    } else {
-                        shaper.push_reference(angle)
-                    };
-                    let column = Some(SteeringRad::from(self.column)).filter(|c| c.is_finite());
-                    motor = shaper.next_target(column);
-                }
-                // The drive counts from where it powered up: its target is the column-derived
-                // angle plus the origin. Not finite, or no origin yet: the target stays (the
-                // link keeps it at the drive's actual position until it is enabled).
-                if let (Some(inc), Some(origin)) =
-                    (link.scale().inc_from_motor(motor), self.origin_counts)
-                {
-                    link.set_target_inc(inc.saturating_add(origin));
-                }
-            }
+            Drive::Epos4(d) => Drive::push_epos4_target(
+                d,
+                self.gearing,
+                angle,
+                ramping,
+                self.column,
+                self.origin_counts,
+            ),
         }
     }
 
@@ -761,8 +688,8 @@ impl Ecu {
     /// bridge was off and the loop not stepped). Nothing in EPOS4 mode.
     pub fn resync_cascade(&mut self) {
         let aligned = self.aligned_counts().unwrap_or(self.hall_count);
-        if let Drive::Direct(cascade) = &mut self.drive {
-            cascade.reset(aligned);
+        if let Drive::Direct(d) = &mut self.drive {
+            d.controller_mut().reset(aligned);
         }
     }
 
@@ -866,10 +793,7 @@ impl Ecu {
                 let _ = self.machine.on_tracking(now_us, reference, column);
                 // What pushes the motor: the position loop's current set-point (direct), the
                 // drive's measured current (EPOS4: its set-point is not on the bus).
-                let effort = match &self.drive {
-                    Drive::Direct(cascade) => cascade.current_setpoint(),
-                    Drive::Epos4(_) => self.current,
-                };
+                let effort = self.drive.effort(self.current);
                 let out = self
                     .machine
                     .on_drive_effort(now_us, reference, column, effort);
@@ -909,10 +833,11 @@ impl Ecu {
     /// is enabled. In EPOS4 mode nothing runs here: 0 A.
     pub fn position_tick(&mut self, hall_count: i32) -> Amps {
         self.hall_count = hall_count;
-        self.ticks_since_push = self.ticks_since_push.saturating_add(1);
-        let Drive::Direct(cascade) = &mut self.drive else {
+        let Drive::Direct(d) = &mut self.drive else {
             return Amps::ZERO;
         };
+        d.ticked();
+        let cascade = d.controller_mut();
         match self.last.demand {
             DriveDemand::Disabled => Amps::ZERO,
             // The cascade runs in the column-aligned frame; the origin is set on the enable
@@ -948,9 +873,10 @@ impl Ecu {
             let out = self.machine.on_current(now_us, measured);
             self.apply(now_us, out)
         };
-        let Drive::Direct(cascade) = &mut self.drive else {
+        let Drive::Direct(d) = &mut self.drive else {
             return None;
         };
+        let cascade = d.controller_mut();
         match out.demand {
             DriveDemand::Disabled => None,
             DriveDemand::Hold | DriveDemand::Track => Some(cascade.current_step(measured).voltage),
@@ -960,7 +886,7 @@ impl Ecu {
     /// EPOS4 mode, once at start: the link's first configuration frame. Empty in direct mode.
     pub fn drive_start(&mut self, now_us: u64) -> DriveFrames {
         let out = match &mut self.drive {
-            Drive::Epos4(link) => link.start(now_us),
+            Drive::Epos4(d) => d.link_mut().start(now_us),
             Drive::Direct(_) => Outbox::new(),
         };
         self.after_link(now_us, out)
@@ -972,15 +898,17 @@ impl Ecu {
     pub fn drive_poll(&mut self, now_us: u64) -> DriveFrames {
         self.fast_loop_ran();
         let as_off = self.machine.as_state() == Some(AsState::Off);
-        let reset_due = self
-            .last_link_reset_us
-            .is_none_or(|t| now_us.saturating_sub(t) >= LINK_RESET_INTERVAL_US);
         let out = match &mut self.drive {
-            Drive::Epos4(link) if link.error().is_some() && as_off && reset_due => {
-                self.last_link_reset_us = Some(now_us);
-                link.request_fault_reset(now_us)
+            Drive::Epos4(d) => {
+                if d.link().error().is_some()
+                    && as_off
+                    && d.take_reset_due(now_us, LINK_RESET_INTERVAL_US)
+                {
+                    d.link_mut().request_fault_reset(now_us)
+                } else {
+                    d.link_mut().poll(now_us)
+                }
             }
-            Drive::Epos4(link) => link.poll(now_us),
             Drive::Direct(_) => Outbox::new(),
         };
         self.after_link(now_us, out)
@@ -990,7 +918,7 @@ impl Ecu {
     /// frames to send. Ignored in direct mode.
     pub fn on_drive_frame(&mut self, now_us: u64, frame: &Frame) -> DriveFrames {
         let out = match &mut self.drive {
-            Drive::Epos4(link) => link.on_frame(frame, now_us),
+            Drive::Epos4(d) => d.link_mut().on_frame(frame, now_us),
             Drive::Direct(_) => Outbox::new(),
         };
         self.after_link(now_us, out)
@@ -998,25 +926,16 @@ impl Ecu {
 
     /// The link's news into the state machine, then the frames to send: pending ones first.
     fn after_link(&mut self, now_us: u64, link_out: Outbox) -> DriveFrames {
-        let Drive::Epos4(link) = &self.drive else {
+        let Drive::Epos4(d) = &mut self.drive else {
             // Direct mode has no link: nothing came out of it.
             return DriveFrames::new();
         };
-        let error = link.error();
-        let up = matches!(
-            link.phase(),
-            Phase::Standby | Phase::Disabling | Phase::Cyclic
-        );
-        let feedback = link.feedback();
-        let current = link.motor_current();
         let mut out = self.last;
-        if feedback.current_updated_us != self.current_seen_us {
-            self.current_seen_us = feedback.current_updated_us;
+        if let Some(current) = d.new_current() {
             self.current = current;
             out = self.machine.on_current(now_us, current);
         }
-        if error != self.link_error {
-            self.link_error = error;
+        if let Some(error) = d.error_change() {
             out = match error {
                 Some(LinkError::HeartbeatLost { .. } | LinkError::PdoTimeout { .. }) => {
                     self.machine.on_heartbeat_lost(now_us)
@@ -1025,27 +944,26 @@ impl Ecu {
                 None => out,
             };
         }
-        if up && !self.link_up {
+        if d.came_up() {
             // Back in Standby (or further) after a start or a reset: the causes are gone.
             let _ = self.machine.on_heartbeat(now_us);
             out = self.machine.on_epos_fault_gone(now_us);
         }
-        self.link_up = up;
         if link_out.iter().any(crate::canopen::nmt::is_sync) {
             // The target went out with this SYNC: the rate limit's next anchor.
-            self.synced_reference = self.reference;
-            if let Some(t) = self.last_sync_us.replace(now_us) {
-                self.sync_interval_us = now_us.saturating_sub(t);
-            }
+            d.synced(now_us, self.reference);
         }
         let _ = self.apply(now_us, out);
+        let pending = match &mut self.drive {
+            Drive::Epos4(d) => d.take_pending(),
+            Drive::Direct(_) => heapless::Vec::new(),
+        };
         let mut frames = DriveFrames::new();
-        for f in self.pending.iter().chain(link_out.iter()) {
+        for f in pending.iter().chain(link_out.iter()) {
             if frames.push(*f).is_err() {
                 self.pending_overflow = self.pending_overflow.saturating_add(1);
             }
         }
-        self.pending.clear();
         frames
     }
 

@@ -3,6 +3,7 @@
 
 use super::tests::Vehicle;
 use super::*;
+use crate::sensors::hall_from_motor;
 use proptest::prelude::*;
 
 const MS: u64 = 1000;
@@ -38,6 +39,7 @@ fn setpoint_deg(ecu: &Ecu) -> f32 {
     let Drive::Direct(cascade) = ecu.drive() else {
         panic!("direct mode")
     };
+    let cascade = cascade.controller();
     SteeringDeg::from(Gearing::PAPER.steering_from_motor(cascade.setpoint().position)).0
 }
 

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::protocol::Reference;
+use crate::sensors::hall_from_motor;
 
 const MS: u64 = 1000;
 
@@ -246,6 +247,7 @@ fn an_enable_beyond_90_deg_ramps_from_the_column() {
                     let Drive::Direct(cascade) = ecu.drive() else {
                         panic!("direct")
                     };
+                    let cascade = cascade.controller();
                     let motor = cascade.setpoint().position;
                     let setpoint = SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0;
                     if let Some(p) = previous {
@@ -278,6 +280,7 @@ fn setpoint_deg(ecu: &Ecu) -> f32 {
     let Drive::Direct(cascade) = ecu.drive() else {
         panic!("direct mode")
     };
+    let cascade = cascade.controller();
     let motor = cascade.setpoint().position;
     SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0
 }
