@@ -77,18 +77,6 @@ impl DirectDrive {
     pub(super) fn ticked(&mut self) {
         self.ticks_since_push = self.ticks_since_push.saturating_add(1);
     }
-
-    pub(super) fn ticks_since_push(&self) -> u32 {
-        self.ticks_since_push
-    }
-
-    pub(super) fn pushed(&mut self) {
-        self.ticks_since_push = 0;
-    }
-
-    pub(super) fn enabled(&mut self) {
-        self.ticks_since_push = u32::MAX;
-    }
 }
 
 impl Epos4Drive {
@@ -113,24 +101,6 @@ impl Epos4Drive {
 
     pub(super) fn link_mut(&mut self) -> &mut Epos4Link {
         &mut self.link
-    }
-
-    pub(super) fn shaper_mut(&mut self) -> Option<&mut ColumnShaper> {
-        self.shaper.as_mut()
-    }
-
-    /// Queues `frame` for the next drive call; `false` if the queue was full.
-    pub(super) fn queue(&mut self, frame: Frame) -> bool {
-        self.pending.push(frame).is_ok()
-    }
-
-    /// The queued frames, emptied.
-    pub(super) fn take_pending(&mut self) -> heapless::Vec<Frame, PENDING_DEPTH> {
-        core::mem::take(&mut self.pending)
-    }
-
-    pub(super) fn enabled(&mut self) {
-        self.synced_reference = None;
     }
 
     /// Whether an automatic reset of a failed link is due at `now_us` (at most once per
@@ -183,15 +153,138 @@ impl Epos4Drive {
             self.sync_interval_us = now_us.saturating_sub(t);
         }
     }
-
-    /// The rate limit's anchor and time base: the reference of the last SYNC and the SYNC
-    /// interval, s.
-    pub(super) fn rate_anchor(&self) -> (Option<SteeringDeg>, f32) {
-        (self.synced_reference, self.sync_interval_us as f32 * 1e-6)
-    }
 }
 
 impl Drive {
+    /// The EPOS4 link, in EPOS4 mode.
+    pub fn link(&self) -> Option<&Epos4Link> {
+        match self {
+            Drive::Epos4(d) => Some(&d.link),
+            Drive::Direct(_) => None,
+        }
+    }
+
+    /// The EPOS4 drive, in EPOS4 mode.
+    pub(super) fn epos4_mut(&mut self) -> Option<&mut Epos4Drive> {
+        match self {
+            Drive::Epos4(d) => Some(d),
+            Drive::Direct(_) => None,
+        }
+    }
+
+    /// The ECU's own bridge, in direct mode.
+    pub(super) fn direct_mut(&mut self) -> Option<&mut DirectDrive> {
+        match self {
+            Drive::Direct(d) => Some(d),
+            Drive::Epos4(_) => None,
+        }
+    }
+
+    /// The demand changed or stands (`on`: the drive may be powered), `just_enabled` if it
+    /// left Disabled now. Direct: an enable restarts the cascade at the motor's aligned count
+    /// `aligned`, with empty integrators. EPOS4: an enable starts ECU mode's shaper from rest
+    /// at the column (`column_motor`); the power stage follows the demand, its frames queued
+    /// for the next drive call. Returns the frames that did not fit the queue.
+    pub(super) fn on_demand(
+        &mut self,
+        now_us: u64,
+        on: bool,
+        just_enabled: bool,
+        aligned: i32,
+        column_motor: MotorRad,
+    ) -> u16 {
+        match self {
+            Drive::Direct(d) => {
+                if just_enabled {
+                    d.ticks_since_push = u32::MAX;
+                    d.controller.reset(aligned);
+                }
+                0
+            }
+            Drive::Epos4(d) => {
+                if just_enabled {
+                    d.synced_reference = None;
+                    if let Some(shaper) = &mut d.shaper {
+                        shaper.reset(column_motor);
+                    }
+                }
+                let mut lost = 0u16;
+                for f in d.link.set_power(on, now_us) {
+                    if d.pending.push(f).is_err() {
+                        lost = lost.saturating_add(1);
+                    }
+                }
+                lost
+            }
+        }
+    }
+
+    /// The rate limit's anchor and the time the controller takes to get there from it, s:
+    /// direct, the last sample pushed (`last_pushed`) and the position ticks taken since (at
+    /// most one period); EPOS4, the sample of the last SYNC and the SYNC interval (at most
+    /// `period_s`).
+    pub(super) fn rate_anchor(
+        &self,
+        last_pushed: Option<SteeringDeg>,
+        period_s: f32,
+    ) -> (Option<SteeringDeg>, f32) {
+        match self {
+            Drive::Direct(d) => {
+                let ticks = d
+                    .ticks_since_push
+                    .min(crate::paper_mode::POSITION_TICKS_PER_REFERENCE);
+                (
+                    last_pushed,
+                    ticks as f32 / crate::paper_mode::POSITION_LOOP_HZ as f32,
+                )
+            }
+            Drive::Epos4(d) => (
+                d.synced_reference,
+                (d.sync_interval_us as f32 * 1e-6).min(period_s),
+            ),
+        }
+    }
+
+    /// A reference sample for the drive (`ramping`: the enable ramp's own, not shaped). The
+    /// E2E check already bounds the angle to the cascade's range; a refusal keeps the ramp
+    /// in progress, which is the documented outcome.
+    pub(super) fn push(
+        &mut self,
+        gearing: Gearing,
+        angle: SteeringDeg,
+        ramping: bool,
+        column: SteeringDeg,
+        origin: Option<i32>,
+    ) {
+        match self {
+            Drive::Direct(d) => {
+                d.ticks_since_push = 0;
+                let _ = if ramping {
+                    d.controller.push_unshaped(angle)
+                } else {
+                    d.controller.push_reference(angle)
+                };
+            }
+            Drive::Epos4(d) => Self::push_epos4_target(d, gearing, angle, ramping, column, origin),
+        }
+    }
+
+    /// Direct mode: restart the cascade at the aligned count `aligned` with empty
+    /// integrators. Nothing in EPOS4 mode.
+    pub(super) fn resync(&mut self, aligned: i32) {
+        if let Drive::Direct(d) = self {
+            d.controller.reset(aligned);
+        }
+    }
+
+    /// The frames demand changes left for the drive task, emptied (none in direct mode).
+    pub(super) fn take_pending(&mut self) -> heapless::Vec<Frame, PENDING_DEPTH> {
+        match self {
+            Drive::Epos4(d) => core::mem::take(&mut d.pending),
+            Drive::Direct(_) => heapless::Vec::new(),
+        }
+    }
+
     /// The motor sensor's raw count: the Hall count `hall_count` (it starts at 0 wherever the
     /// motor stands at power-up), or the EPOS4's position actual once the drive has reported
     /// one.
@@ -255,7 +348,7 @@ impl Drive {
     /// origin, since the drive counts from where it powered up. Not finite, or no origin
     /// yet: the target stays (the link keeps it at the drive's actual position until it is
     /// enabled).
-    pub(super) fn push_epos4_target(
+    fn push_epos4_target(
         d: &mut Epos4Drive,
         gearing: Gearing,
         angle: SteeringDeg,

@@ -322,10 +322,7 @@ impl Ecu {
 
     /// The EPOS4 link, in EPOS4 mode.
     pub fn link(&self) -> Option<&Epos4Link> {
-        match &self.drive {
-            Drive::Epos4(d) => Some(d.link()),
-            Drive::Direct(_) => None,
-        }
+        self.drive.link()
     }
 
     /// The motor angle the ECU believes, aligned to the column (0 = column 0 through the
@@ -522,10 +519,6 @@ impl Ecu {
             // The first reference sample after enabling is the one to track (the enable ramp
             // bounds its motion, not the rate limit: there is no previous sample).
             self.reference = None;
-            match &mut self.drive {
-                Drive::Direct(d) => d.enabled(),
-                Drive::Epos4(d) => d.enabled(),
-            }
             // Every enable takes the motor origin from the column encoder afresh: the motor
             // may have been turned (driver, tyres) while the drive was off, and the Hall
             // count or the drive's position only ever counted relative steps. From the
@@ -543,29 +536,14 @@ impl Ecu {
         let column_motor = self
             .gearing
             .motor_from_steering(SteeringRad::from(self.column));
-        match &mut self.drive {
-            Drive::Direct(d) => {
-                if out.drive_just_enabled {
-                    d.controller_mut().reset(aligned.unwrap_or(self.hall_count));
-                }
-            }
-            Drive::Epos4(d) => {
-                if out.drive_just_enabled
-                    && let Some(shaper) = d.shaper_mut()
-                {
-                    // ECU mode over the EPOS4 starts from rest where the column is.
-                    shaper.reset(column_motor);
-                }
-                let frames = d
-                    .link_mut()
-                    .set_power(out.demand != DriveDemand::Disabled, now_us);
-                for f in frames {
-                    if !d.queue(f) {
-                        self.pending_overflow = self.pending_overflow.saturating_add(1);
-                    }
-                }
-            }
-        }
+        let lost = self.drive.on_demand(
+            now_us,
+            out.demand != DriveDemand::Disabled,
+            out.drive_just_enabled,
+            aligned.unwrap_or(self.hall_count),
+            column_motor,
+        );
+        self.pending_overflow = self.pending_overflow.saturating_add(lost);
         // Power demanded is not power delivered: until the EPOS4 is in Operation enabled the
         // status says Arming, so the vehicle computer does not drive off on wheels nobody
         // steers.
@@ -614,21 +592,7 @@ impl Ecu {
     fn rate_limited(&self, angle: SteeringDeg) -> SteeringDeg {
         let rate = self.protocol.max_rate_deg_per_s;
         let period_s = self.protocol.period_us as f32 * 1e-6;
-        let (anchor, span_s) = match &self.drive {
-            Drive::Direct(d) => {
-                let ticks = d
-                    .ticks_since_push()
-                    .min(crate::paper_mode::POSITION_TICKS_PER_REFERENCE);
-                (
-                    self.reference,
-                    ticks as f32 / crate::paper_mode::POSITION_LOOP_HZ as f32,
-                )
-            }
-            Drive::Epos4(d) => {
-                let (anchor, interval_s) = d.rate_anchor();
-                (anchor, interval_s.min(period_s))
-            }
-        };
+        let (anchor, span_s) = self.drive.rate_anchor(self.reference, period_s);
         let Some(anchor) = anchor.filter(|a| a.is_finite()) else {
             return angle;
         };
@@ -651,27 +615,13 @@ impl Ecu {
         let angle = self.ramped(now_us, target);
         let angle = self.rate_limited(angle);
         self.reference = Some(angle);
-        match &mut self.drive {
-            // The E2E check already bounds the angle to the cascade's range; a refusal here
-            // keeps the ramp in progress, which is the documented outcome.
-            Drive::Direct(d) => {
-                d.pushed();
-                let cascade = d.controller_mut();
-                let _ = if ramping {
-                    cascade.push_unshaped(angle)
-                } else {
-                    cascade.push_reference(angle)
-                };
-            }
-            Drive::Epos4(d) => Drive::push_epos4_target(
-                d,
-                self.gearing,
-                angle,
-                ramping,
-                self.column,
-                self.origin_counts,
-            ),
-        }
+        self.drive.push(
+            self.gearing,
+            angle,
+            ramping,
+            self.column,
+            self.origin_counts,
+        );
     }
 
     /// When the supervisor (the tasks: [`Ecu::tick`], [`Ecu::on_reference_frame`],
@@ -688,9 +638,7 @@ impl Ecu {
     /// bridge was off and the loop not stepped). Nothing in EPOS4 mode.
     pub fn resync_cascade(&mut self) {
         let aligned = self.aligned_counts().unwrap_or(self.hall_count);
-        if let Drive::Direct(d) = &mut self.drive {
-            d.controller_mut().reset(aligned);
-        }
+        self.drive.resync(aligned);
     }
 
     /// How far the supervisor tasks and the fast loop have come (wrapping counts): the
@@ -833,7 +781,7 @@ impl Ecu {
     /// is enabled. In EPOS4 mode nothing runs here: 0 A.
     pub fn position_tick(&mut self, hall_count: i32) -> Amps {
         self.hall_count = hall_count;
-        let Drive::Direct(d) = &mut self.drive else {
+        let Some(d) = self.drive.direct_mut() else {
             return Amps::ZERO;
         };
         d.ticked();
@@ -855,7 +803,7 @@ impl Ecu {
     /// Current-loop tick (20 kHz, direct mode): the voltage to apply, or `None` for bridge off.
     /// The measured current also feeds the over-current check. In EPOS4 mode: `None`.
     pub fn current_tick(&mut self, now_us: u64, measured: Amps) -> Option<Volts> {
-        if let Drive::Epos4(_) = self.drive {
+        if self.drive.link().is_some() {
             return None;
         }
         self.current = measured;
@@ -873,9 +821,7 @@ impl Ecu {
             let out = self.machine.on_current(now_us, measured);
             self.apply(now_us, out)
         };
-        let Drive::Direct(d) = &mut self.drive else {
-            return None;
-        };
+        let d = self.drive.direct_mut()?;
         let cascade = d.controller_mut();
         match out.demand {
             DriveDemand::Disabled => None,
@@ -885,9 +831,9 @@ impl Ecu {
 
     /// EPOS4 mode, once at start: the link's first configuration frame. Empty in direct mode.
     pub fn drive_start(&mut self, now_us: u64) -> DriveFrames {
-        let out = match &mut self.drive {
-            Drive::Epos4(d) => d.link_mut().start(now_us),
-            Drive::Direct(_) => Outbox::new(),
+        let out = match self.drive.epos4_mut() {
+            Some(d) => d.link_mut().start(now_us),
+            None => Outbox::new(),
         };
         self.after_link(now_us, out)
     }
@@ -898,8 +844,8 @@ impl Ecu {
     pub fn drive_poll(&mut self, now_us: u64) -> DriveFrames {
         self.fast_loop_ran();
         let as_off = self.machine.as_state() == Some(AsState::Off);
-        let out = match &mut self.drive {
-            Drive::Epos4(d) => {
+        let out = match self.drive.epos4_mut() {
+            Some(d) => {
                 if d.link().error().is_some()
                     && as_off
                     && d.take_reset_due(now_us, LINK_RESET_INTERVAL_US)
@@ -909,7 +855,7 @@ impl Ecu {
                     d.link_mut().poll(now_us)
                 }
             }
-            Drive::Direct(_) => Outbox::new(),
+            None => Outbox::new(),
         };
         self.after_link(now_us, out)
     }
@@ -917,16 +863,16 @@ impl Ecu {
     /// EPOS4 mode: a frame routed to the drive (PDO, SDO answer, heartbeat, EMCY). Returns the
     /// frames to send. Ignored in direct mode.
     pub fn on_drive_frame(&mut self, now_us: u64, frame: &Frame) -> DriveFrames {
-        let out = match &mut self.drive {
-            Drive::Epos4(d) => d.link_mut().on_frame(frame, now_us),
-            Drive::Direct(_) => Outbox::new(),
+        let out = match self.drive.epos4_mut() {
+            Some(d) => d.link_mut().on_frame(frame, now_us),
+            None => Outbox::new(),
         };
         self.after_link(now_us, out)
     }
 
     /// The link's news into the state machine, then the frames to send: pending ones first.
     fn after_link(&mut self, now_us: u64, link_out: Outbox) -> DriveFrames {
-        let Drive::Epos4(d) = &mut self.drive else {
+        let Some(d) = self.drive.epos4_mut() else {
             // Direct mode has no link: nothing came out of it.
             return DriveFrames::new();
         };
@@ -954,10 +900,7 @@ impl Ecu {
             d.synced(now_us, self.reference);
         }
         let _ = self.apply(now_us, out);
-        let pending = match &mut self.drive {
-            Drive::Epos4(d) => d.take_pending(),
-            Drive::Direct(_) => heapless::Vec::new(),
-        };
+        let pending = self.drive.take_pending();
         let mut frames = DriveFrames::new();
         for f in pending.iter().chain(link_out.iter()) {
             if frames.push(*f).is_err() {
@@ -1053,7 +996,7 @@ impl Ecu {
         self.motor_counter = self.motor_counter.next();
         let current_mean = if self.current_samples > 0 {
             Amps(self.current_sum / self.current_samples as f32)
-        } else if let Drive::Epos4(_) = self.drive {
+        } else if self.drive.link().is_some() {
             self.current
         } else {
             Amps(f32::NAN)
