@@ -2,8 +2,8 @@
 //! bit-exact) or ECU mode (the ECU's own, [`crate::ecu_mode`]), behind one call pattern so the
 //! firmware, host-sim and the golden vectors drive either the same way.
 //!
-//! Call order per position tick: [`SteeringController::push_reference`] when a sample arrives,
-//! then [`SteeringController::position_step`], then ten [`SteeringController::current_step`].
+//! Call order per position tick: [`Controller::push_reference`] when a sample arrives,
+//! then [`Controller::position_step`], then ten [`Controller::current_step`].
 
 use crate::control::AntiWindup;
 use crate::control::current::CurrentOutput;
