@@ -38,7 +38,7 @@ pub const HALL_INVALID_CODE: u16 = 0x100;
 pub const HALL_JUMP: u16 = 0x200;
 /// The fast loop turns the bridge off by itself when the supervisor (the tasks that tick the
 /// state machine: reference receiver, encoder reader) has not called the ECU for this long, us
-/// (issue 12: 5 ms). Both tasks call every 2 ms, so 5 ms is two missed calls of each plus
+/// (5 ms). Both tasks call every 2 ms, so 5 ms is two missed calls of each plus
 /// scheduling jitter; a stall longer than that is a hung or starved task, and the state
 /// machine's timeouts (which need its calls) cannot act. The bridge stays off until the
 /// supervisor calls again; the cascade then restarts at the measured angle.

@@ -71,9 +71,14 @@ const INTEGRAL_ZONE_RAD: f32 = 0.017_453;
 /// friction; short against the integral's own time constant.
 const COLUMN_STILL_S: f32 = 0.1;
 
-/// Fastest change of the proportional column term, rad/s at the column (100 deg/s, as the
-/// enable ramp `ecu::ENABLE_RAMP_DPS`).
+/// Fastest change of the proportional column term, rad/s at the column (100 deg/s).
 const COLUMN_SLEW_RAD_PER_S: f32 = 1.745_33;
+
+/// After the enable ramp hands over, the proportional column term's gain grows from 0 to
+/// [`EcuTuning::column_gain`] over this long, s: the column lags the ramp's end by up to a
+/// degree, and the term taking that back at once (at its 100 deg/s slew) would be a step in
+/// the target's speed, which the drive answers with its full current.
+const COLUMN_GAIN_FADE_IN_S: f32 = 0.05;
 
 /// One count of the 12-bit column encoder, rad.
 const COLUMN_COUNT_RAD: f32 = TAU / COLUMN_ENCODER_COUNTS as f32;
@@ -199,6 +204,9 @@ pub struct ColumnShaper {
     column_error: f32,
     /// The newest sample was shaped (a vehicle reference), not the enable ramp's.
     shaping: bool,
+    /// The share of the proportional column term's gain in force, 0..=1: 0 during the enable
+    /// ramp, then growing over [`COLUMN_GAIN_FADE_IN_S`].
+    gain_share: f32,
     /// The proportional column term as applied (slew-limited), rad at the motor.
     proportional: f32,
     /// Where the column was when it last moved by more than one count, rad at the motor.
@@ -229,6 +237,7 @@ impl ColumnShaper {
             column_correction: 0.0,
             column_error: 0.0,
             shaping: true,
+            gain_share: 1.0,
             proportional: 0.0,
             column_anchor: None,
             column_still_s: 0.0,
@@ -272,6 +281,7 @@ impl ColumnShaper {
         self.history = [Some(r), Some(r)];
         self.plain.push(MotorRad(r))?;
         self.shaping = false;
+        self.gain_share = 0.0;
         self.target.push(MotorRad(r))
     }
 
@@ -343,11 +353,12 @@ impl ColumnShaper {
         // Not during the enable ramp: the column lags the ECU's own ramp, and pushing on that
         // lag would make the ramp faster than its documented rate.
         let gain = if self.shaping {
-            self.tuning.column_gain
+            self.gain_share = (self.gain_share + self.dt_s / COLUMN_GAIN_FADE_IN_S).min(1.0);
+            self.tuning.column_gain * self.gain_share
         } else {
             0.0
         };
-        // The proportional term moves the target no faster than the enable ramp's 100 deg/s
+        // The proportional term moves the target no faster than 100 deg/s
         // at the column: when a ramp hands over, or an encoder sample jumps, the drive sees a
         // ramp, not a step.
         let slew = self.gearing.ratio() * COLUMN_SLEW_RAD_PER_S * self.dt_s;

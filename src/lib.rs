@@ -45,6 +45,7 @@ pub mod controller;
 pub mod direct;
 pub mod ecu;
 pub mod ecu_mode;
+pub mod enable_ramp;
 pub mod faults;
 pub mod gains;
 pub mod gearing;

@@ -46,10 +46,8 @@ mod firmware {
     use static_cell::StaticCell;
     use steering_ecu::amt20;
     use steering_ecu::can::{Frame, StandardId};
-    #[cfg(feature = "drive-epos4")]
-    use steering_ecu::canopen::epos4::Epos4Link;
     use steering_ecu::controller::ControllerKind;
-    use steering_ecu::ecu::Ecu;
+    use steering_ecu::ecu::{DriveChoice, Ecu, EcuBuild};
     use steering_ecu::ports::{BusError, CanRx, CanTx, ColumnEncoderPort, EncoderError};
     use steering_ecu::sensors::ColumnEncoder;
     use steering_ecu::tasks::{self, FirmwareRoutes, FrameQueue, RouterCounters, SharedEcu};
@@ -201,8 +199,7 @@ mod firmware {
         .await
     }
 
-    /// Rate of the loop that will run the control step (the later issue hangs CAN and the EPOS4
-    /// off it).
+    /// Rate of the loop that runs the control step (CAN and the EPOS4 hang off it).
     const CONTROL_RATE_HZ: u64 = 100;
     /// Control ticks between two heartbeat log lines: one per second.
     const TICKS_PER_HEARTBEAT: u32 = 100;
@@ -271,23 +268,17 @@ mod firmware {
         // Start-up only: the defaults are valid by construction (tested on the host).
         #[cfg(feature = "drive-epos4")]
         let ecu: &'static SharedEcu = {
-            let mut config = safety::epos4_config();
-            if CONTROLLER == ControllerKind::Ecu {
-                config.gains = Ecu::ecu_mode_epos4_gains();
-            }
+            let config = safety::epos4_config();
             let now = embassy_time::Instant::now().as_micros();
-            let link = defmt::unwrap!(Epos4Link::new(config, now).ok());
             defmt::info!(
                 "drive: EPOS4 node {=u8}, CSP, controller {}",
                 config.node.raw(),
                 CONTROLLER
             );
-            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(
-                match CONTROLLER {
-                    ControllerKind::Paper => Ecu::paper_epos4(link),
-                    ControllerKind::Ecu => Ecu::ecu_epos4(link),
-                }
-            ))))
+            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(Ecu::build(
+                EcuBuild::new(CONTROLLER, DriveChoice::Epos4(config)),
+                now
+            )))))
         };
         #[cfg(feature = "drive-direct")]
         let ecu: &'static SharedEcu = {
@@ -295,12 +286,10 @@ mod firmware {
                 "drive: direct, three-phase bridge on TIM1, controller {}",
                 CONTROLLER
             );
-            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(
-                match CONTROLLER {
-                    ControllerKind::Paper => Ecu::paper(),
-                    ControllerKind::Ecu => Ecu::ecu_direct(),
-                }
-            ))))
+            ECU.init(SharedEcu::new(RefCell::new(defmt::unwrap!(Ecu::build(
+                EcuBuild::new(CONTROLLER, DriveChoice::Direct),
+                embassy_time::Instant::now().as_micros()
+            )))))
         };
         spawner.spawn(defmt::unwrap!(reference_task(ecu)));
         spawner.spawn(defmt::unwrap!(status_task(ecu)));

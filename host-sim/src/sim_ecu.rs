@@ -52,11 +52,11 @@ use std::task::{Context, Waker};
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
 use steering_ecu::canopen::NodeId;
-use steering_ecu::canopen::epos4::{Epos4Config, Epos4Link, PositionScale};
+use steering_ecu::canopen::epos4::{Epos4Config, PositionScale};
 use steering_ecu::commutation::{BRIDGE_OFF, BridgeCommand, HallDecoder, code_of};
 use steering_ecu::controller::ControllerKind;
 use steering_ecu::direct::FastLoop;
-use steering_ecu::ecu::Ecu;
+use steering_ecu::ecu::{DriveChoice, Ecu, EcuBuild};
 use steering_ecu::ports::{Bridge, ColumnEncoderPort, CurrentSense, EncoderError, HallInputs};
 use steering_ecu::protocol::PERIOD_US;
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
@@ -239,19 +239,15 @@ impl std::fmt::Display for CarEffects {
     }
 }
 
-/// The ECU as the firmware's EPOS4 build makes it at start-up (`main.rs`), with the EPOS4 at
-/// [`EPOS_NODE`]: the link with the paper's settings, and the ECU mode's feedforward gains
-/// when that controller runs. Also the link's settings, for the simulated drive's scale.
+/// The ECU as the firmware's EPOS4 build makes it at start-up (`main.rs`, [`Ecu::build`]),
+/// with the EPOS4 at [`EPOS_NODE`]: the link with the paper's settings (ECU mode writes its
+/// own feedforward gains over them). Also those settings, for the simulated drive's scale.
 pub fn epos4_ecu(controller: ControllerKind, now_us: u64) -> Option<(Ecu, Epos4Config)> {
-    let mut config = Epos4Config::paper(NodeId::new(EPOS_NODE)?);
-    if controller == ControllerKind::Ecu {
-        config.gains = Ecu::ecu_mode_epos4_gains();
-    }
-    let link = Epos4Link::new(config, now_us).ok()?;
-    let ecu = match controller {
-        ControllerKind::Paper => Ecu::paper_epos4(link),
-        ControllerKind::Ecu => Ecu::ecu_epos4(link),
-    }?;
+    let config = Epos4Config::paper(NodeId::new(EPOS_NODE)?);
+    let ecu = Ecu::build(
+        EcuBuild::new(controller, DriveChoice::Epos4(config)),
+        now_us,
+    )?;
     Some((ecu, config))
 }
 
@@ -469,14 +465,10 @@ impl SimEcu {
             .unwrap_or_else(|poisoned| poisoned.into_inner());
         MockDriver::get().reset();
         let node = NodeId::new(EPOS_NODE).expect("node 1 is valid");
-        let (ecu, config) = match (car.drive, car.controller) {
-            (SimDrive::Direct, ControllerKind::Paper) => {
-                Ecu::paper().map(|e| (e, Epos4Config::paper(node)))
-            }
-            (SimDrive::Direct, ControllerKind::Ecu) => {
-                Ecu::ecu_direct().map(|e| (e, Epos4Config::paper(node)))
-            }
-            (SimDrive::Epos4, kind) => epos4_ecu(kind, 0),
+        let (ecu, config) = match car.drive {
+            SimDrive::Direct => Ecu::build(EcuBuild::new(car.controller, DriveChoice::Direct), 0)
+                .map(|e| (e, Epos4Config::paper(node))),
+            SimDrive::Epos4 => epos4_ecu(car.controller, 0),
         }
         .expect("the paper configuration is valid");
         // Leaked: the task futures borrow them for 'static, like the firmware's statics.

@@ -701,7 +701,7 @@ fn an_epos4_enable_ramps_the_target_from_the_measured_position_in() {
     // The vehicle asks for 60 deg all along (the protocol's rate rule judges the frames, not
     // the AS state); the column stands at 0 until AS Driving.
     let mut script = repeat(Event::Ref(Off, 60.0), 60); // 0-59: bring-up, power off
-    script.extend(repeat(Event::Ref(Driving, 60.0), 100)); // 60-159
+    script.extend(repeat(Event::Ref(Driving, 60.0), 120)); // 60-179
     let r = run(&script, RandomFaults::default(), 6);
     let s = &r.samples;
     let per_period = f64::from(steering_ecu::ecu::ENABLE_RAMP_DPS) * 0.010;
@@ -715,9 +715,9 @@ fn an_epos4_enable_ramps_the_target_from_the_measured_position_in() {
         );
     }
     assert!(
-        (s[159].column_deg - 60.0).abs() < 1.0,
+        (s[179].column_deg - 60.0).abs() < 1.0,
         "column at {:.2} deg",
-        s[159].column_deg
+        s[179].column_deg
     );
     assert!(s.iter().all(|x| x.faults == 0));
 }
@@ -770,14 +770,15 @@ fn the_epos4_software_position_limits_follow_the_origin_in(kind: ControllerKind)
     let span = inc_at_wheel(POSITION_LIMIT_DEG).unwrap();
     assert_eq!(POSITION_LIMIT_DEG, 110.0, "+-90 deg and a 20 deg margin");
     let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
-    script.extend(repeat(Event::Ref(Driving, 0.0), 40)); // 60-99: to straight ahead
-    // 100-199: to full lock at the rate the protocol allows, and held there.
+    // 60-119: to straight ahead (30 deg of enable ramp take 0.5 s).
+    script.extend(repeat(Event::Ref(Driving, 0.0), 60));
+    // 120-219: to full lock at the rate the protocol allows, and held there.
     script.extend((1..=100).map(|k| Event::Ref(Driving, (3.0 * k as f32).min(90.0))));
     for column_deg in [-30.0, 0.0, 20.0] {
         let r = run_from(column_deg, &script, RandomFaults::default(), 8);
         let s = &r.samples;
         assert!(s.iter().all(|x| x.faults == 0), "{column_deg}: a fault");
-        assert_eq!(s[199].drive, State::OperationEnabled, "{column_deg}");
+        assert_eq!(s[219].drive, State::OperationEnabled, "{column_deg}");
         // The drive counts from where it powered up: straight ahead is at -column there (to
         // one increment: the origin comes through the 12-bit column encoder).
         let origin = -inc_at_wheel(column_deg as f32).unwrap();
@@ -797,9 +798,9 @@ fn the_epos4_software_position_limits_follow_the_origin_in(kind: ControllerKind)
         // Within the steady-state lag the tyre's load leaves at full lock (2.3 deg in paper
         // mode), so the limits do not take travel the ECU asks for.
         assert!(
-            (s[199].column_deg - 90.0).abs() < settle_tolerance_deg(3.0),
+            (s[219].column_deg - 90.0).abs() < settle_tolerance_deg(3.0),
             "{column_deg}: full lock reached: {:.2} deg",
-            s[199].column_deg
+            s[219].column_deg
         );
         eprintln!(
             "{kind:?} mode, power-up at {column_deg} deg: {} targets held at the limit",

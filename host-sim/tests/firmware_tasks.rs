@@ -9,14 +9,16 @@ use embassy_executor::{Executor, Spawner};
 use embassy_time::{Duration, MockDriver};
 use host_sim::effect_plant::{EffectPlant, PlantEffects};
 use host_sim::plant::{Actuator, PlantParams};
-use host_sim::sim_ecu::{SUPPLY_V, direct_drive_period_sensed};
+use host_sim::sim_ecu::{
+    CarEffects, STEP_US, SUPPLY_V, SimCar, SimDrive, SimEcu, direct_drive_period_sensed,
+};
 use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
 use steering_ecu::controller::ControllerKind;
 use steering_ecu::direct::FastLoop;
-use steering_ecu::ecu::Ecu;
+use steering_ecu::ecu::{Drive, DriveChoice, Ecu, EcuBuild};
 use steering_ecu::faults::Fault;
 use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
@@ -185,10 +187,8 @@ fn run_logged(
         .lock()
         .map(|c| *c)
         .unwrap_or(ControllerKind::Paper);
-    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(match kind {
-        ControllerKind::Paper => Ecu::paper().unwrap(),
-        ControllerKind::Ecu => Ecu::ecu_direct().unwrap(),
-    }))));
+    let ecu = Ecu::build(EcuBuild::new(kind, DriveChoice::Direct), 0).unwrap();
+    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(ecu))));
     let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
     let protocol = ProtocolConfig::default();
     // ECU mode runs against the plant with belt play and rack friction, as a car has them;
@@ -301,28 +301,28 @@ fn steering_rules_end_to_end_on_the_firmware_tasks() {
 fn steering_rules_end_to_end() {
     // Timeline, 10 ms per entry:
     //   0-9    AS Off, 0 deg          -> drive disabled
-    //   10-59  AS Ready/Driving 10 deg -> tracking, the column reaches 10 deg
-    //   60-79  nothing                -> hold after 30 ms, disabled + timeout fault after 130 ms
-    //   80-89  AS Driving again       -> still disabled: the fault is latched
-    //   80      clear request while driving -> refused
-    //   90-99  AS Off                 -> clear request (frame bit) at 95 accepted
-    //   100-129 AS Driving 0 deg      -> tracking again
-    //   130-135 corrupted CRC         -> invalid-frame fault latched, disabled
-    //   136-139 AS Emergency          -> disabled
+    //   10-79  AS Ready/Driving 10 deg -> tracking, the column reaches 10 deg
+    //   80-99  nothing                -> hold after 30 ms, disabled + timeout fault after 130 ms
+    //   100-109 AS Driving again      -> still disabled: the fault is latched
+    //   100     clear request while driving -> refused
+    //   110-119 AS Off                -> clear request (frame bit) at 115 accepted
+    //   120-159 AS Driving 0 deg      -> tracking again (the enable ramp back from 10 deg)
+    //   160-165 corrupted CRC         -> invalid-frame fault latched, disabled
+    //   166-169 AS Emergency          -> disabled
     let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
     script.extend(vec![Send::Ref(AsState::Ready, 10.0); 10]);
-    script.extend(vec![Send::Ref(AsState::Driving, 10.0); 40]);
+    script.extend(vec![Send::Ref(AsState::Driving, 10.0); 60]);
     script.extend(vec![Send::Nothing; 20]);
     script.push(Send::Clear(AsState::Driving, 10.0));
     script.extend(vec![Send::Ref(AsState::Driving, 10.0); 9]);
     script.extend(vec![Send::Ref(AsState::Off, 10.0); 5]);
     script.push(Send::Clear(AsState::Off, 10.0));
     script.extend(vec![Send::Ref(AsState::Off, 10.0); 4]);
-    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 30]);
+    script.extend(vec![Send::Ref(AsState::Driving, 0.0); 40]);
     script.extend(vec![Send::CorruptCrc(AsState::Driving, 0.0); 6]);
     script.extend(vec![Send::Ref(AsState::Emergency, 0.0); 4]);
     let s = run(&script, |period, ecu, _| {
-        if period == 85 {
+        if period == 105 {
             assert_eq!(
                 ecu.clear_refusals(),
                 1,
@@ -338,37 +338,41 @@ fn steering_rules_end_to_end() {
     assert_eq!(at(5).state, EcuState::Idle);
     assert_eq!(at(30).demand, DriveDemand::Track);
     assert!(
-        (at(59).column_deg - 10.0).abs() < 0.5,
+        (at(79).column_deg - 10.0).abs() < 0.5,
         "column {}",
-        at(59).column_deg
+        at(79).column_deg
     );
-    // Reference stops after period 59's frame: hold from 30 ms, then disabled and latched.
+    // Reference stops after period 79's frame: hold from 30 ms, then disabled and latched.
     assert_eq!(
-        at(62).demand,
+        at(82).demand,
         DriveDemand::Track,
         "20 ms without a frame: still tracking"
     );
-    assert_eq!(at(64).demand, DriveDemand::Hold);
-    assert!((at(70).column_deg - 10.0).abs() < 0.5, "holds the position");
-    assert_eq!(at(75).demand, DriveDemand::Disabled);
-    assert!(at(75).faults & (1 << Fault::ReferenceTimeout.bit()) != 0);
-    assert!(at(79).current_a.abs() < 0.5, "current taken to zero");
+    assert_eq!(at(84).demand, DriveDemand::Hold);
+    assert!((at(90).column_deg - 10.0).abs() < 0.5, "holds the position");
+    assert_eq!(at(95).demand, DriveDemand::Disabled);
+    assert!(at(95).faults & (1 << Fault::ReferenceTimeout.bit()) != 0);
+    assert!(at(99).current_a.abs() < 0.5, "current taken to zero");
     assert_eq!(
-        at(85).demand,
+        at(105).demand,
         DriveDemand::Disabled,
         "latched while driving"
     );
-    assert_eq!(at(85).state, EcuState::Faulted);
-    assert_eq!(at(97).faults, 0, "cleared in AS Off on request");
-    assert_eq!(at(120).demand, DriveDemand::Track);
-    assert!(at(129).column_deg.abs() < 0.5);
+    assert_eq!(at(105).state, EcuState::Faulted);
+    assert_eq!(at(117).faults, 0, "cleared in AS Off on request");
+    assert_eq!(at(140).demand, DriveDemand::Track);
+    assert!(
+        at(159).column_deg.abs() < 0.5,
+        "column {}",
+        at(159).column_deg
+    );
     assert_eq!(
-        at(136).demand,
+        at(166).demand,
         DriveDemand::Disabled,
         "five bad CRCs in a row"
     );
-    assert!(at(136).faults & (1 << Fault::InvalidFrames.bit()) != 0);
-    assert_eq!(at(139).demand, DriveDemand::Disabled);
+    assert!(at(166).faults & (1 << Fault::InvalidFrames.bit()) != 0);
+    assert_eq!(at(169).demand, DriveDemand::Disabled);
     assert!(s.iter().all(|x| x.current_a.abs() <= 20.0));
 }
 
@@ -796,5 +800,96 @@ fn the_watchdog_is_fed_only_while_both_run() {
             .windows(2)
             .all(|w| w[1] - w[0] >= u64::from(FEED_PERIOD_US)),
         "at most one feed per period"
+    );
+}
+
+/// What an enable asked of the motor, A: the largest mean of the winding current over one
+/// 10 ms reference period (what the ECU reports on the bus: the motor frame's mean current in
+/// direct drive, the drive's averaged current over the EPOS4), and, for the record, the largest
+/// instantaneous winding current and (direct drive) current set-point.
+#[derive(Debug, Clone, Copy, Default)]
+struct EnableCurrent {
+    period_mean_a: f64,
+    instantaneous_a: f64,
+    setpoint_a: f64,
+}
+
+/// [`EnableCurrent`] while a resting car at 0 deg is enabled toward `target_deg`, in the
+/// simulated car (the firmware's tasks, its EPOS4 link and its fast loop at their own rates,
+/// the simulated EPOS4 and the plant): AS Off for 1 s (the EPOS4's bring-up), then AS Driving
+/// at `target_deg` for 1.5 s (the 0.7 s ramp of 60 deg and its settling), sampled every
+/// 50 us.
+fn enable_current(drive: SimDrive, controller: ControllerKind, target_deg: f64) -> EnableCurrent {
+    // The simulated car resets the global mock clock: no scenario of this binary may run
+    // meanwhile.
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let mut car = SimEcu::new(SimCar {
+        column_deg: 0.0,
+        controller,
+        drive,
+        effects: CarEffects::NONE,
+    });
+    let mut script = vec![(AsState::Off, target_deg); 100];
+    script.extend(vec![(AsState::Driving, target_deg); 150]);
+    car.script_vehicle(script);
+    let period_steps = u64::from(steering_ecu::protocol::PERIOD_US) / STEP_US;
+    let mut peak = EnableCurrent::default();
+    let (mut sum, mut n) = (0.0, 0);
+    let mut t_us = 0;
+    while t_us < 2_500_000 {
+        t_us += STEP_US;
+        car.run_until(t_us);
+        let setpoint = car.with_ecu(|e| match e.drive() {
+            Drive::Direct(d) => f64::from(d.controller().current_setpoint().0),
+            Drive::Epos4(_) => 0.0,
+        });
+        let winding = car.current_a();
+        peak.setpoint_a = peak.setpoint_a.max(setpoint.abs());
+        peak.instantaneous_a = peak.instantaneous_a.max(winding.abs());
+        sum += winding;
+        n += 1;
+        if n == period_steps {
+            peak.period_mean_a = peak.period_mean_a.max((sum / n as f64).abs());
+            (sum, n) = (0.0, 0);
+        }
+    }
+    let o = car.output();
+    assert_eq!(o.demand, DriveDemand::Track, "{drive:?} {controller:?}");
+    assert_eq!(o.faults.bits(), 0, "{drive:?} {controller:?}");
+    assert!(
+        (car.column_deg() - target_deg).abs() < 1.0,
+        "{drive:?} {controller:?}: the column reached {:.2} deg of {target_deg}",
+        car.column_deg()
+    );
+    peak
+}
+
+/// Enabling a resting car asks at most half the 20 A current limit over any reference period,
+/// in either drive and with either controller, for a small and a far target: the enable ramp
+/// starts (and ends) with limited acceleration, not with a step in speed that the position
+/// loop answers with the full current for a period. (Instantaneous peaks of one position tick
+/// remain in direct drive: the paper's D term differences the Hall angle and kicks the
+/// set-point at every Hall edge, at rest as well; they are printed, not bounded here.)
+#[test]
+fn the_enable_of_a_resting_car_asks_at_most_half_the_current_limit() {
+    let half = f64::from(steering_ecu::paper_mode::CURRENT_LIMIT.0) / 2.0;
+    let mut worst: f64 = 0.0;
+    for drive in [SimDrive::Direct, SimDrive::Epos4] {
+        for controller in [ControllerKind::Paper, ControllerKind::Ecu] {
+            for target_deg in [5.0, 60.0] {
+                let c = enable_current(drive, controller, target_deg);
+                eprintln!(
+                    "enable to {target_deg} deg, {drive:?} drive, {controller:?} mode: \
+                     {:.2} A over a period at most, {:.2} A instantaneous, set-point {:.2} A",
+                    c.period_mean_a, c.instantaneous_a, c.setpoint_a
+                );
+                worst = worst.max(c.period_mean_a);
+            }
+        }
+    }
+    assert!(
+        worst <= half,
+        "an enable asked {worst:.2} A over a period, more than half the {:.0} A limit",
+        2.0 * half
     );
 }

@@ -13,7 +13,8 @@ use steering_ecu::as_state::AsState;
 use steering_ecu::can::{Frame, StandardId};
 use steering_ecu::canopen::cia402::{self, State, Target};
 use steering_ecu::canopen::{NodeId, emcy, nmt, pdo, sdo};
-use steering_ecu::ecu::Ecu;
+use steering_ecu::controller::ControllerKind;
+use steering_ecu::ecu::{DriveChoice, Ecu, EcuBuild};
 use steering_ecu::gains::EposGains;
 use steering_ecu::paper_mode::Cascade;
 use steering_ecu::protocol::{AliveCounter, E2eChecker, ProtocolConfig, Reference, Status};
@@ -318,7 +319,8 @@ fn e2e_cases(cases: u32, rng: &mut Rng, done: &mut impl FnMut(u32, &CaseWriter))
 /// long enough for the timeout fault, Off and a clear request, Driving again, and an
 /// over-current. One case per 10 ms reference period.
 fn ecu_cases(cases: u32, rng: &mut Rng, done: &mut impl FnMut(u32, &CaseWriter)) {
-    let Some(mut ecu) = Ecu::paper() else {
+    let build = EcuBuild::new(ControllerKind::Paper, DriveChoice::Direct);
+    let Some(mut ecu) = Ecu::build(build, 0) else {
         return;
     };
     let cfg = ProtocolConfig::DEFAULT;

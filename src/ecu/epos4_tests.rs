@@ -1,0 +1,868 @@
+//! EPOS4 mode against a fake drive: the bring-up, the power stage following the demand,
+//! the link's faults and their recovery, the current and the target the drive is given. The
+//! library's other tests reach this mode only through host-sim.
+
+use super::tests::Vehicle;
+use super::*;
+use crate::canopen::cia402::{self, State};
+use crate::canopen::epos4::Phase;
+use crate::canopen::epos4::{Epos4Config, od};
+use crate::canopen::nmt::{self, NmtCommand, NmtState};
+use crate::canopen::sdo::{self, ServerRequest, Width};
+use crate::canopen::{NodeId, ObjectAddress, cob_id, function};
+use crate::controller::SteeringController;
+use crate::faults::Fault;
+use crate::sensors::{HALL_COUNTS_PER_REV, hall_from_motor, motor_from_hall};
+use std::collections::HashMap;
+
+const MS: u64 = 1000;
+
+fn node() -> NodeId {
+    NodeId::new(1).unwrap()
+}
+
+/// A minimal EPOS4 on the other end of the link: an object dictionary that reads back
+/// what was written, the CiA 402 state driven by the controlword, NMT start, a heartbeat
+/// and TPDO1 (statusword, position) and TPDO2 (current, mA) on each SYNC. The motor stands
+/// at `position_inc` (the drive's own count from its power-up) unless the test moves it.
+struct FakeEpos4 {
+    od: HashMap<ObjectAddress, u32>,
+    state: State,
+    operational: bool,
+    position_inc: i32,
+    current_ma: i32,
+    /// The targets RPDO1 brought in Operation enabled (the ones the drive follows).
+    targets: Vec<i32>,
+    /// Frames for the ECU, delivered at its next drive call.
+    answers: Vec<Frame>,
+    /// The motor goes to each target at once.
+    follows: bool,
+}
+
+impl FakeEpos4 {
+    fn new(position_inc: i32) -> Self {
+        FakeEpos4 {
+            od: HashMap::new(),
+            state: State::SwitchOnDisabled,
+            operational: false,
+            position_inc,
+            current_ma: 0,
+            targets: Vec::new(),
+            answers: Vec::new(),
+            follows: false,
+        }
+    }
+
+    fn statusword(&self) -> u16 {
+        match self.state {
+            State::SwitchOnDisabled => 0x0040,
+            State::ReadyToSwitchOn => 0x0021,
+            State::SwitchedOn => 0x0023,
+            State::OperationEnabled => 0x0027,
+            _ => 0x0008,
+        }
+    }
+
+    fn on_controlword(&mut self, cw: u16) {
+        use cia402::Command;
+        self.state = match (self.state, cw) {
+            (_, cw) if cw == Command::DisableVoltage.controlword() => State::SwitchOnDisabled,
+            (_, cw) if cw == Command::FaultReset.controlword() => State::SwitchOnDisabled,
+            (_, cw) if cw == Command::Shutdown.controlword() => State::ReadyToSwitchOn,
+            (State::ReadyToSwitchOn | State::OperationEnabled, 0x0007) => State::SwitchedOn,
+            (State::SwitchedOn, 0x000F) => State::OperationEnabled,
+            (state, _) => state,
+        };
+    }
+
+    fn on_frame(&mut self, f: &Frame) -> Vec<Frame> {
+        let n = node();
+        let mut out = Vec::new();
+        if let Some((NmtCommand::Start, target)) = nmt::parse_command(f)
+            && target.includes(n)
+        {
+            self.operational = true;
+            out.extend(nmt::heartbeat_frame(n, NmtState::Operational));
+        } else if nmt::is_sync(f) && self.operational {
+            let mut d = [0u8; 6];
+            d[..2].copy_from_slice(&self.statusword().to_le_bytes());
+            d[2..].copy_from_slice(&self.position_inc.to_le_bytes());
+            out.extend(Frame::new(cob_id(function::TPDO1, n), &d));
+            out.extend(Frame::new(
+                cob_id(function::TPDO2, n),
+                &self.current_ma.to_le_bytes(),
+            ));
+            out.extend(nmt::heartbeat_frame(n, NmtState::Operational));
+        } else if f.id() == cob_id(function::RPDO1, n) {
+            if let Ok(bytes) = <[u8; 4]>::try_from(f.data())
+                && self.state == State::OperationEnabled
+            {
+                let target = i32::from_le_bytes(bytes);
+                self.targets.push(target);
+                if self.follows {
+                    self.position_inc = target;
+                }
+            }
+        } else if let Some(request) = sdo::parse_request(f, n) {
+            match request {
+                ServerRequest::Download { object, value, .. } => {
+                    if object == od::CONTROLWORD {
+                        self.on_controlword(value as u16);
+                    }
+                    self.od.insert(object, value);
+                    out.extend(sdo::download_response_frame(n, object));
+                }
+                ServerRequest::Upload { object } => {
+                    let value = match object {
+                        o if o == od::STATUSWORD => u32::from(self.statusword()),
+                        o if o == od::POSITION_ACTUAL => self.position_inc as u32,
+                        o => self.od.get(&o).copied().unwrap_or(0),
+                    };
+                    out.extend(sdo::upload_response_frame(n, object, value, Width::U32));
+                }
+                ServerRequest::Unsupported { .. } => {}
+            }
+        }
+        out
+    }
+}
+
+/// One millisecond of the drive task: the drive's answers to what the ECU sent in the
+/// previous one (a bus round trip later) go to the ECU, then the ECU polls; everything the
+/// ECU sends goes to the drive. The frames the ECU sent, in order.
+fn step(ecu: &mut Ecu, drive: &mut FakeEpos4, t: u64) -> Vec<Frame> {
+    let answers = std::mem::take(&mut drive.answers);
+    let mut sent = Vec::new();
+    for answer in &answers {
+        sent.extend(ecu.on_drive_frame(t, answer));
+    }
+    sent.extend(ecu.drive_poll(t));
+    for f in &sent {
+        let answers = drive.on_frame(f);
+        drive.answers.extend(answers);
+    }
+    sent
+}
+
+/// An EPOS4-mode ECU (paper mode) whose drive powered up at `position_inc`, started at 0.
+fn epos4_ecu(position_inc: i32) -> (Ecu, FakeEpos4, Vec<Frame>) {
+    let config = Epos4Config::paper(node());
+    let mut ecu = Ecu::build(
+        EcuBuild::new(ControllerKind::Paper, DriveChoice::Epos4(config)),
+        0,
+    )
+    .unwrap();
+    let mut drive = FakeEpos4::new(position_inc);
+    let sent = ecu.drive_start(0).to_vec();
+    for f in &sent {
+        let answers = drive.on_frame(f);
+        drive.answers.extend(answers);
+    }
+    (ecu, drive, sent)
+}
+
+/// Runs the car from `from` to `to` as the firmware's tasks do: the drive task every 1 ms,
+/// the encoder (column at `column`) and the vehicle's frame (`as_state`, `deg`; none for
+/// a NaN `deg`) every 10 ms. Every frame the ECU sent.
+#[allow(clippy::too_many_arguments)]
+fn run(
+    ecu: &mut Ecu,
+    drive: &mut FakeEpos4,
+    vehicle: &mut Vehicle,
+    from: u64,
+    to: u64,
+    as_state: AsState,
+    deg: f32,
+    column: f32,
+) -> Vec<Frame> {
+    let mut sent = Vec::new();
+    let mut t = from;
+    while t < to {
+        if (t - from).is_multiple_of(10 * MS) {
+            let _ = ecu.on_encoder(t, SteeringDeg(column));
+            if !deg.is_nan() {
+                let _ = vehicle.send(ecu, t, as_state, deg);
+            }
+        }
+        sent.extend(step(ecu, drive, t));
+        t += MS;
+    }
+    sent
+}
+
+fn is_disable(f: &Frame) -> bool {
+    Some(*f) == crate::canopen::epos4::disable_voltage_frame(node())
+}
+
+/// The link brings the drive up through the ECU's drive calls, and in AS Driving the
+/// drive reaches Operation enabled and is given the reference as the CSP target: the
+/// column-derived angle plus the origin (the drive counted from 500 at power-up, the
+/// column stood at 0).
+#[test]
+fn the_ecu_brings_the_epos4_up_and_steers_it() {
+    let (mut ecu, mut drive, sent) = epos4_ecu(500);
+    assert!(!sent.is_empty(), "no configuration frame at the start");
+    let mut vehicle = Vehicle::new();
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        0,
+        200 * MS,
+        AsState::Off,
+        0.0,
+        0.0,
+    );
+    assert_eq!(ecu.link().map(|l| l.phase()), Some(Phase::Standby));
+    assert_eq!(ecu.output().state, EcuState::Idle);
+    assert_eq!(ecu.motor_origin_counts(), Some(500));
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        200 * MS,
+        400 * MS,
+        AsState::Driving,
+        0.0,
+        0.0,
+    );
+    assert_eq!(drive.state, State::OperationEnabled);
+    assert_eq!(ecu.output().state, EcuState::Tracking);
+    assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
+    assert_eq!(drive.targets.last(), Some(&500));
+    // 10 deg at the wheel, reached through the enable ramp.
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        400 * MS,
+        600 * MS,
+        AsState::Driving,
+        10.0,
+        0.0,
+    );
+    let scale = ecu.link().unwrap().scale();
+    let want = scale
+        .inc_from_motor(Gearing::PAPER.motor_from_steering(SteeringDeg(10.0).into()))
+        .unwrap();
+    assert_eq!(drive.targets.last(), Some(&(500 + want)));
+    assert_eq!(ecu.pending_overflow(), 0);
+}
+
+/// The CSP target for `deg` at the wheel, in the drive's increments from the origin.
+fn inc_at(ecu: &Ecu, deg: f32) -> i32 {
+    let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(deg).into());
+    ecu.link().unwrap().scale().inc_from_motor(motor).unwrap()
+}
+
+/// An EPOS4-mode ECU tracking 0 deg in AS Driving at 400 ms, the drive at 500.
+fn tracking_epos4() -> (Ecu, FakeEpos4, Vehicle, u64) {
+    let (mut ecu, mut drive, _) = epos4_ecu(500);
+    let mut vehicle = Vehicle::new();
+    let t = 400 * MS;
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        0,
+        t,
+        AsState::Driving,
+        0.0,
+        0.0,
+    );
+    let log: Vec<_> = ecu.machine().fault_log().iter().copied().collect();
+    assert_eq!(ecu.output().state, EcuState::Tracking, "{log:?}");
+    (ecu, drive, vehicle, t)
+}
+
+/// A demand change found outside the drive calls (here the reference timeout, seen by
+/// the supervisor's tick) leaves its disable for the next drive poll: on the bus within
+/// 1 ms, before anything else.
+#[test]
+fn a_disable_decided_by_a_tick_goes_out_first_at_the_next_drive_poll() {
+    let (mut ecu, mut drive, _, t0) = tracking_epos4();
+    // The vehicle falls silent; the encoder and the supervisor keep running.
+    let mut t = t0;
+    let disabled_at = loop {
+        t += MS;
+        if (t - t0).is_multiple_of(2 * MS) {
+            let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+        }
+        if ecu.tick(t).demand == DriveDemand::Disabled {
+            break t;
+        }
+        let _ = step(&mut ecu, &mut drive, t);
+        assert!(t < t0 + 200 * MS, "never disabled");
+    };
+    let sent = step(&mut ecu, &mut drive, disabled_at);
+    assert!(sent.first().is_some_and(is_disable), "{sent:?}");
+    assert_eq!(drive.state, State::SwitchOnDisabled);
+    assert!(ecu.output().faults.contains(Fault::ReferenceTimeout));
+}
+
+/// The drive's current (TPDO2) feeds the over-current check: 30 A in the drive's 10 ms
+/// samples latches within 20 ms and disables the drive; the status and motor frames carry
+/// the drive's current.
+#[test]
+fn the_drives_current_feeds_the_over_current_check_and_the_frames() {
+    let (mut ecu, mut drive, mut vehicle, t0) = tracking_epos4();
+    drive.current_ma = 5_000;
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        t0,
+        t0 + 20 * MS,
+        AsState::Driving,
+        0.0,
+        0.0,
+    );
+    let protocol = ProtocolConfig::default();
+    let status = protocol.decode_status(&ecu.status_frame()).unwrap();
+    assert!((status.current.0 - 5.0).abs() < 0.1, "{:?}", status.current);
+    let motor = protocol.decode_motor(&ecu.motor_frame()).unwrap();
+    assert!(
+        (motor.current_mean.0 - 5.0).abs() < 0.1,
+        "{:?}",
+        motor.current_mean
+    );
+    drive.current_ma = 30_000;
+    let t1 = t0 + 20 * MS;
+    let mut latched_at = None;
+    for k in 0..40 {
+        let t = t1 + k * MS;
+        let _ = step(&mut ecu, &mut drive, t);
+        if latched_at.is_none() && ecu.output().faults.contains(Fault::OverCurrent) {
+            latched_at = Some(t - t1);
+        }
+    }
+    assert!(latched_at.is_some_and(|at| at <= 20 * MS), "{latched_at:?}");
+    assert_eq!(drive.state, State::SwitchOnDisabled);
+}
+
+/// An EMCY from the drive latches `EposFault` with its code. The failed link is not
+/// reset while the AS state is Driving; in AS Off it is reset at once and then at most
+/// once a second; back in Standby the cause is gone and a clear request clears.
+#[test]
+fn a_failed_link_is_reset_only_in_as_off_and_at_most_once_a_second() {
+    let (mut ecu, mut drive, mut vehicle, t0) = tracking_epos4();
+    let emcy = crate::canopen::emcy::Emcy {
+        error_code: 0x3210,
+        error_register: 0x04,
+        vendor: [0; 5],
+    }
+    .to_frame(node())
+    .unwrap();
+    let _ = ecu.on_drive_frame(t0, &emcy);
+    let out = ecu.output();
+    assert!(out.faults.contains(Fault::EposFault), "{out:?}");
+    let record = ecu.machine().fault_log().iter().last().copied();
+    assert_eq!(
+        record.map(|r| (r.fault, r.detail)),
+        Some((Fault::EposFault, 0x3210))
+    );
+    let t1 = t0 + 2000 * MS;
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        t0,
+        t1,
+        AsState::Driving,
+        0.0,
+        0.0,
+    );
+    assert!(
+        ecu.link().unwrap().error().is_some(),
+        "reset while AS Driving"
+    );
+    // A clear asked for in AS Driving is refused, and counted.
+    assert_eq!(ecu.clear_refusals(), 0);
+    let f = vehicle.frame(AsState::Driving, 0.0, true);
+    let _ = ecu.on_reference_frame(t1, &f);
+    assert_eq!(ecu.clear_refusals(), 1);
+    // AS Off: reset at once, the link is back in Standby within 100 ms.
+    let t2 = t1 + 100 * MS;
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        t1,
+        t2,
+        AsState::Off,
+        0.0,
+        0.0,
+    );
+    assert_eq!(ecu.link().unwrap().phase(), Phase::Standby);
+    // A second failure 100 ms later waits for the second's end (t1 + 1 s).
+    let _ = ecu.on_drive_frame(t2, &emcy);
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        t2,
+        t1 + 990 * MS,
+        AsState::Off,
+        0.0,
+        0.0,
+    );
+    assert!(
+        ecu.link().unwrap().error().is_some(),
+        "reset within the second"
+    );
+    let t3 = t1 + 1100 * MS;
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        t1 + 990 * MS,
+        t3,
+        AsState::Off,
+        0.0,
+        0.0,
+    );
+    assert_eq!(ecu.link().unwrap().phase(), Phase::Standby);
+    // The cause is gone: the clear bit's rising edge clears.
+    let f = vehicle.frame(AsState::Off, 0.0, true);
+    let out = ecu.on_reference_frame(t3, &f);
+    assert!(out.faults.is_empty(), "{:?}", out.faults);
+    assert_eq!(ecu.clear_refusals(), 1);
+}
+
+/// EPOS4 mode: the enable ramp starts where the column is once the drive is in Operation
+/// enabled, and the CSP target then moves at most the ramp's speed toward a far reference.
+#[test]
+fn an_epos4_enable_ramps_the_target_from_the_column() {
+    let (mut ecu, mut drive, _) = epos4_ecu(500);
+    let mut vehicle = Vehicle::new();
+    // The link comes up with no vehicle frame yet ...
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        0,
+        200 * MS,
+        AsState::Off,
+        f32::NAN,
+        0.0,
+    );
+    // ... which asks for 30 deg from its first frame, in AS Driving, on. The motor follows
+    // each target and the column the motor (a stiff belt).
+    drive.follows = true;
+    let mut t = 200 * MS;
+    while t < 900 * MS {
+        if t.is_multiple_of(10 * MS) {
+            let motor = ecu.motor_angle();
+            let column = SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor));
+            let _ = ecu.on_encoder(t, column);
+            let _ = vehicle.send(&mut ecu, t, AsState::Driving, 30.0);
+        }
+        let _ = step(&mut ecu, &mut drive, t);
+        t += MS;
+    }
+    assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
+    // The ramp's speed for a 10 ms cycle, one increment of rounding.
+    let per_cycle = inc_at(&ecu, ENABLE_RAMP_DPS * 0.01) + 1;
+    let steps: Vec<i32> = drive.targets.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(drive.targets.first() == Some(&500), "{:?}", drive.targets);
+    assert!(steps.iter().all(|s| s.abs() <= per_cycle), "{steps:?}");
+    // 30 deg at the ramp's speed and acceleration: there after 0.5 s of the 0.7 s.
+    assert_eq!(drive.targets.last(), Some(&(500 + inc_at(&ecu, 30.0))));
+}
+
+/// The origin comes from the column: a drive that powered up at 500 increments with the
+/// column at 5 deg has its column 0 at 500 less 5 deg's increments, and the ECU's motor
+/// angle reads 5 deg at the wheel.
+#[test]
+fn the_epos4_origin_is_taken_from_the_column() {
+    let (mut ecu, mut drive, _) = epos4_ecu(500);
+    let mut vehicle = Vehicle::new();
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        0,
+        200 * MS,
+        AsState::Off,
+        0.0,
+        5.0,
+    );
+    let origin = 500 - inc_at(&ecu, 5.0);
+    assert_eq!(ecu.motor_origin_counts(), Some(origin));
+    let wheel = SteeringDeg::from(Gearing::PAPER.steering_from_motor(ecu.motor_angle()));
+    let resolution = 360.0 / inc_at(&ecu, 360.0) as f32;
+    assert!((wheel.0 - 5.0).abs() <= resolution, "{wheel:?}");
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        200 * MS,
+        400 * MS,
+        AsState::Driving,
+        5.0,
+        5.0,
+    );
+    assert_eq!(ecu.output().state, EcuState::Tracking);
+    assert_eq!(drive.targets.last(), Some(&500));
+}
+
+/// Direct mode: the origin is the Hall count nearest to the column's angle through the
+/// gearing, so the motor angle the ECU believes is within half a count of the column's.
+#[test]
+fn the_direct_origin_rounds_to_the_nearest_hall_count() {
+    let half_count = std::f32::consts::PI / HALL_COUNTS_PER_REV as f32;
+    for deg in [0.3f32, 1.0, 2.3, 5.55, -7.2, 13.1, -0.4] {
+        let mut ecu = Ecu::paper().unwrap();
+        let _ = ecu.position_tick(0);
+        let _ = ecu.on_encoder(0, SteeringDeg(deg));
+        let want = Gearing::PAPER.motor_from_steering(SteeringDeg(deg).into());
+        let got = ecu.motor_angle();
+        assert!(
+            (got.0 - want.0).abs() <= half_count + 1e-5,
+            "{deg} deg: motor {} rad, column says {} rad",
+            got.0,
+            want.0
+        );
+    }
+}
+
+/// Direct mode: the motor frame carries the mean of the current samples since the last
+/// motor frame, and NaN when none came.
+#[test]
+fn the_motor_frame_carries_the_mean_current_since_the_last_one() {
+    let mut ecu = Ecu::paper().unwrap();
+    let protocol = ProtocolConfig::default();
+    for k in 0..20u64 {
+        let amps = if k < 10 { 2.0 } else { 4.0 };
+        let _ = ecu.current_tick(k * 50, Amps(amps));
+    }
+    let motor = protocol.decode_motor(&ecu.motor_frame()).unwrap();
+    assert!(
+        (motor.current_mean.0 - 3.0).abs() < 0.01,
+        "{:?}",
+        motor.current_mean
+    );
+    let motor = protocol.decode_motor(&ecu.motor_frame()).unwrap();
+    assert!(motor.current_mean.0.is_nan(), "{:?}", motor.current_mean);
+}
+
+/// Direct mode: the origin is taken from the column once (and at each enable), not on
+/// every sample: a motor that turns 20 deg (at the wheel) while the column stands (a
+/// broken belt) is a disagreement, latched 20 ms after it exceeds the window.
+#[test]
+fn a_motor_turning_without_the_column_is_a_disagreement() {
+    let mut ecu = Ecu::paper().unwrap();
+    let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(20.0).into());
+    let hall = hall_from_motor(f64::from(motor.0));
+    let _ = ecu.position_tick(0);
+    let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+    let _ = ecu.position_tick(hall);
+    let mut latched_at = None;
+    for k in 1..=30u64 {
+        let out = ecu.on_encoder(k * MS, SteeringDeg(0.0));
+        if latched_at.is_none() && out.faults.contains(Fault::EncoderMotorDisagreement) {
+            latched_at = Some(k * MS);
+        }
+    }
+    assert_eq!(latched_at, Some(21 * MS));
+}
+
+/// EPOS4 mode: a drive that does not follow its target (the motor stands while the
+/// reference is 30 deg away) latches `TrackingError` through the ECU's encoder path.
+#[test]
+fn an_epos4_that_does_not_follow_latches_a_tracking_error() {
+    let (mut ecu, mut drive, _) = epos4_ecu(500);
+    let mut vehicle = Vehicle::new();
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        0,
+        200 * MS,
+        AsState::Off,
+        f32::NAN,
+        0.0,
+    );
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        200 * MS,
+        1200 * MS,
+        AsState::Driving,
+        30.0,
+        0.0,
+    );
+    assert!(
+        ecu.output().faults.contains(Fault::TrackingError),
+        "{:?}",
+        ecu.output()
+    );
+}
+
+/// The ECU-mode constructors: the direct one runs the ECU-mode cascade; over an EPOS4 the
+/// drive gets Table 3's gains with the model's feedforward in mA (A x 1000), and the ECU
+/// brings it up and steers it.
+#[test]
+fn ecu_mode_runs_its_cascade_direct_and_its_feedforward_on_the_epos4() {
+    let ecu = Ecu::build(EcuBuild::new(ControllerKind::Ecu, DriveChoice::Direct), 0).unwrap();
+    assert!(matches!(
+        ecu.drive(),
+        Drive::Direct(d) if matches!(d.controller(), SteeringController::Ecu(_))
+    ));
+    let gains = Ecu::ecu_mode_epos4_gains();
+    assert!((gains.ff_velocity_ma_s_per_rad / 1000.0 - EcuTuning::PAPER.ff_velocity).abs() < 1e-6);
+    assert!(
+        (gains.ff_acceleration_ma_s2_per_rad / 1000.0 - EcuTuning::PAPER.ff_acceleration).abs()
+            < 1e-9
+    );
+    assert!(gains.ff_velocity_ma_s_per_rad > 0.0 && gains.ff_acceleration_ma_s2_per_rad > 0.0);
+    let feedback_only = |g: EposGains| EposGains {
+        ff_velocity_ma_s_per_rad: 0.0,
+        ff_acceleration_ma_s2_per_rad: 0.0,
+        ..g
+    };
+    assert_eq!(feedback_only(gains), feedback_only(EposGains::PAPER));
+
+    let mut config = Epos4Config::paper(node());
+    config.gains = gains;
+    let mut ecu = Ecu::build(
+        EcuBuild::new(ControllerKind::Ecu, DriveChoice::Epos4(config)),
+        0,
+    )
+    .unwrap();
+    let mut drive = FakeEpos4::new(500);
+    for f in ecu.drive_start(0) {
+        let answers = drive.on_frame(&f);
+        drive.answers.extend(answers);
+    }
+    let mut vehicle = Vehicle::new();
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        0,
+        400 * MS,
+        AsState::Driving,
+        0.0,
+        0.0,
+    );
+    assert_eq!(ecu.output().state, EcuState::Tracking);
+    let written = drive.od.get(&od::POSITION_FF_VELOCITY).copied();
+    assert_eq!(
+        written,
+        Some((gains.ff_velocity_ma_s_per_rad * 1000.0).round() as u32)
+    );
+    assert_eq!(drive.targets.last(), Some(&500));
+}
+
+/// A frame whose angle breaks the rate rule is dropped; its AS state counts only when it
+/// does not allow power. AS Driving from such a frame after AS Off powers nothing.
+#[test]
+fn a_dropped_driving_frame_powers_nothing() {
+    let mut ecu = Ecu::paper().unwrap();
+    let mut vehicle = Vehicle::new();
+    for k in 0..5u64 {
+        let _ = ecu.on_encoder(k * 10 * MS, SteeringDeg(0.0));
+        let _ = vehicle.send(&mut ecu, k * 10 * MS, AsState::Off, 0.0);
+    }
+    // 60 deg 10 ms after 0 deg: authentic and in sequence, but dropped by the rate rule.
+    let _ = ecu.on_encoder(50 * MS, SteeringDeg(0.0));
+    let out = vehicle.send(&mut ecu, 50 * MS, AsState::Driving, 60.0);
+    assert_eq!(out.demand, DriveDemand::Disabled);
+    assert_eq!(out.state, EcuState::Idle);
+    assert_eq!(ecu.machine().as_state(), Some(AsState::Off));
+}
+
+/// Direct mode, through the 20 kHz current tick: 20 consecutive samples above 22 A latch
+/// `OverCurrent` and switch the bridge off; samples alternating above and within never do
+/// (a sample within ends the run, fast path or not).
+#[test]
+fn the_current_tick_latches_only_a_run_of_over_current_samples() {
+    let mut ecu = Ecu::paper().unwrap();
+    let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+    let _ = Vehicle::new().send(&mut ecu, 0, AsState::Driving, 0.0);
+    let _ = ecu.position_tick(0);
+    // Over on odd samples, within on even ones, the last (the 200th) within.
+    for k in 1..=200u64 {
+        let amps = if k % 2 == 1 { 25.0 } else { 10.0 };
+        let _ = ecu.current_tick(k * 50, Amps(amps));
+    }
+    assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
+    let mut latched_at = None;
+    for k in 1..=40u64 {
+        let voltage = ecu.current_tick(10 * MS + k * 50, Amps(-25.0));
+        if latched_at.is_none() && ecu.output().faults.contains(Fault::OverCurrent) {
+            latched_at = Some(k);
+            assert_eq!(voltage, None, "bridge off in the latching call");
+        } else if latched_at.is_none() {
+            assert!(voltage.is_some(), "bridge on before the latch");
+        }
+    }
+    assert_eq!(latched_at, Some(20), "samples to latch");
+}
+
+/// The watchdog's progress counts: one per supervisor call (tick, reference frame,
+/// encoder sample or error) and one per fast-loop period (`fast_loop_ran`, and each
+/// EPOS4-mode drive poll); the supervisor's last call time never goes back.
+#[test]
+fn the_progress_counts_and_the_supervisors_time_follow_the_calls() {
+    let mut ecu = Ecu::paper().unwrap();
+    assert_eq!(ecu.supervisor_seen_us(), None);
+    assert_eq!((ecu.progress().supervisor, ecu.progress().fast), (0, 0));
+    let _ = ecu.tick(5 * MS);
+    let _ = ecu.on_encoder(3 * MS, SteeringDeg(0.0));
+    let _ = Vehicle::new().send(&mut ecu, 7 * MS, AsState::Off, 0.0);
+    let _ = ecu.on_encoder_error(6 * MS, 1);
+    assert_eq!(ecu.supervisor_seen_us(), Some(7 * MS));
+    ecu.fast_loop_ran();
+    ecu.fast_loop_ran();
+    assert_eq!((ecu.progress().supervisor, ecu.progress().fast), (4, 2));
+    let (mut ecu, mut drive, _) = epos4_ecu(0);
+    let _ = step(&mut ecu, &mut drive, MS);
+    let _ = step(&mut ecu, &mut drive, 2 * MS);
+    assert_eq!(ecu.progress().fast, 2);
+}
+
+/// Direct mode: after a stall (bridge off, cascade not stepped) the fast loop restarts
+/// the cascade where the motor is now, in the column-aligned frame: the next position
+/// tick's set-point is the motor's angle and it asks for no current.
+#[test]
+fn a_resync_restarts_the_cascade_at_the_motor() {
+    let mut ecu = Ecu::paper().unwrap();
+    let _ = ecu.position_tick(0);
+    let _ = ecu.on_encoder(0, SteeringDeg(0.0));
+    let _ = Vehicle::new().send(&mut ecu, 0, AsState::Driving, 0.0);
+    // The wheels were turned to 10 deg while the loop stood.
+    let motor = Gearing::PAPER.motor_from_steering(SteeringDeg(10.0).into());
+    let hall = hall_from_motor(f64::from(motor.0));
+    let _ = ecu.position_tick(hall);
+    ecu.resync_cascade();
+    let current = ecu.position_tick(hall);
+    assert!(current.0.abs() < 1.0, "{} A at the set-point", current.0);
+    let Drive::Direct(cascade) = ecu.drive() else {
+        panic!("direct mode")
+    };
+    let cascade = cascade.controller();
+    let at = cascade.setpoint().position;
+    assert!(
+        (at.0 - motor_from_hall(hall).0).abs() < 1e-4,
+        "set-point {} rad, motor {} rad",
+        at.0,
+        motor_from_hall(hall).0
+    );
+}
+
+/// The drive's fault cause is gone exactly when the link is back up (Standby, Disabling
+/// or Cyclic after the reset), not while it is still failed: a clear asked for before the reset is refused,
+/// one asked for right after the call that brought the link up is granted.
+#[test]
+fn a_drive_fault_clears_only_once_the_link_is_back_up() {
+    let (mut ecu, mut drive, mut vehicle, t0) = tracking_epos4();
+    let emcy = crate::canopen::emcy::Emcy {
+        error_code: 0x3210,
+        error_register: 0x04,
+        vendor: [0; 5],
+    }
+    .to_frame(node())
+    .unwrap();
+    let _ = ecu.on_drive_frame(t0, &emcy);
+    // Still in AS Driving (no reset): the link stays failed for 20 ms of drive polls.
+    let t1 = t0 + 20 * MS;
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        t0,
+        t1,
+        AsState::Driving,
+        0.0,
+        0.0,
+    );
+    assert!(ecu.link().unwrap().error().is_some());
+    // AS Off and a clear at once, before the next drive poll resets the link: refused.
+    let _ = vehicle.send(&mut ecu, t1, AsState::Off, 0.0);
+    let f = vehicle.frame(AsState::Off, 0.0, true);
+    let out = ecu.on_reference_frame(t1, &f);
+    assert!(
+        out.faults.contains(Fault::EposFault),
+        "cleared while failed"
+    );
+    // The bit low again, so the next request is a rising edge.
+    let _ = vehicle.send(&mut ecu, t1, AsState::Off, 0.0);
+    // Run the drive task until the call that brings the link up; clear right after it.
+    let up = |ecu: &Ecu| {
+        matches!(
+            ecu.link().unwrap().phase(),
+            Phase::Standby | Phase::Disabling | Phase::Cyclic
+        )
+    };
+    let mut t = t1;
+    'up: loop {
+        t += MS;
+        assert!(t < t1 + 500 * MS, "the link never came back");
+        if (t - t1).is_multiple_of(10 * MS) {
+            let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+            let _ = vehicle.send(&mut ecu, t, AsState::Off, 0.0);
+        }
+        let mut sent = Vec::new();
+        for answer in std::mem::take(&mut drive.answers) {
+            sent.extend(ecu.on_drive_frame(t, &answer));
+            if up(&ecu) {
+                break 'up;
+            }
+        }
+        sent.extend(ecu.drive_poll(t));
+        if up(&ecu) {
+            break;
+        }
+        for f in &sent {
+            let answers = drive.on_frame(f);
+            drive.answers.extend(answers);
+        }
+    }
+    let f = vehicle.frame(AsState::Off, 0.0, true);
+    let out = ecu.on_reference_frame(t, &f);
+    assert!(out.faults.is_empty(), "{:?}", out.faults);
+}
+
+/// EPOS4 mode: after 120 ms without frames the vehicle's next frame is 48 deg away (the
+/// E2E budget allows it); the drive's target moves at most the 400 deg/s rate times the
+/// 10 ms SYNC cycle, however the frames fall between SYNCs.
+#[test]
+fn after_a_gap_the_epos4_target_moves_at_the_rate_limit() {
+    let (mut ecu, mut drive, mut vehicle, t) = tracking_epos4();
+    drive.follows = true;
+    let before = drive.targets.len();
+    // Silence, then 48 deg, on time again.
+    let _ = run(
+        &mut ecu,
+        &mut drive,
+        &mut vehicle,
+        t,
+        t + 120 * MS,
+        AsState::Driving,
+        f32::NAN,
+        0.0,
+    );
+    let start = t + 120 * MS;
+    let mut t = start;
+    while t < start + 200 * MS {
+        if t.is_multiple_of(10 * MS) {
+            let motor = ecu.motor_angle();
+            let column = SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor));
+            let _ = ecu.on_encoder(t, column);
+            let _ = vehicle.send(&mut ecu, t, AsState::Driving, 48.0);
+        }
+        let _ = step(&mut ecu, &mut drive, t);
+        t += MS;
+    }
+    assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
+    let per_cycle = inc_at(&ecu, 4.0) + 1;
+    let steps: Vec<i32> = drive.targets[before..]
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .collect();
+    assert!(steps.iter().all(|s| s.abs() <= per_cycle), "{steps:?}");
+    assert_eq!(drive.targets.last(), Some(&(500 + inc_at(&ecu, 48.0))));
+}
