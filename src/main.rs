@@ -61,9 +61,9 @@ mod firmware {
     static ECU: StaticCell<SharedEcu> = StaticCell::new();
     /// The steering controller: `Paper` (the paper's EPOS4 cascade, Table 3) or `Ecu` (the
     /// ECU's own, `steering_ecu::ecu_mode`: about twice the bandwidth on the paper's plant; see
-    /// the README's "ECU mode"). In EPOS4 mode `Ecu` also writes the model feedforward.
+    /// host-sim/README.md, "ECU mode"). In EPOS4 mode `Ecu` also writes the model feedforward.
     const CONTROLLER: ControllerKind = ControllerKind::Paper;
-    /// Raw column-encoder word at straight ahead; set at bring-up (see the README checklist).
+    /// Raw column-encoder word at straight ahead; set at bring-up (the bring-up list, host-sim/steer-can/README.md).
     const COLUMN_ZERO_RAW: u16 = 0;
     /// AMT20 SPI clock: the datasheet allows up to 1 MHz; 500 kHz leaves margin for the cable
     /// along the column.

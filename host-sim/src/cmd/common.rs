@@ -40,7 +40,7 @@ pub(crate) struct Common {
     #[arg(long)]
     pub(crate) no_anti_windup: bool,
     /// The steering controller: the paper's EPOS4 cascade on the motor, or the ECU's own
-    /// (inverse belt model, model feedforward, column integral; README "ECU mode").
+    /// (inverse belt model, model feedforward, column integral; host-sim/README.md, "ECU mode").
     #[arg(long, value_enum, default_value_t = Controller::Paper)]
     pub(crate) controller: Controller,
     /// A rig file (as in host-sim/rigs/) whose `model.plant` replaces the paper's plant (Tables

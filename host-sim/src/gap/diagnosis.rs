@@ -79,7 +79,7 @@ pub struct Diagnosis {
     /// divides each residual by it.
     pub noise: Option<Noise>,
     /// The nominal model against itself with the reference moved by a ten-millionth of its
-    /// range ([`repeatability`]): how closely any model can predict this log. A loop that
+    /// range ([`super::repeatability`]): how closely any model can predict this log. A loop that
     /// feeds a quantised signal back (the ECU's column terms on the AMT20's counts, the direct
     /// drive's Hall edges) changes the phase of its chatter on any disturbance, so its own
     /// GoF falls below 100 % by what no model can follow sample for sample.

@@ -16,7 +16,7 @@
 //! current as the mean over the row's interval plus sensor noise; the rows' stamps are late
 //! by 0-3 ms against the instants the samples were taken (a logger stamps on receipt).
 
-use super::rng::Rng;
+use super::rng;
 use super::{CurrentSamples, Record};
 use crate::plant::{Actuator, PlantParams};
 use crate::scenario::Sweep;
@@ -84,7 +84,7 @@ const ANGLE_NOISE_DEG: f64 = 0.01;
 /// Draw case `index` of a run seeded with `seed`. `sweep_s` is the length of a sweep; tracks
 /// are 120 s.
 pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
-    let mut rng = Rng::new(seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ index as u64);
+    let mut rng = rng::seeded(seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ index as u64);
     let mut plant = PlantParams::PAPER;
     // Every case: all nine Table 4 parameters off by up to 10 %.
     let scale = |p: &mut PlantParams, name: &str, f: f64| match name {
@@ -116,7 +116,7 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
         reference_delay_s: 0.0,
     };
     let effects = ["backlash", "coulomb_friction", "delay", "tire_ground"];
-    let roll = rng.uniform();
+    let roll = rng.unit();
     let mut hidden: Vec<String> = Vec::new();
     if roll < 0.2 {
         // none
@@ -129,7 +129,7 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
         for i in 0..count {
             let name = prominent[(first + 2 * i) % 5];
             let f = rng.range(2.0, 3.0);
-            let f = if rng.uniform() < 0.5 { f } else { 1.0 / f };
+            let f = if rng.unit() < 0.5 { f } else { 1.0 / f };
             scale(&mut truth.plant, name, f);
         }
     } else if roll < 0.8 {
@@ -158,8 +158,8 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
     let log_rate_hz = [100, 200, 1000][(rng.next_u64() % 3) as usize];
     // Whole 50 us ticks, 0-3 ms.
     let skew_s = (rng.range(0.0, 3.0e-3) * CURRENT_LOOP_HZ as f64).round() / CURRENT_LOOP_HZ as f64;
-    let (scenario, reference) = if rng.uniform() < 0.7 {
-        let amp = if rng.uniform() < 0.5 { 5.0 } else { 10.0 };
+    let (scenario, reference) = if rng.unit() < 0.7 {
+        let amp = if rng.unit() < 0.5 { 5.0 } else { 10.0 };
         let f1 = rng.range(3.0, 6.0);
         (
             format!("sweep {amp:.0} deg 0.2-{f1:.1} Hz"),
@@ -372,7 +372,7 @@ pub fn rows_of(case: &GenCase, seed: u64) -> Rows {
         0.0,
     ];
     cascade.reset(hall_from_motor(x[1]));
-    let mut rng = Rng::new(seed ^ (case.index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+    let mut rng = rng::seeded(seed ^ (case.index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
     let encoder = ColumnEncoder { zero_raw: 0 };
     let h = 1.0 / CURRENT_LOOP_HZ as f64;
     let ticks_per_row = CURRENT_LOOP_HZ as u64 / case.log_rate_hz as u64;

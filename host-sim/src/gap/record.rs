@@ -2,7 +2,7 @@
 //! ([`LogTiming`]).
 
 /// A log on the rig's grid. For the paper rig the grid is the 10 ms reference period, and
-/// each step `k` holds what the log means (README, log format): the reference in force over
+/// each step `k` holds what the log means (host-sim/README.md, "The log format"): the reference in force over
 /// the period, the column and motor angles at the instant the period ends, and the mean
 /// motor current over the period. The model computes the same quantities at the same
 /// instants. EMPS samples are taken as they are.

@@ -8,7 +8,7 @@
 use super::generator::{self, GenCase};
 use super::model::Effects;
 use super::rig::Rig;
-use super::rng::Rng;
+use super::rng::{self, Rng};
 use super::{EffectKind, Options, Record, diagnose};
 use crate::scenario::Sweep;
 use std::collections::BTreeMap;
@@ -61,9 +61,9 @@ fn draw_effect(kind: EffectKind, rng: &mut Rng, fx: &mut Effects) {
 
 /// Draw case `index` of a run seeded with `seed`.
 pub fn draw_case(seed: u64, index: usize, duration_s: f64) -> Case {
-    let mut rng = Rng::new(seed.wrapping_mul(1_000_003).wrapping_add(index as u64));
+    let mut rng = rng::seeded(seed.wrapping_mul(1_000_003).wrapping_add(index as u64));
     let kinds = EffectKind::CORE;
-    let roll = rng.uniform();
+    let roll = rng.unit();
     let mut hidden: Vec<EffectKind> = Vec::new();
     if roll < 0.2 {
         // none
@@ -79,7 +79,7 @@ pub fn draw_case(seed: u64, index: usize, duration_s: f64) -> Case {
     for k in &hidden {
         draw_effect(*k, &mut rng, &mut effects);
     }
-    let (scenario, reference) = if rng.uniform() < 0.5 {
+    let (scenario, reference) = if rng.unit() < 0.5 {
         let amp = rng.range(4.0, 10.0);
         let f1 = rng.range(3.0, 6.0);
         (
@@ -127,7 +127,7 @@ pub fn record_of(rig: &Rig, case: &Case, seed: u64) -> Record {
         ..Record::default()
     };
     let sim = super::simulate(rig, &rec, &case.effects);
-    let mut rng = Rng::new(seed ^ (case.index as u64).wrapping_mul(0x1234_5678_9abc_def1));
+    let mut rng = rng::seeded(seed ^ (case.index as u64).wrapping_mul(0x1234_5678_9abc_def1));
     let q = |v: f64, step: f64| (v / step).round() * step;
     rec.output = sim
         .output

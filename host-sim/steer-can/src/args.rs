@@ -46,7 +46,7 @@ pub struct Cli {
     )]
     pub sim_column_deg: f64,
     /// With `--iface sim`: the simulated ECU's steering controller, `paper` (the paper's
-    /// cascade) or `ecu` (the ECU's own, README "ECU mode").
+    /// cascade) or `ecu` (the ECU's own, host-sim/README.md, "ECU mode").
     #[arg(long, global = true, value_enum, default_value_t = ControllerArg::Paper)]
     pub controller: ControllerArg,
     /// With `--iface sim`: the firmware build the simulated car runs, `epos4` (the default
