@@ -270,58 +270,40 @@ mod garbage_tests {
     //! Whatever arrives, the outputs stay finite and within 20 A / 24 V, and nothing panics.
     use super::*;
 
-    /// xorshift64*: deterministic, no dependency.
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-        }
-        /// Any f32 bit pattern half the time (NaN, inf, subnormals), a plausible value else.
-        fn f32(&mut self, plausible: f32) -> f32 {
-            let bits = self.next();
-            if bits & 1 == 0 {
-                f32::from_bits((bits >> 32) as u32)
-            } else {
-                ((bits >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * 2.0 * plausible
-            }
-        }
-    }
+    use det_rng::XorShift64Star as Rng;
 
     #[test]
     fn arbitrary_inputs_give_bounded_finite_outputs() {
-        let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+        let mut rng = Rng::from_state(0x9E37_79B9_7F4A_7C15);
         let mut c = Cascade::paper();
         for k in 0..200_000u32 {
-            match rng.next() % 8 {
+            match rng.next_u64() % 8 {
                 0 => {
-                    let _ = c.push_reference(SteeringDeg(rng.f32(120.0)));
+                    let _ = c.push_reference(SteeringDeg(rng.any_f32(120.0)));
                 }
                 1 => {
-                    let out = c.position_step(rng.next() as i32);
+                    let out = c.position_step(rng.next_u64() as i32);
                     assert!(
                         out.current.0.is_finite() && out.current.0.abs() <= 20.0,
                         "{k}"
                     );
                 }
                 2 => {
-                    let out = c.position_step_at(MotorRad(rng.f32(200.0)));
+                    let out = c.position_step_at(MotorRad(rng.any_f32(200.0)));
                     assert!(
                         out.current.0.is_finite() && out.current.0.abs() <= 20.0,
                         "{k}"
                     );
                 }
-                3 if k % 1000 == 3 => c.reset(rng.next() as i32),
+                3 if k % 1000 == 3 => c.reset(rng.next_u64() as i32),
                 4 if k % 5000 == 4 => {
                     let mut g = EposGains::PAPER;
-                    g.position_kd_ma_s_per_rad = rng.f32(1000.0);
+                    g.position_kd_ma_s_per_rad = rng.any_f32(1000.0);
                     let _ = c.set_gains(&g);
                 }
-                5 if k % 5000 == 5 => c.set_winding(rng.f32(1.0), rng.f32(1e-3)),
+                5 if k % 5000 == 5 => c.set_winding(rng.any_f32(1.0), rng.any_f32(1e-3)),
                 _ => {
-                    let out = c.current_step(Amps(rng.f32(40.0)));
+                    let out = c.current_step(Amps(rng.any_f32(40.0)));
                     assert!(
                         out.voltage.0.is_finite() && out.voltage.0.abs() <= 24.0,
                         "{k}"
