@@ -9,7 +9,7 @@
 #   .ci/mutation.sh                          all four files, results in target/mutants
 #   FILES=src/faults.rs .ci/mutation.sh -j 1 one file, results in target/mutants/faults
 #   .ci/mutation.sh --list                   the mutants only
-#   FILES=src/steering.rs .ci/mutation.sh --re 'steering.rs:(5[89]\d|[6-9]\d\d):'
+#   FILES=src/steering/mod.rs .ci/mutation.sh --re 'mod.rs:(5[89]\d|[6-9]\d\d):'
 #                                            part of a file: --re matches "file:line:col: ..."
 #
 # On shared cores run it under `nice -n 10`; two files can run side by side, each in its own
@@ -24,7 +24,7 @@
 # would rebuild the real tree's library after every mutant).
 set -eu
 cd "$(dirname "$0")/.."
-FILES=${FILES:-"src/protocol/e2e.rs src/steering.rs src/faults.rs src/ecu.rs"}
+FILES=${FILES:-"src/protocol/e2e.rs src/steering/mod.rs src/faults.rs src/ecu.rs"}
 OUT=target/mutants
 FILE_ARGS=""
 for f in $FILES; do
@@ -32,7 +32,8 @@ for f in $FILES; do
 done
 case "$FILES" in
     *" "*) ;;
-    *) OUT="$OUT/$(basename "$FILES" .rs)" ;;
+    # src/canopen/epos4.rs -> canopen-epos4, src/faults.rs -> faults
+    *) OUT="$OUT/$(printf '%s' "${FILES%.rs}" | sed 's|^src/||; s|/|-|g')" ;;
 esac
 unset CARGO_TARGET_DIR
 # shellcheck disable=SC2086 # FILE_ARGS is a list of words
