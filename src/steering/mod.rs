@@ -93,6 +93,26 @@
 //! The plausibility checks (jump, disagreement, current) run in every AS state: a broken
 //! sensor is found in AS Off, before the car is handed to the autonomous system.
 //!
+//! ## Detectors
+//!
+//! Each check that remembers something between calls is a small pure struct in its own file:
+//! one detector, its inputs (the sample, the time, its limits from [`Config`]) and its
+//! [`Verdict`] on them. The machine owns one of each, feeds them from its entry points and
+//! applies each verdict to the fault's cause and latch in one place (`apply`); the faults that
+//! arrive as events (EPOS4, heartbeat, bus-off, invalid frames, origin) need no detector.
+//!
+//! ```text
+//!   on_reference / on_as_state --> Timeouts (timeouts.rs)          --> ReferenceTimeout, Encoder
+//!   on_encoder / on_column     --> JumpCheck (jump.rs)             --> EncoderJump
+//!                              --> DisagreementCheck (disagreement.rs) --> EncoderMotorDisagreement
+//!   on_current                 --> OverCurrentCheck (overcurrent.rs)   --> OverCurrent
+//!   on_tracking                --> TrackingCheck (tracking.rs)     --> TrackingError
+//!   on_drive_effort            --> RunawayCheck (runaway.rs)       --> TrackingError
+//!                                      |
+//!                                      v  Verdict: Within / Building / Latch / Unjudged
+//!                   active causes + latched faults + fault log --> output(): the demand
+//! ```
+//!
 //! A panic is not a fault here: the firmware's panic handler turns the bridge off (EPOS4
 //! disabled, PWM outputs low) and resets the MCU, so nothing of this machine runs after it.
 //! After the reset the machine starts in Idle with no fault and no reference, so the drive
@@ -140,6 +160,25 @@
 //!   306 deg/s) is not a fault: the column must move toward the reference by less than
 //!   30 deg/s over the 200 ms, i.e. stand still (jammed) or run away (lost control).
 
+mod disagreement;
+mod jump;
+mod overcurrent;
+mod runaway;
+mod timeouts;
+mod tracking;
+mod verdict;
+
+pub use disagreement::{DisagreementCheck, DisagreementLimits};
+pub use jump::{JumpCheck, JumpLimits};
+pub use overcurrent::{OVERCURRENT_PERSIST_US, OverCurrentCheck, OverCurrentLimits};
+pub use runaway::{
+    RUNAWAY_AWAY_DPS, RUNAWAY_CURRENT, RUNAWAY_PERSIST_US, RUNAWAY_SLOWING_SLACK_DPS,
+    RUNAWAY_SPEED_WINDOW_US, RunawayCheck,
+};
+pub use timeouts::{TimeoutLimits, Timeouts};
+pub use tracking::{TrackingCheck, TrackingLimits};
+pub use verdict::Verdict;
+
 use crate::as_state::{Actuation, AsState};
 use crate::faults::{EncoderFaultDetail, Fault, FaultLog, FaultRecord, FaultSet};
 use crate::gearing::Gearing;
@@ -163,35 +202,12 @@ pub const DEFAULT_DISAGREEMENT_PERSIST_US: u32 = 20_000;
 pub const DEFAULT_OVERCURRENT: Amps = Amps(22.0);
 /// Consecutive over-current samples that latch the fault.
 pub const DEFAULT_OVERCURRENT_SAMPLES: u16 = 20;
-/// ... or a run of over-current samples (at least two) lasting this long, µs, whatever the
-/// sample rate: the EPOS4's current comes once per 10 ms SYNC, where 20 samples would be
-/// 200 ms; two samples 10 ms apart latch within 20 ms of the first (issue 12). At 20 kHz the
-/// 20 samples (1 ms) come first.
-pub const OVERCURRENT_PERSIST_US: u64 = 10_000;
 /// |column - reference| beyond this is a tracking error candidate, deg at the wheel.
 pub const DEFAULT_TRACKING_DEG: f32 = 20.0;
 /// ... for this long, µs ...
 pub const DEFAULT_TRACKING_PERSIST_US: u32 = 200_000;
 /// ... while the column closes the gap slower than this, deg/s.
 pub const DEFAULT_TRACKING_PROGRESS_DPS: f32 = 30.0;
-/// Runaway: the current toward the reference at least this (90 % of the 20 A loop limit: the
-/// loop is saturated, pushing with all it has) ...
-pub const RUNAWAY_CURRENT: Amps = Amps(18.0);
-/// ... for this long, µs (issue 12: within 50 ms) ...
-pub const RUNAWAY_PERSIST_US: u32 = 50_000;
-/// ... while the column still moves away from the reference at least this fast, deg/s, over
-/// the last [`RUNAWAY_SPEED_WINDOW_US`]. A column that only coasts on (the motor decelerating
-/// after a reversal of the reference: at most about 44 ms from full speed at 20 A) is moving
-/// toward the reference again after 50 ms; 20 deg/s is 2.3 encoder counts per 10 ms, above
-/// the quantisation.
-pub const RUNAWAY_AWAY_DPS: f32 = 20.0;
-/// The speed of [`RUNAWAY_AWAY_DPS`] is measured over at least this, µs (5 encoder samples).
-pub const RUNAWAY_SPEED_WINDOW_US: u32 = 10_000;
-/// A runaway's motion away does not slow under the push; this much slower than when the push
-/// began still counts as not slowing, deg/s: one 12-bit encoder count (0.088 deg) per
-/// [`RUNAWAY_SPEED_WINDOW_US`], the speed measurement's resolution.
-pub const RUNAWAY_SLOWING_SLACK_DPS: f32 = 360.0 / 4096.0 / (RUNAWAY_SPEED_WINDOW_US as f32 * 1e-6);
-
 /// The detail of a [`Fault::Origin`] found by the resting cross-check is its difference in
 /// centi-degrees moved this far from 0 (with its sign), so it reads apart from the spread of
 /// the samples at an enable (always below it).
@@ -455,6 +471,42 @@ impl Config {
     pub fn gearing(&self) -> Gearing {
         self.gearing
     }
+
+    /// The limits of each detector, as it takes them.
+    pub fn timeout_limits(&self) -> TimeoutLimits {
+        TimeoutLimits {
+            reference_timeout_us: self.reference_timeout_us,
+            hold_us: self.hold_us,
+            encoder_timeout_us: self.encoder_timeout_us,
+        }
+    }
+    /// The jump check compares samples at most one encoder timeout apart.
+    pub fn jump_limits(&self) -> JumpLimits {
+        JumpLimits {
+            floor_deg: self.jump_floor_deg,
+            max_rate_dps: self.max_column_rate_dps,
+            max_gap_us: self.encoder_timeout_us,
+        }
+    }
+    pub fn disagreement_limits(&self) -> DisagreementLimits {
+        DisagreementLimits {
+            window_deg: self.disagreement_deg,
+            persist_us: self.disagreement_persist_us,
+        }
+    }
+    pub fn overcurrent_limits(&self) -> OverCurrentLimits {
+        OverCurrentLimits {
+            threshold: self.overcurrent,
+            samples: self.overcurrent_samples,
+        }
+    }
+    pub fn tracking_limits(&self) -> TrackingLimits {
+        TrackingLimits {
+            window_deg: self.tracking_deg,
+            persist_us: self.tracking_persist_us,
+            progress_dps: self.tracking_progress_dps,
+        }
+    }
 }
 
 /// Why [`SteeringStateMachine::request_clear_faults`] refused.
@@ -479,27 +531,13 @@ pub struct SteeringStateMachine {
     now_us: u64,
     as_state: Option<AsState>,
     last_as_us: Option<u64>,
-    /// When the AS state last became one that allows power; `None` while it does not.
-    powered_since_us: Option<u64>,
-    last_reference_us: Option<u64>,
-    last_encoder_us: Option<u64>,
-    /// Previous plausible-or-not column sample, for the jump check: (time, deg).
-    previous_column: Option<(u64, f32)>,
-    disagreement_since_us: Option<u64>,
-    /// Start of the current tracking-error interval: (time, column deg).
-    tracking_since: Option<(u64, f32)>,
-    /// Since when the current has pushed toward the reference at [`RUNAWAY_CURRENT`].
-    runaway_since: Option<u64>,
-    /// A column sample for the speed away: (time, deg), and the last speed away, deg/s.
-    runaway_probe: Option<(u64, f32)>,
-    away_dps: f32,
-    /// The column's speed away from the reference when the saturated push began, deg/s.
-    away_at_push_dps: f32,
-    /// The sign of the error the push began on (+1 toward positive angles).
-    push_direction: f32,
-    overcurrent_count: u16,
-    /// When the current over-current run began.
-    overcurrent_since_us: Option<u64>,
+    /// The reference timeout and the encoder timeout.
+    timeouts: Timeouts,
+    jump: JumpCheck,
+    disagreement: DisagreementCheck,
+    tracking: TrackingCheck,
+    runaway: RunawayCheck,
+    overcurrent: OverCurrentCheck,
     latched: FaultSet,
     /// Faults whose cause is present now (latched or not yet).
     active: FaultSet,
@@ -524,6 +562,16 @@ fn centideg_detail(deg: f32) -> i32 {
     (deg * 100.0) as i32
 }
 
+/// A current as mA for a record's detail, saturated; a current that is not a number is
+/// recorded as `i32::MIN`, apart from every reading.
+fn milliamps_detail(current: Amps) -> i32 {
+    if current.0.is_nan() {
+        i32::MIN
+    } else {
+        (current.0 * 1000.0) as i32
+    }
+}
+
 impl SteeringStateMachine {
     /// Starts in Idle: no AS state, no reference, no fault, drive disabled.
     pub fn new(config: Config) -> Self {
@@ -532,19 +580,12 @@ impl SteeringStateMachine {
             now_us: 0,
             as_state: None,
             last_as_us: None,
-            powered_since_us: None,
-            last_reference_us: None,
-            last_encoder_us: None,
-            previous_column: None,
-            disagreement_since_us: None,
-            tracking_since: None,
-            runaway_since: None,
-            runaway_probe: None,
-            away_dps: 0.0,
-            away_at_push_dps: 0.0,
-            push_direction: 0.0,
-            overcurrent_count: 0,
-            overcurrent_since_us: None,
+            timeouts: Timeouts::new(),
+            jump: JumpCheck::new(),
+            disagreement: DisagreementCheck::new(),
+            tracking: TrackingCheck::new(),
+            runaway: RunawayCheck::new(),
+            overcurrent: OverCurrentCheck::new(),
             latched: FaultSet::EMPTY,
             active: FaultSet::EMPTY,
             log: FaultLog::new(),
@@ -594,7 +635,7 @@ impl SteeringStateMachine {
     pub fn on_reference(&mut self, now_us: u64, as_state: AsState) -> Output {
         let now = self.advance(now_us);
         self.set_as_state(now, as_state);
-        self.last_reference_us = Some(now);
+        self.timeouts.on_reference(now);
         // A valid frame proves the bus and the frame checks work again.
         self.active.remove(Fault::ReferenceTimeout);
         self.active.remove(Fault::InvalidFrames);
@@ -641,7 +682,7 @@ impl SteeringStateMachine {
     ) -> Output {
         let now = self.advance(now_us);
         if !column.is_finite() {
-            self.previous_column = None;
+            self.jump.forget();
             self.raise(
                 now,
                 Fault::Encoder,
@@ -658,19 +699,28 @@ impl SteeringStateMachine {
             return self.output();
         }
         self.active.remove(Fault::Encoder);
-        self.last_encoder_us = Some(now);
-        self.check_jump(now, column.0);
-        match motor {
+        self.timeouts.on_encoder(now);
+        let jump = self.jump.check(now, column.0, &self.config.jump_limits());
+        self.apply(now, Fault::EncoderJump, jump, centideg_detail);
+        let disagreement = match motor {
             Some(motor) => {
                 let motor_as_column =
                     SteeringDeg::from(self.config.gearing.steering_from_motor(motor));
-                self.check_disagreement(now, column.0 - motor_as_column.0);
+                let difference_deg = column.0 - motor_as_column.0;
+                self.disagreement
+                    .check(now, difference_deg, &self.config.disagreement_limits())
             }
             None => {
-                self.disagreement_since_us = None;
-                self.active.remove(Fault::EncoderMotorDisagreement);
+                self.disagreement.forget();
+                Verdict::Within
             }
-        }
+        };
+        self.apply(
+            now,
+            Fault::EncoderMotorDisagreement,
+            disagreement,
+            centideg_detail,
+        );
         self.output()
     }
 
@@ -684,26 +734,10 @@ impl SteeringStateMachine {
         column: SteeringDeg,
     ) -> Output {
         let now = self.advance(now_us);
-        let error = reference.0 - column.0;
-        if error.abs() <= self.config.tracking_deg {
-            self.tracking_since = None;
-            self.active.remove(Fault::TrackingError);
-            return self.output();
-        }
-        self.active.insert(Fault::TrackingError);
-        let (since, column_then) = *self.tracking_since.get_or_insert((now, column.0));
-        let elapsed_us = now.saturating_sub(since);
-        if elapsed_us >= u64::from(self.config.tracking_persist_us) {
-            let toward = (column.0 - column_then) * error.signum();
-            let progress_dps = toward / (elapsed_us as f32 * 1e-6);
-            // NaN compares false: no progress anyone can vouch for.
-            if progress_dps >= self.config.tracking_progress_dps {
-                // Closing the gap: start a new interval from here.
-                self.tracking_since = Some((now, column.0));
-            } else {
-                self.raise(now, Fault::TrackingError, centideg_detail(error));
-            }
-        }
+        let verdict = self
+            .tracking
+            .check(now, reference, column, &self.config.tracking_limits());
+        self.apply(now, Fault::TrackingError, verdict, centideg_detail);
         self.output()
     }
 
@@ -725,43 +759,8 @@ impl SteeringStateMachine {
         current: Amps,
     ) -> Output {
         let now = self.advance(now_us);
-        let error = reference.0 - column.0;
-        match self.runaway_probe {
-            Some((t, c)) if now.saturating_sub(t) >= u64::from(RUNAWAY_SPEED_WINDOW_US) => {
-                let dt_s = now.saturating_sub(t) as f32 * 1e-6;
-                // Away = moving against the sign of the error.
-                self.away_dps = -(column.0 - c) * error.signum() / dt_s;
-                self.runaway_probe = Some((now, column.0));
-            }
-            Some(_) => {}
-            None => self.runaway_probe = Some((now, column.0)),
-        }
-        // NaN compares false: no push anyone can vouch for.
-        let pushing = current.0 * error.signum() >= RUNAWAY_CURRENT.0;
-        if !pushing {
-            self.runaway_since = None;
-            return self.output();
-        }
-        // One push is one direction: a saturated loop on a fast reference flips its current
-        // with the error, and each flip starts a new push.
-        if self.runaway_since.is_none() || error.signum() != self.push_direction {
-            self.runaway_since = Some(now);
-            self.away_at_push_dps = self.away_dps;
-            self.push_direction = error.signum();
-        }
-        let since = self.runaway_since.unwrap_or(now);
-        // A loop that lags a fast reference (a 10 Hz sweep: the error's sign holds for 50 ms,
-        // and the soft belt delays the column by as much) also sees the column move away
-        // under a saturated push, but the push slows it. A drive pushing the wrong way does
-        // not: the motion away is at least as fast as when the push began (one encoder count
-        // per speed window of slack for the quantisation).
-        let not_slowing = self.away_dps >= self.away_at_push_dps - RUNAWAY_SLOWING_SLACK_DPS;
-        if now.saturating_sub(since) >= u64::from(RUNAWAY_PERSIST_US)
-            && self.away_dps >= RUNAWAY_AWAY_DPS
-            && not_slowing
-        {
-            self.raise(now, Fault::TrackingError, centideg_detail(error));
-        }
+        let verdict = self.runaway.check(now, reference, column, current);
+        self.apply(now, Fault::TrackingError, verdict, centideg_detail);
         self.output()
     }
 
@@ -769,16 +768,14 @@ impl SteeringStateMachine {
     /// a number), so the next sample must go through [`SteeringStateMachine::on_current`]
     /// even if it is within.
     pub fn overcurrent_pending(&self) -> bool {
-        self.overcurrent_count > 0 || self.active.contains(Fault::OverCurrent)
+        self.overcurrent.run_open() || self.active.contains(Fault::OverCurrent)
     }
 
     /// The drive is off (or has no reference): no tracking error can be present.
     pub fn on_not_tracking(&mut self, now_us: u64) -> Output {
         self.advance(now_us);
-        self.tracking_since = None;
-        self.runaway_since = None;
-        self.runaway_probe = None;
-        self.away_dps = 0.0;
+        self.tracking.reset();
+        self.runaway.reset();
         self.active.remove(Fault::TrackingError);
         self.output()
     }
@@ -794,27 +791,10 @@ impl SteeringStateMachine {
     /// A measured motor current sample (at the rate of the current or the position loop).
     pub fn on_current(&mut self, now_us: u64, measured: Amps) -> Output {
         let now = self.advance(now_us);
-        // NaN compares false: a current nobody can read is not vouched to be within the limit.
-        let within = measured.0.abs() <= self.config.overcurrent.0;
-        if within {
-            self.overcurrent_count = 0;
-            self.overcurrent_since_us = None;
-            self.active.remove(Fault::OverCurrent);
-        } else {
-            self.overcurrent_count = self.overcurrent_count.saturating_add(1);
-            let since = *self.overcurrent_since_us.get_or_insert(now);
-            self.active.insert(Fault::OverCurrent);
-            let lasted =
-                self.overcurrent_count >= 2 && now.saturating_sub(since) >= OVERCURRENT_PERSIST_US;
-            if self.overcurrent_count >= self.config.overcurrent_samples || lasted {
-                let detail = if measured.0.is_nan() {
-                    i32::MIN
-                } else {
-                    (measured.0 * 1000.0) as i32
-                };
-                self.raise(now, Fault::OverCurrent, detail);
-            }
-        }
+        let verdict = self
+            .overcurrent
+            .check(now, measured, &self.config.overcurrent_limits());
+        self.apply(now, Fault::OverCurrent, verdict, milliamps_detail);
         self.output()
     }
 
@@ -920,22 +900,13 @@ impl SteeringStateMachine {
     fn advance(&mut self, now_us: u64) -> u64 {
         self.now_us = self.now_us.max(now_us);
         let now = self.now_us;
-        if let Some(powered_since) = self.powered_since_us {
-            let age_from = |last: Option<u64>| {
-                let since = last.map_or(powered_since, |t| t.max(powered_since));
-                now.saturating_sub(since)
-            };
-            let reference_age = age_from(self.last_reference_us);
-            let limit = u64::from(self.config.reference_timeout_us)
-                .saturating_add(u64::from(self.config.hold_us));
-            if reference_age > limit {
-                self.raise(now, Fault::ReferenceTimeout, ms_detail(reference_age));
-            }
-            let encoder_age = age_from(self.last_encoder_us);
-            if encoder_age > u64::from(self.config.encoder_timeout_us) {
-                self.raise(now, Fault::Encoder, EncoderFaultDetail::Stale as i32);
-            }
-        }
+        let limits = self.config.timeout_limits();
+        let reference = self.timeouts.reference(now, &limits);
+        self.apply(now, Fault::ReferenceTimeout, reference, ms_detail);
+        let encoder = self.timeouts.encoder(now, &limits);
+        self.apply(now, Fault::Encoder, encoder, |_| {
+            EncoderFaultDetail::Stale as i32
+        });
         now
     }
 
@@ -948,13 +919,8 @@ impl SteeringStateMachine {
         } else {
             as_state
         };
-        if self.config.actuation.allows(as_state) {
-            if self.powered_since_us.is_none() {
-                self.powered_since_us = Some(now);
-            }
-        } else {
-            self.powered_since_us = None;
-        }
+        self.timeouts
+            .on_power_allowed(now, self.config.actuation.allows(as_state));
         self.as_state = Some(as_state);
         self.last_as_us = Some(now);
     }
@@ -971,49 +937,24 @@ impl SteeringStateMachine {
         }
     }
 
-    fn check_jump(&mut self, now: u64, column_deg: f32) {
-        if let Some((t, previous)) = self.previous_column {
-            let dt_us = now.saturating_sub(t);
-            // After a gap the previous sample says nothing about this one; the encoder
-            // timeout covers the gap itself.
-            if dt_us <= u64::from(self.config.encoder_timeout_us) {
-                let limit = self.config.jump_floor_deg
-                    + self.config.max_column_rate_dps * (dt_us as f32 * 1e-6);
-                let jump = (column_deg - previous).abs();
-                if jump > limit {
-                    self.raise(now, Fault::EncoderJump, centideg_detail(jump));
-                } else {
-                    self.active.remove(Fault::EncoderJump);
-                }
+    /// A detector's verdict on the state of `fault`; `detail` makes the record's detail from
+    /// the figure a latch carries.
+    fn apply<T>(&mut self, now: u64, fault: Fault, verdict: Verdict<T>, detail: fn(T) -> i32) {
+        match verdict {
+            Verdict::Unjudged => {}
+            Verdict::Within => self.active.remove(fault),
+            Verdict::Building => {
+                self.active.insert(fault);
             }
-        }
-        self.previous_column = Some((now, column_deg));
-    }
-
-    fn check_disagreement(&mut self, now: u64, difference_deg: f32) {
-        // Not finite (two huge angles) counts as beyond the window.
-        if difference_deg.abs() <= self.config.disagreement_deg {
-            self.disagreement_since_us = None;
-            self.active.remove(Fault::EncoderMotorDisagreement);
-            return;
-        }
-        self.active.insert(Fault::EncoderMotorDisagreement);
-        let since = *self.disagreement_since_us.get_or_insert(now);
-        if now.saturating_sub(since) >= u64::from(self.config.disagreement_persist_us) {
-            self.raise(
-                now,
-                Fault::EncoderMotorDisagreement,
-                centideg_detail(difference_deg),
-            );
+            Verdict::Latch(figure) => self.raise(now, fault, detail(figure)),
         }
     }
 
     /// The demand, from the stored facts alone: the single place that can say `Track`.
     fn output(&mut self) -> Output {
         let now = self.now_us;
-        let age = |t: Option<u64>| t.map(|t| now.saturating_sub(t));
-        let reference_age = age(self.last_reference_us);
-        let encoder_age = age(self.last_encoder_us);
+        let reference_age = self.timeouts.reference_age(now);
+        let encoder_age = self.timeouts.encoder_age(now);
         let timeout = u64::from(self.config.reference_timeout_us);
         let reference_fresh = reference_age.is_some_and(|a| a <= timeout);
         let encoder_fresh =
