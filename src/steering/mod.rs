@@ -121,7 +121,7 @@
 //! ## Defaults and why
 //!
 //! - Reference timeout 30 ms ([`DEFAULT_REFERENCE_TIMEOUT_US`]): three periods of the 100 Hz
-//!   reference (issue).
+//!   reference: two frames lost in a row keep the drive tracking, a third puts it in Hold.
 //! - Encoder timeout 30 ms ([`DEFAULT_ENCODER_TIMEOUT_US`]): the same rule as the reference; at
 //!   2 kHz that is 60 missed samples, at 100 Hz three.
 //! - Encoder jump ([`DEFAULT_JUMP_FLOOR_DEG`], [`DEFAULT_MAX_COLUMN_RATE_DPS`]): the motor
