@@ -1361,6 +1361,9 @@ impl Epos4Link {
 }
 
 #[cfg(test)]
+mod supervision;
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
