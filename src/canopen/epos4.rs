@@ -1361,6 +1361,8 @@ impl Epos4Link {
 }
 
 #[cfg(test)]
+mod enable_walk;
+#[cfg(test)]
 mod supervision;
 
 #[cfg(test)]
