@@ -1,5 +1,6 @@
 //! The CiA 402 walk to Operation enabled as the drive answers it: a drive found enabled, a
-//! drive found faulted with and without a fault reset asked, a quick stop left on the way.
+//! drive found faulted with and without a fault reset asked, a quick stop left on the way, a
+//! drive whose answers never let the walk advance.
 
 use super::super::sdo::{self, ServerRequest};
 use super::*;
@@ -112,6 +113,33 @@ fn a_disable_voltage_on_the_way_is_followed_by_a_status_read_not_a_fault_reset()
         request_in(&out),
         Some(ServerRequest::Upload {
             object: od::STATUSWORD
+        })
+    );
+}
+
+/// A drive that keeps answering a statusword no CiA 402 state has is read again, 40 steps in
+/// all; the 41st fails the link with Cia402Stuck and the last statusword.
+#[test]
+fn a_walk_that_does_not_advance_fails_after_40_steps() {
+    let garbage = 0x0001;
+    assert_eq!(State::from_statusword(garbage), None);
+    let mut link = walking(false);
+    for k in 1..=40u64 {
+        let out = status(&mut link, garbage, k * 1_000);
+        assert_eq!(link.error(), None, "step {k}");
+        assert_eq!(
+            request_in(&out),
+            Some(ServerRequest::Upload {
+                object: od::STATUSWORD
+            }),
+            "step {k}"
+        );
+    }
+    let _ = status(&mut link, garbage, 41_000);
+    assert_eq!(
+        link.error(),
+        Some(LinkError::Cia402Stuck {
+            statusword: garbage
         })
     );
 }
