@@ -389,9 +389,9 @@ mod acknowledge_tests {
     }
 }
 
-// Tests for what `.ci/mutation.sh` found missed in this file.
+/// A union that adds nothing new, and a log's emptiness as records come and go.
 #[cfg(test)]
-mod mutation_tests {
+mod set_and_log_queries {
     use super::*;
 
     #[test]

@@ -1362,6 +1362,11 @@ impl Epos4Link {
 }
 
 #[cfg(test)]
+mod enable_walk;
+#[cfg(test)]
+mod supervision;
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
