@@ -83,7 +83,7 @@ const ORIGIN_SAMPLES: usize = 8;
 pub const ORIGIN_REST_US: u64 = 100_000;
 /// ... column and motor angle / gear ratio must agree within this, deg at the wheel: the
 /// backlash (about 1 deg), the belt's stretch at 2 A (0.49 deg/A: 9.7 deg at 20 A, see the
-/// disagreement window in `src/steering.rs`, about 1 deg) and the quantisation (0.1 deg). An
+/// disagreement window in `src/steering/mod.rs`, about 1 deg) and the quantisation (0.1 deg). An
 /// origin wrong by more latches `Origin`; the agreement at the enable bounds it far tighter.
 pub const ORIGIN_REST_BOUND_DEG: f32 = 2.5;
 /// See [`ORIGIN_REST_US`], deg at the wheel.
