@@ -9,6 +9,7 @@
 /// (uV/A, uA/rad, ...), i.e. 1000 x these numbers; the CANopen layer does that scaling.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct EposGains {
     /// Current controller P gain, mV/A (0x30A0 sub 1).
     pub current_kp_mv_per_a: f32,

@@ -139,7 +139,7 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
     let cfg = RunConfig {
         controller: m.controller,
         plant: p,
-        gains: m.gains.to_epos(),
+        gains: m.gains,
         supply_v: if fx.supply_v > 0.0 {
             fx.supply_v
         } else {
@@ -198,7 +198,7 @@ pub fn simulate_epos4(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
     plant.set_at_rest(first.to_radians());
     let mut drive = DriveLoop::new(plant);
     let gains = match m.controller {
-        Controller::Paper => m.gains.to_epos(),
+        Controller::Paper => m.gains,
         Controller::Ecu => Ecu::ecu_mode_epos4_gains(),
     };
     if drive.set_gains(&gains).is_err() {

@@ -33,45 +33,9 @@ pub struct Columns {
     pub torque_enable: Option<String>,
 }
 
-/// Table 3 gains in EPOS4 units, as in `steering_ecu::gains::EposGains`.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct GainsFile {
-    pub current_kp_mv_per_a: f32,
-    pub current_ki_mv_per_a_ms: f32,
-    pub position_kp_ma_per_rad: f32,
-    pub position_ki_ma_per_rad_s: f32,
-    pub position_kd_ma_s_per_rad: f32,
-    pub ff_velocity_ma_s_per_rad: f32,
-    pub ff_acceleration_ma_s2_per_rad: f32,
-}
-
-impl Default for GainsFile {
-    fn default() -> Self {
-        let g = EposGains::PAPER;
-        GainsFile {
-            current_kp_mv_per_a: g.current_kp_mv_per_a,
-            current_ki_mv_per_a_ms: g.current_ki_mv_per_a_ms,
-            position_kp_ma_per_rad: g.position_kp_ma_per_rad,
-            position_ki_ma_per_rad_s: g.position_ki_ma_per_rad_s,
-            position_kd_ma_s_per_rad: g.position_kd_ma_s_per_rad,
-            ff_velocity_ma_s_per_rad: g.ff_velocity_ma_s_per_rad,
-            ff_acceleration_ma_s2_per_rad: g.ff_acceleration_ma_s2_per_rad,
-        }
-    }
-}
-
-impl GainsFile {
-    pub fn to_epos(&self) -> EposGains {
-        EposGains {
-            current_kp_mv_per_a: self.current_kp_mv_per_a,
-            current_ki_mv_per_a_ms: self.current_ki_mv_per_a_ms,
-            position_kp_ma_per_rad: self.position_kp_ma_per_rad,
-            position_ki_ma_per_rad_s: self.position_ki_ma_per_rad_s,
-            position_kd_ma_s_per_rad: self.position_kd_ma_s_per_rad,
-            ff_velocity_ma_s_per_rad: self.ff_velocity_ma_s_per_rad,
-            ff_acceleration_ma_s2_per_rad: self.ff_acceleration_ma_s2_per_rad,
-        }
-    }
+/// A rig file's gains when it gives none: the paper's Table 3.
+fn paper_gains() -> EposGains {
+    EposGains::PAPER
 }
 
 fn default_supply() -> f64 {
@@ -83,8 +47,9 @@ fn default_supply() -> f64 {
 pub struct PaperModel {
     #[serde(default)]
     pub plant: PlantParams,
-    #[serde(default)]
-    pub gains: GainsFile,
+    /// Table 3 in EPOS4 units, the firmware's own type (its field names are the file's keys).
+    #[serde(default = "paper_gains")]
+    pub gains: EposGains,
     #[serde(default = "default_supply")]
     pub supply_v: f64,
     /// Which drive closes the loops on the car (the firmware's build): the ECU's own bridge,
@@ -322,7 +287,7 @@ impl Rig {
             },
             model: RigModel::Paper(PaperModel {
                 plant: PlantParams::PAPER,
-                gains: GainsFile::default(),
+                gains: EposGains::PAPER,
                 supply_v: 24.0,
                 drive: CarDrive::Direct,
                 controller: crate::sim::Controller::Paper,
