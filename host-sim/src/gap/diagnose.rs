@@ -7,6 +7,7 @@ use super::diagnosis::{
     PARAMETER_TOLERANCE, PARAMETERS_COST_SHARE, UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict,
     VerdictKind,
 };
+use super::finding::{self, BestSingle, Finding, Shortfall};
 use super::model::Effects;
 use super::rig::{Rig, RigModel};
 use super::score::{cost, repeatability, simulate};
@@ -97,7 +98,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             && gain > MIN_PAIR_SHARE_OF_FLOOR * floor
     };
     let mut verdict_candidate: Option<Candidate> = None;
-    let mut reason;
+    let mut findings: Vec<Finding> = Vec::new();
     // Simulations of Table 4 refits, which do not tick `progress`.
     let mut refit_simulations = 0usize;
     if let Some(best) = ranking
@@ -105,14 +106,13 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         .find(|c| c.large_enough)
         .filter(|c| named(c, cost0, MIN_IMPROVEMENT))
     {
-        reason = format!(
-            "{} removes {:.0} % of the nominal cost ({:.0} of {:.0}; noise floor {:.0})",
-            best.effect,
-            100.0 * best.improvement,
-            cost0 - best.cost,
-            cost0,
-            floor
-        );
+        findings.push(Finding::Named {
+            effect: best.effect.clone(),
+            improvement: best.improvement,
+            nominal: cost0,
+            left: best.cost,
+            floor,
+        });
         let mut chosen = best.clone();
         // A second effect: every other candidate fitted on top of the best one, jointly (the new
         // effect first, so the scan runs over its leading parameter). And, when the best leaves the
@@ -268,106 +268,77 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             if let Some((c_lag, lag_s)) = on_lag
                 && lag_explains
             {
-                let share = if pair.cost < c_lag {
-                    format!(
-                        "removes only {:.0} % of that",
-                        100.0 * (c_lag - pair.cost) / c_lag.max(1e-300)
-                    )
-                } else {
-                    format!("leaves more ({:.0})", pair.cost)
-                };
-                reason.push_str(&format!(
-                    "; the pair {} removes {:.0} % of what {} leaves, but {} with the log's \
-                     stamps {:.1} ms late (fitted) leaves {:.0}, and the pair {share}: not named",
-                    pair.effect,
-                    100.0 * gain / best.cost,
-                    best.effect,
-                    best.effect,
-                    1e3 * lag_s,
-                    c_lag,
-                ));
+                findings.push(Finding::PairLagExplains {
+                    pair: pair.effect.clone(),
+                    gain_pct: 100.0 * gain / best.cost,
+                    best: best.effect.clone(),
+                    lag_ms: 1e3 * lag_s,
+                    with_lag: c_lag,
+                    pair_cost: pair.cost,
+                });
             } else if let Some((small, c_small)) = undersized {
-                reason.push_str(&format!(
-                    "; the pair {} removes {:.0} % of what {} leaves, but {} leaves less ({:.0}) \
-                     with its second effect below its minimum size: not named",
-                    pair.effect,
-                    100.0 * gain / best.cost,
-                    best.effect,
-                    small,
-                    c_small
-                ));
+                findings.push(Finding::PairSecondUndersized {
+                    pair: pair.effect.clone(),
+                    gain_pct: 100.0 * gain / best.cost,
+                    best: best.effect.clone(),
+                    small: small.to_string(),
+                    small_cost: *c_small,
+                });
             } else if let Some((c_single, c_pair, _)) = on_refit
                 && !removes_beyond(c_single, c_pair)
             {
-                reason.push_str(&format!(
-                    "; the pair {} removes {:.0} % of what {} leaves, but with Table 4 refitted \
-                     within x{:.1} beside {} it removes only {:.0} % ({:.0} of {:.0}): not named",
-                    pair.effect,
-                    100.0 * gain / best.cost,
-                    best.effect,
-                    PARAMETER_TOLERANCE,
-                    best.effect,
-                    100.0 * (c_single - c_pair) / c_single.max(1e-300),
-                    c_single - c_pair,
-                    c_single
-                ));
+                findings.push(Finding::PairNotBeyondRefit {
+                    pair: pair.effect.clone(),
+                    gain_pct: 100.0 * gain / best.cost,
+                    best: best.effect.clone(),
+                    tolerance: PARAMETER_TOLERANCE,
+                    single: c_single,
+                    with_pair: c_pair,
+                });
             } else if pair_removes {
                 // The pair may have grown from the runner-up and hold no part of the best.
                 let added = pair.kinds.iter().find(|k| **k != best.kinds[0]);
                 if pair.kinds.contains(&best.kinds[0])
                     && let Some(added) = added
                 {
-                    reason.push_str(&format!(
-                        "; adding {} removes {:.0} % of what was left",
-                        added.name(),
-                        100.0 * gain / best.cost
-                    ));
+                    findings.push(Finding::Added {
+                        added: added.name().to_string(),
+                        gain_pct: 100.0 * gain / best.cost,
+                    });
                 } else {
-                    reason.push_str(&format!(
-                        "; the pair {} removes {:.0} % of what {} leaves",
-                        pair.effect,
-                        100.0 * gain / best.cost,
-                        best.effect
-                    ));
+                    findings.push(Finding::PairNamed {
+                        pair: pair.effect.clone(),
+                        gain_pct: 100.0 * gain / best.cost,
+                        best: best.effect.clone(),
+                    });
                 }
                 chosen = pair.clone();
             } else if gain <= 0.0 {
-                reason.push_str(&format!(
-                    "; the best pair {} leaves more than {} alone ({:.0})",
-                    pair.effect, best.effect, pair.cost
-                ));
+                findings.push(Finding::PairLeavesMore {
+                    pair: pair.effect.clone(),
+                    best: best.effect.clone(),
+                    pair_cost: pair.cost,
+                });
             } else {
-                reason.push_str(&format!(
-                    "; the best pair {} removes only {:.0} % of what was left ({:.0})",
-                    pair.effect,
-                    100.0 * gain / best.cost,
-                    gain
-                ));
+                findings.push(Finding::PairRemovesTooLittle {
+                    pair: pair.effect.clone(),
+                    gain_pct: 100.0 * gain / best.cost,
+                    gain,
+                });
             }
             ranking.push(pair);
         }
         verdict_candidate = Some(chosen);
     } else {
-        reason = format!(
-            "the nominal cost is {:.2} times the noise floor ({:.0} of {:.0}); no effect of at \
-             least its minimum size removes enough of it (best: {})",
-            cost0 / floor.max(1e-300),
-            cost0,
+        findings.push(Finding::NothingNamed {
+            nominal: cost0,
             floor,
-            ranking
-                .first()
-                .map(|c| format!(
-                    "{} {:.0} %{}",
-                    c.effect,
-                    100.0 * c.improvement,
-                    if c.large_enough {
-                        ""
-                    } else {
-                        ", below its minimum size"
-                    }
-                ))
-                .unwrap_or_default()
-        );
+            best: ranking.first().map(|c| BestSingle {
+                effect: c.effect.clone(),
+                improvement: c.improvement,
+                large_enough: c.large_enough,
+            }),
+        });
     }
     progress.finish();
     // Parameters: Table 4 refitted on the fitting window, scored by the same likelihood. Only
@@ -458,13 +429,12 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                 .is_none_or(|(_, c_tol)| removes_beyond(*c_tol, *c))
     });
     if !within_tolerance && let (Some((id, _, c)), Some((_, c_tol))) = (&parameters, &tolerant) {
-        reason.push_str(&format!(
-            "; Table 4 refitted freely moves {} and leaves {:.0}, held within x{:.1} {:.0}",
-            identify::outside_factor(rig, id, PARAMETER_TOLERANCE).join(", "),
-            c,
-            PARAMETER_TOLERANCE,
-            c_tol
-        ));
+        findings.push(Finding::RefitFree {
+            moved: identify::outside_factor(rig, id, PARAMETER_TOLERANCE),
+            left: *c,
+            tolerance: PARAMETER_TOLERANCE,
+            within: *c_tol,
+        });
     }
     // A car within the table's tolerance that explains the log as well as the effect verdict
     // does means the effect was standing in for it: the effect again, on top of that refit,
@@ -497,24 +467,20 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             && gain > MIN_SHARE_OF_REDUCIBLE * (c - floor).max(0.0)
             && gain > MIN_IMPROVEMENT * c
         {
-            reason.push_str(&format!(
-                "; Table 4 refitted within x{:.1} leaves {:.0}, and {} on top of it removes {:.0} % of that",
-                PARAMETER_TOLERANCE,
-                c,
-                v.effect,
-                100.0 * gain / c.max(1e-300)
-            ));
+            findings.push(Finding::EffectOnRefit {
+                tolerance: PARAMETER_TOLERANCE,
+                refit: *c,
+                effect: v.effect.clone(),
+                gain_pct: 100.0 * gain / c.max(1e-300),
+            });
         } else {
-            reason.push_str(&format!(
-                "; but Table 4 refitted within x{:.1} leaves {:.0}, no more than {} ({:.0}), \
-                 and {} on top of it removes only {:.0} % of that: not named",
-                PARAMETER_TOLERANCE,
-                c,
-                v.effect,
-                v.cost,
-                v.effect,
-                100.0 * gain / c.max(1e-300)
-            ));
+            findings.push(Finding::EffectNotBeyondRefit {
+                tolerance: PARAMETER_TOLERANCE,
+                refit: *c,
+                effect: v.effect.clone(),
+                effect_cost: v.cost,
+                gain_pct: 100.0 * gain / c.max(1e-300),
+            });
             verdict_candidate = None;
         }
     }
@@ -568,17 +534,14 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                 && gain > MIN_IMPROVEMENT * cost0
                 && c < PARAMETERS_COST_SHARE * cost0
                 && removes_beyond(c_near, c);
-            reason.push_str(&format!(
-                "; Table 4 with the log's stamps late (fitted), from starts far off the table \
-                 (j_w x0.4 and x2.5, beta_sw x2.5), moves {} with the stamps {:.1} ms late and \
-                 leaves {:.0}; held within x{:.1} it leaves {:.0}{}",
-                identify::outside_factor(rig, &id, PARAMETER_TOLERANCE).join(", "),
-                1e3 * id.log_lag_s,
-                c,
-                PARAMETER_TOLERANCE,
-                c_near,
-                if wins { "" } else { ": not named" }
-            ));
+            findings.push(Finding::FarStarts {
+                moved: identify::outside_factor(rig, &id, PARAMETER_TOLERANCE),
+                lag_ms: 1e3 * id.log_lag_s,
+                left: c,
+                tolerance: PARAMETER_TOLERANCE,
+                within: c_near,
+                wins,
+            });
             if wins {
                 // Its simulations are counted with `parameters`, the replaced refit's here.
                 refit_simulations -= id.simulations;
@@ -590,35 +553,28 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         }
     }
     if let Some((_, _, c)) = &parameters {
-        reason.push_str(&format!(
-            "; a refit of Table 4 leaves {:.0} ({:.0} % of the nominal cost{})",
-            c,
-            100.0 * c / cost0.max(1e-300),
-            if parameters_win {
-                ", better than any effect"
-            } else {
-                ""
-            }
-        ));
+        findings.push(Finding::RefitLeaves {
+            left: *c,
+            share_pct: 100.0 * c / cost0.max(1e-300),
+            better_than_effects: parameters_win,
+        });
     }
     let base_validation = fit_on_validation(&nominal);
     // An honest verdict: an explanation that leaves the log, or the validation log, further
     // from the car than the nominal model (eq. 11) is no explanation, whatever the likelihood
     // says (a likelihood weighs each signal by its own noise; the GoF is what a team reads).
-    let worse_than_nominal = |after: &Fit, validation: Option<&Fit>| -> Option<String> {
+    let worse_than_nominal = |after: &Fit, validation: Option<&Fit>| -> Option<Shortfall> {
         if after.gof < fit0.gof {
-            return Some(format!(
-                "leaves the GoF at {:.1} %, below the nominal {:.1} %",
-                100.0 * after.gof,
-                100.0 * fit0.gof
-            ));
+            return Some(Shortfall::Log {
+                after: after.gof,
+                nominal: fit0.gof,
+            });
         }
         match (validation, base_validation.as_ref()) {
-            (Some(v), Some(b)) if v.gof < b.gof => Some(format!(
-                "leaves the validation GoF at {:.1} %, below the nominal {:.1} %",
-                100.0 * v.gof,
-                100.0 * b.gof
-            )),
+            (Some(v), Some(b)) if v.gof < b.gof => Some(Shortfall::Validation {
+                after: v.gof,
+                nominal: b.gof,
+            }),
             _ => None,
         }
     };
@@ -634,9 +590,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                 // Nor the effect it beat: the refit explains the log better by the likelihood,
                 // so that effect is not what is left (a car off the table the model does not
                 // reach stands behind both).
-                reason.push_str(&format!(
-                    "; the refit {why}: not named, nor the effect it explains better"
-                ));
+                findings.push(Finding::RefitWorse(why));
                 verdict_candidate = None;
                 parameters_win = false;
                 refit_simulations += 1 + usize::from(fit_validation.is_some());
@@ -657,7 +611,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             gof_validation: fit_validation.map(|f| f.gof),
             fit_after,
             fit_validation,
-            reason,
+            reason: finding::reason(&findings),
         };
         return Diagnosis {
             rig: rig.name.clone(),
@@ -681,7 +635,10 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     if let Some(c) = &verdict_candidate
         && let Some(why) = worse_than_nominal(&c.fit, c.fit_validation.as_ref())
     {
-        reason.push_str(&format!("; {} {why}: not named", c.effect));
+        findings.push(Finding::EffectWorse {
+            effect: c.effect.clone(),
+            why,
+        });
         verdict_candidate = None;
     }
     let parameter_simulations = parameters.as_ref().map_or(0, |(id, _, _)| id.simulations);
@@ -692,10 +649,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         && left > UNEXPLAINED_RATIO * floor
         && fit0.gof < UNEXPLAINED_BELOW_GOF;
     if unexplained {
-        reason.push_str(
-            "; try `--refit-linear` (Table 4 off), other candidate effects (`--effects`), or \
-             check the log's columns and units",
-        );
+        findings.push(Finding::TryElse);
     }
     let verdict = match &verdict_candidate {
         Some(c) => Verdict {
@@ -710,7 +664,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             gof_validation: c.gof_validation,
             fit_after: c.fit,
             fit_validation: c.fit_validation,
-            reason,
+            reason: finding::reason(&findings),
         },
         None => Verdict {
             kind: if unexplained {
@@ -727,7 +681,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             gof_validation: base_validation.map(|f| f.gof),
             fit_after: fit0,
             fit_validation: base_validation,
-            reason,
+            reason: finding::reason(&findings),
         },
     };
     let after_fx = verdict_candidate

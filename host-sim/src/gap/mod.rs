@@ -22,6 +22,7 @@ mod diagnose;
 mod diagnosis;
 pub mod drive;
 mod effects;
+pub mod finding;
 pub mod fit;
 pub mod generator;
 pub mod identify;

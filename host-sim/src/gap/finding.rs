@@ -1,0 +1,418 @@
+//! What the diagnosis found on its way to the verdict, one [`Finding`] per step that decided
+//! something, in the order the steps ran. The verdict's `reason` is their text joined by `; `:
+//! the numbers live here, the sentences are made from them in one place.
+
+use std::fmt;
+
+/// Why an explanation is refused although the likelihood prefers it: eq. 11's GoF, what a team
+/// reads, is below the nominal model's.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Shortfall {
+    /// On the log itself: the GoF with the explanation and without, as fractions.
+    Log { after: f64, nominal: f64 },
+    /// On the validation log.
+    Validation { after: f64, nominal: f64 },
+}
+
+impl fmt::Display for Shortfall {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Shortfall::Log { after, nominal } => write!(
+                f,
+                "leaves the GoF at {:.1} %, below the nominal {:.1} %",
+                100.0 * after,
+                100.0 * nominal
+            ),
+            Shortfall::Validation { after, nominal } => write!(
+                f,
+                "leaves the validation GoF at {:.1} %, below the nominal {:.1} %",
+                100.0 * after,
+                100.0 * nominal
+            ),
+        }
+    }
+}
+
+/// The best single candidate when nothing was named: its name, the share of the nominal cost
+/// it removes, and whether it reached its minimum size.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BestSingle {
+    pub effect: String,
+    pub improvement: f64,
+    pub large_enough: bool,
+}
+
+/// One step's finding. Costs are the fits' (each residual sample over its noise, summed);
+/// `share` and `gain_pct` fields are per cent of what the text says.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Finding {
+    /// The best single effect removes enough to be named.
+    Named {
+        effect: String,
+        /// Share of the nominal cost it removes, a fraction.
+        improvement: f64,
+        nominal: f64,
+        left: f64,
+        floor: f64,
+    },
+    /// No single effect of its minimum size removes enough.
+    NothingNamed {
+        nominal: f64,
+        floor: f64,
+        best: Option<BestSingle>,
+    },
+    /// The best pair, refused: the best single with the log's stamping lag fitted beside it
+    /// explains as much.
+    PairLagExplains {
+        pair: String,
+        gain_pct: f64,
+        best: String,
+        lag_ms: f64,
+        with_lag: f64,
+        pair_cost: f64,
+    },
+    /// The best pair, refused: a pair whose second effect is below its minimum size leaves less.
+    PairSecondUndersized {
+        pair: String,
+        gain_pct: f64,
+        best: String,
+        small: String,
+        small_cost: f64,
+    },
+    /// The best pair, refused: with Table 4 refitted within its tolerance beside the best
+    /// single, the pair removes too little.
+    PairNotBeyondRefit {
+        pair: String,
+        gain_pct: f64,
+        best: String,
+        tolerance: f64,
+        single: f64,
+        with_pair: f64,
+    },
+    /// A second effect added to the best one.
+    Added { added: String, gain_pct: f64 },
+    /// A pair named that grew from the runner-up.
+    PairNamed {
+        pair: String,
+        gain_pct: f64,
+        best: String,
+    },
+    /// The best pair leaves more than the best single alone.
+    PairLeavesMore {
+        pair: String,
+        best: String,
+        pair_cost: f64,
+    },
+    /// The best pair removes too little of what the best single left.
+    PairRemovesTooLittle {
+        pair: String,
+        gain_pct: f64,
+        gain: f64,
+    },
+    /// Table 4 refitted freely left the tolerance; what it moved and left, and the bounded refit.
+    RefitFree {
+        moved: Vec<String>,
+        left: f64,
+        tolerance: f64,
+        within: f64,
+    },
+    /// The named effect still removes enough on top of Table 4 refitted within its tolerance.
+    EffectOnRefit {
+        tolerance: f64,
+        refit: f64,
+        effect: String,
+        gain_pct: f64,
+    },
+    /// The named effect does not: it stood in for a car a few per cent off the table.
+    EffectNotBeyondRefit {
+        tolerance: f64,
+        refit: f64,
+        effect: String,
+        effect_cost: f64,
+        gain_pct: f64,
+    },
+    /// Table 4 refitted with the log's stamping lag, from starts far off the table.
+    FarStarts {
+        moved: Vec<String>,
+        lag_ms: f64,
+        left: f64,
+        tolerance: f64,
+        within: f64,
+        wins: bool,
+    },
+    /// What the kept Table 4 refit leaves.
+    RefitLeaves {
+        left: f64,
+        share_pct: f64,
+        better_than_effects: bool,
+    },
+    /// The refit, refused by the GoF, and with it the effect it explained better.
+    RefitWorse(Shortfall),
+    /// The named effect, refused by the GoF.
+    EffectWorse { effect: String, why: Shortfall },
+    /// Nothing explains a log far above its floor: what to try.
+    TryElse,
+}
+
+impl fmt::Display for Finding {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Finding::Named {
+                effect,
+                improvement,
+                nominal,
+                left,
+                floor,
+            } => write!(
+                f,
+                "{} removes {:.0} % of the nominal cost ({:.0} of {:.0}; noise floor {:.0})",
+                effect,
+                100.0 * improvement,
+                nominal - left,
+                nominal,
+                floor
+            ),
+            Finding::NothingNamed {
+                nominal,
+                floor,
+                best,
+            } => {
+                write!(
+                    f,
+                    "the nominal cost is {:.2} times the noise floor ({:.0} of {:.0}); no effect \
+                     of at least its minimum size removes enough of it (best: ",
+                    nominal / floor.max(1e-300),
+                    nominal,
+                    floor,
+                )?;
+                if let Some(b) = best {
+                    write!(
+                        f,
+                        "{} {:.0} %{}",
+                        b.effect,
+                        100.0 * b.improvement,
+                        if b.large_enough {
+                            ""
+                        } else {
+                            ", below its minimum size"
+                        }
+                    )?;
+                }
+                write!(f, ")")
+            }
+            Finding::PairLagExplains {
+                pair,
+                gain_pct,
+                best,
+                lag_ms,
+                with_lag,
+                pair_cost,
+            } => {
+                write!(
+                    f,
+                    "the pair {pair} removes {gain_pct:.0} % of what {best} leaves, but {best} \
+                     with the log's stamps {lag_ms:.1} ms late (fitted) leaves {with_lag:.0}, \
+                     and the pair "
+                )?;
+                if pair_cost < with_lag {
+                    write!(
+                        f,
+                        "removes only {:.0} % of that",
+                        100.0 * (with_lag - pair_cost) / with_lag.max(1e-300)
+                    )?;
+                } else {
+                    write!(f, "leaves more ({pair_cost:.0})")?;
+                }
+                write!(f, ": not named")
+            }
+            Finding::PairSecondUndersized {
+                pair,
+                gain_pct,
+                best,
+                small,
+                small_cost,
+            } => write!(
+                f,
+                "the pair {pair} removes {gain_pct:.0} % of what {best} leaves, but {small} \
+                 leaves less ({small_cost:.0}) with its second effect below its minimum size: \
+                 not named"
+            ),
+            Finding::PairNotBeyondRefit {
+                pair,
+                gain_pct,
+                best,
+                tolerance,
+                single,
+                with_pair,
+            } => write!(
+                f,
+                "the pair {pair} removes {gain_pct:.0} % of what {best} leaves, but with Table 4 \
+                 refitted within x{tolerance:.1} beside {best} it removes only {:.0} % ({:.0} of \
+                 {single:.0}): not named",
+                100.0 * (single - with_pair) / single.max(1e-300),
+                single - with_pair,
+            ),
+            Finding::Added { added, gain_pct } => {
+                write!(f, "adding {added} removes {gain_pct:.0} % of what was left")
+            }
+            Finding::PairNamed {
+                pair,
+                gain_pct,
+                best,
+            } => write!(
+                f,
+                "the pair {pair} removes {gain_pct:.0} % of what {best} leaves"
+            ),
+            Finding::PairLeavesMore {
+                pair,
+                best,
+                pair_cost,
+            } => write!(
+                f,
+                "the best pair {pair} leaves more than {best} alone ({pair_cost:.0})"
+            ),
+            Finding::PairRemovesTooLittle {
+                pair,
+                gain_pct,
+                gain,
+            } => write!(
+                f,
+                "the best pair {pair} removes only {gain_pct:.0} % of what was left ({gain:.0})"
+            ),
+            Finding::RefitFree {
+                moved,
+                left,
+                tolerance,
+                within,
+            } => write!(
+                f,
+                "Table 4 refitted freely moves {} and leaves {left:.0}, held within \
+                 x{tolerance:.1} {within:.0}",
+                moved.join(", ")
+            ),
+            Finding::EffectOnRefit {
+                tolerance,
+                refit,
+                effect,
+                gain_pct,
+            } => write!(
+                f,
+                "Table 4 refitted within x{tolerance:.1} leaves {refit:.0}, and {effect} on top \
+                 of it removes {gain_pct:.0} % of that"
+            ),
+            Finding::EffectNotBeyondRefit {
+                tolerance,
+                refit,
+                effect,
+                effect_cost,
+                gain_pct,
+            } => write!(
+                f,
+                "but Table 4 refitted within x{tolerance:.1} leaves {refit:.0}, no more than \
+                 {effect} ({effect_cost:.0}), and {effect} on top of it removes only \
+                 {gain_pct:.0} % of that: not named"
+            ),
+            Finding::FarStarts {
+                moved,
+                lag_ms,
+                left,
+                tolerance,
+                within,
+                wins,
+            } => write!(
+                f,
+                "Table 4 with the log's stamps late (fitted), from starts far off the table \
+                 (j_w x0.4 and x2.5, beta_sw x2.5), moves {} with the stamps {lag_ms:.1} ms late \
+                 and leaves {left:.0}; held within x{tolerance:.1} it leaves {within:.0}{}",
+                moved.join(", "),
+                if *wins { "" } else { ": not named" }
+            ),
+            Finding::RefitLeaves {
+                left,
+                share_pct,
+                better_than_effects,
+            } => write!(
+                f,
+                "a refit of Table 4 leaves {left:.0} ({share_pct:.0} % of the nominal cost{})",
+                if *better_than_effects {
+                    ", better than any effect"
+                } else {
+                    ""
+                }
+            ),
+            Finding::RefitWorse(why) => {
+                write!(
+                    f,
+                    "the refit {why}: not named, nor the effect it explains better"
+                )
+            }
+            Finding::EffectWorse { effect, why } => write!(f, "{effect} {why}: not named"),
+            Finding::TryElse => write!(
+                f,
+                "try `--refit-linear` (Table 4 off), other candidate effects (`--effects`), or \
+                 check the log's columns and units"
+            ),
+        }
+    }
+}
+
+/// The verdict's reason: the findings' text, in order, joined by `; `.
+pub fn reason(findings: &[Finding]) -> String {
+    findings
+        .iter()
+        .map(|f| f.to_string())
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_reason_joins_each_finding_in_order() {
+        let findings = [
+            Finding::Named {
+                effect: "backlash".into(),
+                improvement: 0.73,
+                nominal: 1000.0,
+                left: 270.0,
+                floor: 24.0,
+            },
+            Finding::EffectWorse {
+                effect: "backlash".into(),
+                why: Shortfall::Validation {
+                    after: 0.801,
+                    nominal: 0.812,
+                },
+            },
+        ];
+        assert_eq!(
+            reason(&findings),
+            "backlash removes 73 % of the nominal cost (730 of 1000; noise floor 24); backlash \
+             leaves the validation GoF at 80.1 %, below the nominal 81.2 %: not named"
+        );
+    }
+
+    #[test]
+    fn a_lag_that_explains_the_pair_says_whether_the_pair_still_removes_some() {
+        let lag = |pair_cost| Finding::PairLagExplains {
+            pair: "delay+tire_ground".into(),
+            gain_pct: 40.0,
+            best: "delay".into(),
+            lag_ms: 2.5,
+            with_lag: 100.0,
+            pair_cost,
+        };
+        assert!(
+            lag(90.0)
+                .to_string()
+                .contains("removes only 10 % of that: not named")
+        );
+        assert!(
+            lag(120.0)
+                .to_string()
+                .contains("leaves more (120): not named")
+        );
+    }
+}
