@@ -598,6 +598,30 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             None => parameters_checked = Some((fit_after, fit_validation)),
         }
     }
+    // The report, whichever way the verdict went: `simulations` are those beyond the
+    // candidates' fits (which tick `progress`) and the three runs every log gets (the nominal
+    // model, its repeatability, the verdict's `where`).
+    let diagnosis = |verdict: Verdict,
+                     where_: locate::Where,
+                     parameters: Option<identify::Identified>,
+                     simulations: usize| Diagnosis {
+        rig: rig.name.clone(),
+        duration_s: rec.duration_s(),
+        baseline_gof: fit0.gof,
+        baseline: fit0,
+        baseline_validation: base_validation,
+        baseline_cost: cost0,
+        noise_floor_cost: floor,
+        noise: scorer.noise(),
+        repeatability: repeat,
+        verdict,
+        ranking,
+        where_,
+        refit_linear: None,
+        parameters,
+        simulations: progress.done() + simulations + 3,
+        elapsed_s: started.elapsed().as_secs_f64(),
+    };
     if parameters_win
         && let Some((id, refit, _)) = &parameters
         && let Some((fit_after, fit_validation)) = parameters_checked
@@ -613,24 +637,12 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             fit_validation,
             reason: finding::reason(&findings),
         };
-        return Diagnosis {
-            rig: rig.name.clone(),
-            duration_s: rec.duration_s(),
-            baseline_gof: fit0.gof,
-            baseline: fit0,
-            baseline_validation: fit_on_validation(&nominal),
-            baseline_cost: cost0,
-            noise_floor_cost: floor,
-            noise: scorer.noise(),
-            repeatability: repeat,
+        return diagnosis(
             verdict,
-            ranking,
             where_,
-            refit_linear: None,
-            parameters: Some(id.clone()),
-            simulations: progress.done() + refit_simulations + id.simulations + 3,
-            elapsed_s: started.elapsed().as_secs_f64(),
-        };
+            Some(id.clone()),
+            refit_simulations + id.simulations,
+        );
     }
     if let Some(c) = &verdict_candidate
         && let Some(why) = worse_than_nominal(&c.fit, c.fit_validation.as_ref())
@@ -689,22 +701,10 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         .map_or(nominal, |c| c.effects_on(rig));
     let sim_after = simulate(rig, rec, &after_fx);
     let where_ = locate::locate(rig, rec, &scorer, &sim0, &sim_after);
-    Diagnosis {
-        rig: rig.name.clone(),
-        duration_s: rec.duration_s(),
-        baseline_gof: fit0.gof,
-        baseline: fit0,
-        baseline_validation: base_validation,
-        baseline_cost: cost0,
-        noise_floor_cost: floor,
-        noise: scorer.noise(),
-        repeatability: repeat,
+    diagnosis(
         verdict,
-        ranking,
         where_,
-        refit_linear: None,
-        parameters: parameters.map(|(id, _, _)| id),
-        simulations: progress.done() + refit_simulations + parameter_simulations + 3,
-        elapsed_s: started.elapsed().as_secs_f64(),
-    }
+        parameters.map(|(id, _, _)| id),
+        refit_simulations + parameter_simulations,
+    )
 }
