@@ -77,6 +77,10 @@ pub struct RunConfig {
     pub logged_angles: LoggedAngles,
     /// Effects added to the plant (`--plant-effects`); none runs the linear plant.
     pub effects: PlantEffects,
+    /// Position-loop ticks (0.5 ms) into each reference period at which its sample is pushed:
+    /// 0 at the period's start, as the vehicle's frames reach an ECU on time; a frame that
+    /// arrives late within the period is taken when it arrives. At most a period less a tick.
+    pub reference_push_tick: u32,
 }
 
 /// What the log's `sw_deg` and `motor_rad` columns hold.
@@ -105,6 +109,7 @@ impl Default for RunConfig {
             logged_angles: LoggedAngles::Sensors,
             current_guard: true,
             effects: PlantEffects::NONE,
+            reference_push_tick: 0,
         }
     }
 }
@@ -282,13 +287,18 @@ pub fn run_on<A: Actuator>(
     // frame and the EPOS4's averaged current report), not an instant of the PWM chatter.
     let (mut current_sum, mut current_n) = (0.0f64, 0u32);
 
+    let push_tick = cfg
+        .reference_push_tick
+        .min(POSITION_TICKS_PER_REFERENCE - 1);
     for &sample in reference_deg {
-        let pushed = cascade.push_reference(SteeringDeg(sample as f32));
-        tap.reference(sample as f32, pushed);
-        if pushed.is_err() {
-            summary.rejected_references += 1;
-        }
-        for _ in 0..POSITION_TICKS_PER_REFERENCE {
+        for j in 0..POSITION_TICKS_PER_REFERENCE {
+            if j == push_tick {
+                let pushed = cascade.push_reference(SteeringDeg(sample as f32));
+                tap.reference(sample as f32, pushed);
+                if pushed.is_err() {
+                    summary.rejected_references += 1;
+                }
+            }
             let hall = hall_from_motor(plant.motor_rad());
             let pos = match &mut cascade {
                 SteeringController::Paper(c) if cfg.hall_feedback => {

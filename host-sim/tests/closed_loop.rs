@@ -238,3 +238,31 @@ fn the_current_guard_keeps_the_peak_within_the_limit_and_can_be_switched_off() {
         free.max_current_a
     );
 }
+
+/// A reference pushed `reference_push_tick` position ticks into its period (a frame that
+/// reaches the ECU late within the period) acts that much later: the response to a step is
+/// the on-time one moved by 5 ms (ten 0.5 ms ticks), row for row on a 2 kHz log, and the
+/// first row of the period still holds the step's old current.
+#[test]
+fn a_reference_pushed_late_in_its_period_acts_that_much_later() {
+    let mut reference = vec![0.0; 20];
+    reference.extend(std::iter::repeat_n(2.0, 30));
+    let cfg = |push| RunConfig {
+        log_rate_hz: 2000,
+        reference_push_tick: push,
+        ..paper()
+    };
+    let on_time = run(&reference, &cfg(0)).unwrap().log;
+    let late = run(&reference, &cfg(10)).unwrap().log;
+    // The step is pushed at row 400 (20 periods of 20 rows) on time, at row 410 late.
+    let first_move = |log: &Log| log.current_a.iter().position(|i| i.abs() > 0.5).unwrap();
+    assert_eq!(first_move(&late), first_move(&on_time) + 10);
+    for k in 410..900 {
+        assert!(
+            (late.current_a[k] - on_time.current_a[k - 10]).abs() < 1e-9,
+            "row {k}: {} A late against {} A on time",
+            late.current_a[k],
+            on_time.current_a[k - 10]
+        );
+    }
+}

@@ -98,7 +98,7 @@ fn the_logs_stamping_lag_is_fitted_beside_table_4() {
         scenario: "chirp, stamps 2.5 ms late".into(),
         hidden: vec![],
         effects: Effects {
-            delay_s: 2.5e-3,
+            log_lag_s: 2.5e-3,
             ..Effects::nominal()
         },
         reference: chirp(8.0, 5.0, 10.0),

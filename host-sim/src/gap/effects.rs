@@ -146,6 +146,9 @@ impl EffectKind {
                     2e-4,
                 ),
             ],
+            // On an EPOS4 car the delay is the latch's latency beyond the nominal SYNC phase
+            // (`model::simulate_epos4`): a log cannot tell a late frame from a SYNC grid that
+            // sits later, so the figure is the delay to within that phase, under a period.
             (EffectKind::Delay, _) => vec![spec(
                 "delay_ms",
                 0.0,

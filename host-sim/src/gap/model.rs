@@ -20,7 +20,9 @@ use steering_ecu::canopen::epos4::PositionScale;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::ecu_mode::{ColumnShaper, EcuTuning};
 use steering_ecu::gearing::Gearing;
-use steering_ecu::paper_mode::{CURRENT_LOOP_HZ, REFERENCE_HZ};
+use steering_ecu::paper_mode::{
+    CURRENT_LOOP_HZ, POSITION_LOOP_HZ, POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ,
+};
 use steering_ecu::sensors::ColumnEncoder;
 use steering_ecu::sensors::HALL_COUNTS_PER_REV;
 use steering_ecu::units::{SteeringDeg, SteeringRad};
@@ -39,10 +41,16 @@ pub struct Effects {
     pub stribeck_velocity: f64,
     /// Viscous coefficient replacing the nominal one (EMPS only, N s/m; NaN = nominal).
     pub viscous_override: f64,
-    /// Transport delay of the reference, s. A delay of every measured signal alike is the
-    /// same thing to a log of a time-invariant loop (each logged signal is the undelayed one
-    /// shifted by it), so this one parameter stands for both places.
+    /// Transport delay of the reference, s: its frames reach the ECU this much late, and the
+    /// ECU takes each when it arrives (paper rig: whole periods, then the tick it lands on).
+    /// A delay of every measured signal alike is the same thing to a log of a time-invariant
+    /// loop (each logged signal is the undelayed one shifted by it), so this one parameter
+    /// stands for both places.
     pub delay_s: f64,
+    /// The log's stamps lag the instants its rows were sampled at by this much, s: every
+    /// logged signal trails the reference by it, taken as the reference later by as much,
+    /// linearly interpolated between its samples (a clock's offset, no frame arriving late).
+    pub log_lag_s: f64,
     /// The measured effort (current) reaches the log this much later than the angles, s: a
     /// drive's averaged current reported once per SYNC and forwarded a period later.
     pub effort_delay_s: f64,
@@ -74,7 +82,7 @@ impl Effects {
     /// `lag_s`: the model takes that as a reference later by as much (every logged signal
     /// trails it), on top of any delay the effects hold.
     pub fn with_log_lag(mut self, lag_s: f64) -> Effects {
-        self.delay_s += lag_s;
+        self.log_lag_s += lag_s;
         self
     }
 }
@@ -87,6 +95,13 @@ pub struct SimOut {
     /// Motor angle in output units through the rigid gearing (paper rig), for the segment
     /// analysis; empty for rigs without it.
     pub motor: Vec<f64>,
+}
+
+/// The reference `rows` samples later, the first sample held before it.
+fn held_later(reference: &[f64], rows: usize) -> Vec<f64> {
+    (0..reference.len())
+        .map(|k| reference[k.saturating_sub(rows)])
+        .collect()
 }
 
 /// The reference delayed by `delay_s`, linearly interpolated on its own grid of step `dt`.
@@ -135,8 +150,20 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
         return simulate_epos4(m, rec, fx);
     }
     let p = m.plant;
-    let reference = delayed(&rec.reference, fx.delay_s, 1.0 / REFERENCE_HZ as f64);
+    // A reference late by `delay_s` reaches the ECU that much into a later period, and the ECU
+    // takes it when it arrives: whole periods of the reference, then the position-loop tick
+    // it is pushed at (a held reference whose steps come late, never a blend of two samples).
+    let ticks = (fx.delay_s.max(0.0) * POSITION_LOOP_HZ as f64).round();
+    let ticks = if ticks.is_finite() { ticks as u64 } else { 0 };
+    let per_period = u64::from(POSITION_TICKS_PER_REFERENCE);
+    let whole = usize::try_from(ticks / per_period).unwrap_or(usize::MAX);
+    let reference = delayed(
+        &held_later(&rec.reference, whole),
+        fx.log_lag_s,
+        1.0 / REFERENCE_HZ as f64,
+    );
     let cfg = RunConfig {
+        reference_push_tick: (ticks % per_period) as u32,
         controller: m.controller,
         plant: p,
         gains: m.gains,
@@ -165,6 +192,29 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
     }
 }
 
+/// Where an EPOS4 car latches each reference: `whole_periods` rows after its own, at
+/// `sync_tick` (1..=ticks per period) current-loop ticks into that period.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Epos4Latch {
+    whole_periods: usize,
+    sync_tick: u64,
+}
+
+impl Epos4Latch {
+    /// The latch `latency_s` after the push, on the grid of `dt` ticks, at least one tick.
+    fn new(latency_s: f64, dt: f64, ticks_per_period: u64) -> Epos4Latch {
+        let ticks = (latency_s / dt).round();
+        // `as` saturates a NaN to 0 and a huge value to u64::MAX; the max keeps one tick.
+        let ticks = (if ticks.is_finite() { ticks as u64 } else { 1 }).max(1);
+        let tpp = ticks_per_period.max(1);
+        let whole = (ticks - 1) / tpp;
+        Epos4Latch {
+            whole_periods: usize::try_from(whole).unwrap_or(usize::MAX),
+            sync_tick: ticks - whole * tpp,
+        }
+    }
+}
+
 /// The paper's actuator behind an EPOS4 in CSP, from `rec.reference`: the chain the firmware's
 /// EPOS4 build runs and `steer-can convert` logs, on the drive's own loop ([`DriveLoop`], the
 /// one the simulated EPOS4 runs).
@@ -174,14 +224,32 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
 ///                       shaper on the newest column sample)--> CSP target, whole increments
 ///  SYNC, `sync_after_push_s` later: the drive latches it (interpolated over one period) and
 ///                       samples its position (increments) and current for TPDO1 / TPDO2
+///                       (a delay moves the latch: whole periods later, then the SYNC's tick)
 ///  row k: column at push + 10 ms, motor angle interpolated between the SYNC samples at
 ///         push + 10 ms, current interpolated between them at push + 5 ms (logbuild's reading)
 /// ```
 pub fn simulate_epos4(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
     let p = m.plant;
     let period = 1.0 / REFERENCE_HZ as f64;
-    let reference = delayed(&rec.reference, fx.delay_s, period);
     let dt = 1.0 / CURRENT_LOOP_HZ as f64;
+    let ticks_per_period = (period / dt).round() as u64;
+    // A reference that reaches the ECU late is latched at the first SYNC after it arrives:
+    // on an EPOS4 car a delay is a later latch, whole periods of the reference plus a SYNC
+    // phase moved within the period, never a blend of two samples. The drive's position and
+    // current are sampled at the same SYNC, so the phase is the one the log's sampling shows,
+    // and a log cannot tell a delay from a SYNC grid that sits later (the ECU's grid starts
+    // with the link, wherever the first frame put it). So `delay_s` is the latency beyond the
+    // nominal SYNC phase, split into whole reference periods and the latch's tick.
+    let latch = Epos4Latch::new(
+        m.epos4.sync_after_push_s + fx.delay_s.max(0.0),
+        dt,
+        ticks_per_period,
+    );
+    let reference = delayed(
+        &held_later(&rec.reference, latch.whole_periods),
+        fx.log_lag_s,
+        period,
+    );
     let Some(&first) = reference.first() else {
         return SimOut::default();
     };
@@ -225,9 +293,7 @@ pub fn simulate_epos4(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
         .to_degrees()
     };
     let per_motor = p.motor_per_pinion();
-    let ticks_per_period = (period / dt).round() as u64;
-    // The SYNC as a whole tick within the period after each push, at least one tick.
-    let sync_tick = ((m.epos4.sync_after_push_s / dt).round() as u64).clamp(1, ticks_per_period);
+    let sync_tick = latch.sync_tick;
     let n = reference.len();
     // SYNC samples: the tick they were taken at, the position (output units) and the current.
     let mut at = Vec::with_capacity(n + 1);
@@ -372,7 +438,7 @@ pub fn simulate_emps(m: &EmpsModel, rec: &Record, fx: &Effects) -> SimOut {
         return out;
     }
     let ts = m.ts_s;
-    let reference = delayed(&rec.reference, fx.delay_s, ts);
+    let reference = delayed(&rec.reference, fx.delay_s + fx.log_lag_s, ts);
     let sub = m.substeps.max(1);
     let h = ts / sub as f64;
     let fv = if fx.viscous_override.is_finite() {
@@ -494,7 +560,7 @@ pub fn simulate_bam(m: &BamModel, rec: &Record, fx: &Effects) -> SimOut {
         rec,
         &friction,
         fx.backlash,
-        fx.delay_s,
+        fx.delay_s + fx.log_lag_s,
     )
 }
 
@@ -558,4 +624,34 @@ pub fn simulate_bam_with(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Epos4Latch;
+
+    /// 50 us current-loop ticks, 200 to a 10 ms period.
+    fn latch(latency_ms: f64) -> (usize, u64) {
+        let l = Epos4Latch::new(latency_ms * 1e-3, 50e-6, 200);
+        (l.whole_periods, l.sync_tick)
+    }
+
+    #[test]
+    fn a_latch_within_the_period_stays_in_it_and_one_beyond_moves_a_whole_period() {
+        assert_eq!(latch(1.75), (0, 35));
+        // The SYNC at the end of the period is still this period's (the nominal phase may be
+        // a whole period).
+        assert_eq!(latch(10.0), (0, 200));
+        assert_eq!(latch(10.05), (1, 1));
+        assert_eq!(latch(38.0), (3, 160));
+    }
+
+    #[test]
+    fn a_latch_is_at_least_one_tick_whatever_the_latency() {
+        assert_eq!(latch(0.0), (0, 1));
+        assert_eq!(latch(-3.0), (0, 1));
+        // No number of ticks: the earliest latch, as for no latency at all.
+        assert_eq!(latch(f64::NAN), (0, 1));
+        assert_eq!(latch(f64::INFINITY), (0, 1));
+    }
 }

@@ -147,6 +147,42 @@ struct ChainCase {
 }
 
 /// A small deterministic generator (the chain's own, not the diagnosis's RNG).
+/// A vehicle computer whose frames reach the ECU late: the EPOS4 car latches each at the
+/// first SYNC after it arrives (whole periods and a SYNC phase), the direct drive takes it at
+/// the position tick it lands on. Either is a held reference that steps late, not a blend of
+/// two samples; a model that blends leaves a third of the current unexplained, and a second
+/// effect gets named for it. Asserted: `delay` alone, and the fit back within 3 points of the
+/// car's repeatability.
+#[test]
+fn frames_that_reach_the_ecu_late_are_a_delay_on_either_drive() {
+    for (drive, delay_ms) in [(SimDrive::Epos4, 33.0), (SimDrive::Direct, 44.0)] {
+        let car = SimCar {
+            column_deg: 0.0,
+            controller: ControllerKind::Paper,
+            drive,
+            effects: format!("reference_delay_ms={delay_ms}").parse().unwrap(),
+        };
+        let (d, _) = diagnosed(car, profile::sweep(Sweep::PAPER).unwrap());
+        let best = &d.ranking[0];
+        println!(
+            "{drive:?}, frames {delay_ms} ms late: {:?} {:?}, GoF {:.1} -> {:.1} % (repeatability {:.1} %), fitted {:?}",
+            d.verdict.kind,
+            d.verdict.effects,
+            100.0 * d.baseline_gof,
+            100.0 * d.verdict.gof_after,
+            100.0 * d.repeatability.gof,
+            best.values
+        );
+        assert_eq!(d.verdict.effects, vec!["delay".to_string()], "{drive:?}");
+        assert!(
+            d.verdict.gof_after > d.repeatability.gof - 0.03,
+            "{drive:?}: the delay leaves the log at {:.1} %, its repeatability {:.1} %",
+            100.0 * d.verdict.gof_after,
+            100.0 * d.repeatability.gof
+        );
+    }
+}
+
 fn lcg(state: &mut u64) -> f64 {
     *state = state
         .wrapping_mul(6_364_136_223_846_793_005)
