@@ -5,10 +5,16 @@
 //! the mock clock and the task pools are global.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
+#[path = "support/task_scenarios.rs"]
+mod task_scenarios;
+use task_scenarios::{
+    append_resting_steps, assert_settled, controller, in_both_modes, on_plant, plant_effects,
+    with_controller,
+};
+
 use host_sim::canbus::RandomFaults;
 use host_sim::effect_plant::PlantEffects;
 use host_sim::firmware_fixture::{CarPlant, FirmwareFixture, FixtureBuild, STEP_US, SimDrive};
-use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::canopen::cia402::State;
 use steering_ecu::canopen::epos4::{Epos4Config, PositionScale, od};
@@ -20,42 +26,19 @@ use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
 use steering_ecu::steering::{DriveDemand, EcuState};
 use steering_ecu::units::SteeringDeg;
 
-/// The controller the next scenario's ECU runs (both drive the same tests).
-static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Paper);
-/// Held by each test for its whole run, so no scenario starts with another test's choice.
-static SCENARIOS: StdMutex<()> = StdMutex::new(());
-/// The plant the next scenario runs, if not the controller's default (paper mode: the paper's
-/// linear plant; ECU mode: play and friction).
-static PLANT_EFFECTS: StdMutex<Option<PlantEffects>> = StdMutex::new(None);
-
 /// How far from a resting reference the column may settle, deg: `lag` on the paper's linear
 /// plant (paper mode), plus, for ECU mode on the plant with play and friction, half the belt
 /// play (0.75 deg) and the belt stretch the rack friction holds (200 N through tau_BS and
 /// k_B: 0.30 deg): the column integral takes that back to within 0.3 deg, but over up to 1.7 s
 /// (`ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant`), later than these checks.
 fn settle_tolerance_deg(lag: f64) -> f64 {
-    let kind = CONTROLLER
-        .lock()
-        .map(|c| *c)
-        .unwrap_or(ControllerKind::Paper);
+    let kind = controller();
     match kind {
         ControllerKind::Paper => lag,
         ControllerKind::Ecu => lag + 0.75 + 0.30,
     }
 }
 
-/// Runs `scenario` once with each controller, holding [`SCENARIOS`] throughout so no other
-/// test's scenario starts with this one's choice.
-fn in_both_modes(scenario: impl Fn(ControllerKind)) {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        if let Ok(mut c) = CONTROLLER.lock() {
-            *c = kind;
-        }
-        scenario(kind);
-    }
-}
 /// 50 µs steps in one 10 ms period.
 const PERIOD_STEPS: u64 = 10_000 / STEP_US;
 
@@ -129,19 +112,10 @@ fn run(script: &[Event], faults: RandomFaults, seed: u64) -> Run {
 /// the tasks polled first, then, at each period boundary, the sample and the vehicle's frame;
 /// the drive's period, the ECU's frames onto the bus, the bus's deliveries.
 fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) -> Run {
-    let kind = CONTROLLER
-        .lock()
-        .map(|c| *c)
-        .unwrap_or(ControllerKind::Paper);
+    let kind = controller();
     let scale = PositionScale::new(Epos4Config::paper(node()).counts_per_rev).unwrap();
     let protocol = ProtocolConfig::default();
-    // ECU mode drives the plant with belt play and rack friction, as a car has them; paper
-    // mode the paper's linear plant.
-    let effects = match (PLANT_EFFECTS.lock().map(|e| *e).unwrap_or(None), kind) {
-        (Some(effects), _) => effects,
-        (None, ControllerKind::Paper) => PlantEffects::NONE,
-        (None, ControllerKind::Ecu) => PlantEffects::PLAY_AND_FRICTION,
-    };
+    let effects = plant_effects(kind);
     // The drive boots before the ECU's link starts: its boot-up message is on the bus first.
     let mut fixture = FirmwareFixture::new(FixtureBuild {
         controller: kind,
@@ -417,73 +391,26 @@ fn an_ecu_reset_with_the_drive_enabled_switches_the_power_stage_off_first_in() {
     assert_eq!(r.refusals, 0, "no illegal CiA 402 transition");
 }
 
-/// The resting steps of the settling test, deg at the wheel (from, to): both directions, small
-/// and large, across straight ahead and not.
-const STEPS_DEG: [(f32, f32); 6] = [
-    (0.0, 5.0),
-    (5.0, -5.0),
-    (-5.0, 10.0),
-    (10.0, -10.0),
-    (-10.0, -8.0),
-    (-8.0, 0.0),
-];
-/// How long each step of [`STEPS_DEG`] is held, periods of 10 ms.
-const HOLD_PERIODS: usize = 250;
-
 /// ECU mode settles a resting step within 0.3 deg, on the plant with 1.5 deg of belt play and
-/// 200 N of rack friction and on the paper's linear plant: the steps of [`STEPS_DEG`] at
+/// 200 N of rack friction and on the paper's linear plant: the steps of `STEPS_DEG` at
 /// the protocol's rate, each held 2.5 s. Returns, per plant, the error left at the end of each hold
 /// and the time from the step's last frame until the column stayed within 0.3 deg.
 #[test]
 fn ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant() {
     use AsState::*;
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    if let Ok(mut c) = CONTROLLER.lock() {
-        *c = ControllerKind::Ecu;
-    }
+    let _serial = with_controller(ControllerKind::Ecu);
     let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
     script.extend(repeat(Event::Ref(Driving, 0.0), 40)); // 60-99
-    let mut holds = Vec::new();
-    for (from, to) in STEPS_DEG {
-        // At 4 deg per frame, the rate the protocol allows.
-        let n = ((to - from).abs() / 4.0).ceil() as usize;
-        script
-            .extend((1..=n).map(|k| Event::Ref(Driving, from + (to - from) * k as f32 / n as f32)));
-        holds.push((script.len(), to));
-        script.extend(repeat(Event::Ref(Driving, to), HOLD_PERIODS));
-    }
+    let holds = append_resting_steps(&mut script, |deg| Event::Ref(Driving, deg));
     for (name, effects) in [
         ("play and friction", PlantEffects::PLAY_AND_FRICTION),
         ("paper plant", PlantEffects::NONE),
     ] {
-        if let Ok(mut e) = PLANT_EFFECTS.lock() {
-            *e = Some(effects);
-        }
-        let r = run(&script, RandomFaults::default(), 9);
-        if let Ok(mut e) = PLANT_EFFECTS.lock() {
-            *e = None;
-        }
+        let r = on_plant(effects, || run(&script, RandomFaults::default(), 9));
         let s = &r.samples;
         assert!(s.iter().all(|x| x.faults == 0), "{name}: a fault");
-        for &(start, to) in &holds {
-            let end = start + HOLD_PERIODS - 1;
-            let error = |i: usize| s[i].column_deg - f64::from(to);
-            let settled = (start..=end)
-                .rev()
-                .take_while(|&i| error(i).abs() <= 0.3)
-                .last();
-            eprintln!(
-                "EPOS4, ECU mode, {name}: step to {to} deg: {:+.3} deg after 2.5 s, within 0.3 deg \
-                 from {} ms on",
-                error(end),
-                settled.map_or(-1, |i| ((i - start) * 10) as i64)
-            );
-            assert!(
-                error(end).abs() <= 0.3,
-                "{name}: the column settled {:+.2} deg from {to} deg",
-                error(end)
-            );
-        }
+        let column: Vec<f64> = s.iter().map(|x| x.column_deg).collect();
+        assert_settled("EPOS4, ECU mode", name, &column, &holds);
     }
 }
 

@@ -4,6 +4,13 @@
 //! steering rules, end to end. Own test binary: the mock clock and task pools are global.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
+#[path = "support/task_scenarios.rs"]
+mod task_scenarios;
+use task_scenarios::{
+    append_resting_steps, assert_settled, controller, in_both_modes, on_plant, plant_effects,
+    with_controller,
+};
+
 use canlink::Stamped;
 use host_sim::effect_plant::PlantEffects;
 use host_sim::firmware_fixture::{
@@ -11,7 +18,6 @@ use host_sim::firmware_fixture::{
 };
 use host_sim::sim_ecu::{CarEffects, STEP_US, SimCar, SimDrive, SimEcu};
 use std::cell::RefCell;
-use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
 use steering_ecu::controller::ControllerKind;
@@ -21,28 +27,6 @@ use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
 use steering_ecu::steering::{DriveDemand, EcuState};
 use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
 use steering_ecu::units::SteeringDeg;
-
-/// Tests that switch the controller hold this for their whole run, so no other test's
-/// scenario starts with their choice (tests that do not take it run paper mode).
-static SCENARIOS: StdMutex<()> = StdMutex::new(());
-/// The plant the next scenario runs, if not the controller's default (paper mode: the paper's
-/// linear plant; ECU mode: play and friction).
-static PLANT_EFFECTS: StdMutex<Option<PlantEffects>> = StdMutex::new(None);
-/// The controller the next scenario's ECU runs (both drive the same tests).
-static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Paper);
-
-/// Runs `scenario` once with each controller, holding [`SCENARIOS`] throughout so no other
-/// test's scenario starts with this one's choice.
-fn in_both_modes(scenario: impl Fn(ControllerKind)) {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        if let Ok(mut c) = CONTROLLER.lock() {
-            *c = kind;
-        }
-        scenario(kind);
-    }
-}
 
 /// A sensor fault the scenario injects, from a period on (`at_period` sets it).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -133,17 +117,8 @@ fn run_logged(
     script: &[Send],
     at_period: impl Fn(usize, &mut Ecu, &mut Inject),
 ) -> Logged {
-    let kind = CONTROLLER
-        .lock()
-        .map(|c| *c)
-        .unwrap_or(ControllerKind::Paper);
-    // ECU mode runs against the plant with belt play and rack friction, as a car has them;
-    // paper mode against the paper's linear plant, its figures' own.
-    let effects = match (PLANT_EFFECTS.lock().map(|e| *e).unwrap_or(None), kind) {
-        (Some(effects), _) => effects,
-        (None, ControllerKind::Paper) => PlantEffects::NONE,
-        (None, ControllerKind::Ecu) => PlantEffects::PLAY_AND_FRICTION,
-    };
+    let kind = controller();
+    let effects = plant_effects(kind);
     let mut fixture = FirmwareFixture::new(FixtureBuild {
         controller: kind,
         drive: SimDrive::Direct,
@@ -503,10 +478,7 @@ fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() 
     use steering_ecu::canopen::NodeId;
     use steering_ecu::canopen::epos4::PositionScale;
 
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    if let Ok(mut c) = CONTROLLER.lock() {
-        *c = ControllerKind::Paper;
-    }
+    let _serial = with_controller(ControllerKind::Paper);
     // 0-9 AS Off; 10-29 AS Driving 0 deg; 30-44 nothing (hold, then the timeout latches);
     // 45-49 AS Off, a clear at 50, AS Off to 59; 60-69 Driving; 70-75 six corrupted CRCs (the
     // fifth latches the invalid-frame fault); 76-99 AS Off, long enough for every page.
@@ -606,71 +578,23 @@ fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() 
     );
 }
 
-/// The resting steps of the settling test, deg at the wheel (from, to): both directions, small
-/// and large, across straight ahead and not.
-const STEPS_DEG: [(f32, f32); 6] = [
-    (0.0, 5.0),
-    (5.0, -5.0),
-    (-5.0, 10.0),
-    (10.0, -10.0),
-    (-10.0, -8.0),
-    (-8.0, 0.0),
-];
-/// How long each step of [`STEPS_DEG`] is held, periods of 10 ms.
-const HOLD_PERIODS: usize = 250;
-
 /// ECU mode in direct drive settles a resting step within 0.3 deg, on the plant with 1.5 deg of
-/// belt play and 200 N of rack friction and on the paper's linear plant: the steps of [`STEPS_DEG`]
+/// belt play and 200 N of rack friction and on the paper's linear plant: the steps of `STEPS_DEG`
 /// at the protocol's rate, each held 2.5 s.
 #[test]
 fn ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    if let Ok(mut c) = CONTROLLER.lock() {
-        *c = ControllerKind::Ecu;
-    }
+    let _serial = with_controller(ControllerKind::Ecu);
     let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
     script.extend(vec![Send::Ref(AsState::Driving, 0.0); 40]);
-    let mut holds = Vec::new();
-    for (from, to) in STEPS_DEG {
-        // At 4 deg per frame, the rate the protocol allows.
-        let n = ((to - from).abs() / 4.0).ceil() as usize;
-        script.extend(
-            (1..=n).map(|k| Send::Ref(AsState::Driving, from + (to - from) * k as f32 / n as f32)),
-        );
-        holds.push((script.len(), to));
-        script.extend(vec![Send::Ref(AsState::Driving, to); HOLD_PERIODS]);
-    }
+    let holds = append_resting_steps(&mut script, |deg| Send::Ref(AsState::Driving, deg));
     for (name, effects) in [
         ("play and friction", PlantEffects::PLAY_AND_FRICTION),
         ("paper plant", PlantEffects::NONE),
     ] {
-        if let Ok(mut e) = PLANT_EFFECTS.lock() {
-            *e = Some(effects);
-        }
-        let s = run(&script, |_, _, _| {});
-        if let Ok(mut e) = PLANT_EFFECTS.lock() {
-            *e = None;
-        }
+        let s = on_plant(effects, || run(&script, |_, _, _| {}));
         assert!(s.iter().all(|x| x.faults == 0), "{name}: a fault");
-        for &(start, to) in &holds {
-            let end = start + HOLD_PERIODS - 1;
-            let error = |i: usize| s[i].column_deg - f64::from(to);
-            let settled = (start..=end)
-                .rev()
-                .take_while(|&i| error(i).abs() <= 0.3)
-                .last();
-            eprintln!(
-                "direct, ECU mode, {name}: step to {to} deg: {:+.3} deg after 2.5 s, within \
-                 0.3 deg from {} ms on",
-                error(end),
-                settled.map_or(-1, |i| ((i - start) * 10) as i64)
-            );
-            assert!(
-                error(end).abs() <= 0.3,
-                "{name}: the column settled {:+.2} deg from {to} deg",
-                error(end)
-            );
-        }
+        let column: Vec<f64> = s.iter().map(|x| x.column_deg).collect();
+        assert_settled("direct, ECU mode", name, &column, &holds);
     }
 }
 
