@@ -3,6 +3,7 @@
 pub mod analysis;
 pub mod effect_plant;
 pub mod epos4_sim;
+pub mod firmware_fixture;
 pub mod gap;
 pub mod golden;
 pub mod linear_model;

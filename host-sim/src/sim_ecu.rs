@@ -13,12 +13,11 @@
 //!   firmware's ADC interrupt runs it, as in `tests/firmware_tasks.rs`, on the plant here. The
 //!   simulated EPOS4 stays on the bus, unconfigured, as a drive a direct-drive car does not use.
 //!
-//! How the tasks run: the same task functions the STM32 runs, polled once per 50 µs step by a
-//! small single-threaded executor here (a no-op waker, every task polled every step), with
-//! embassy-time's mock driver advanced by the step. Polling every step costs nothing at this
-//! rate and lets the host code call in and out (`recv_until`) instead of handing control to
-//! embassy's `Executor::run_until`. The ECU's received frames go through the firmware's own
-//! routing ([`steering_ecu::tasks::FirmwareRoutes`], [`route_to_ecu`]).
+//! How the tasks run: on [`crate::firmware_fixture`] (the firmware's tasks polled once per
+//! 50 µs step, embassy-time's mock driver advanced by the step), in the order below. The
+//! host code calls in and out (`recv_until`) between steps. The ECU's received frames go
+//! through the firmware's own routing ([`steering_ecu::tasks::FirmwareRoutes`],
+//! [`route_to_ecu`]).
 //!
 //! The mock clock is global to the process, so one `SimEcu` lives at a time: `new` waits for
 //! the previous one to be dropped.
@@ -35,61 +34,29 @@
 //!                 encoder value; mock clock += 50 µs
 //! ```
 
-use crate::effect_plant::{EffectPlant, PlantEffects};
+use crate::effect_plant::PlantEffects;
 use crate::epos4_sim::Epos4Sim;
-use crate::plant::{Actuator, LinearPlant, PlantParams};
-use canlink::canbus::{CanBus, Port};
+use crate::firmware_fixture::{CarPlant, EncoderFault, FirmwareFixture, FixtureBuild, SenseFault};
+use canlink::canbus::{CanBus, Port, RandomFaults};
 use canlink::reference::ReferenceSender;
 use canlink::{Clock, LinkError, Stamped, Transport};
-use embassy_time::{Duration, MockDriver};
-use std::cell::Cell;
 use std::collections::VecDeque;
-use std::future::Future;
-use std::pin::Pin;
-use std::rc::Rc;
-use std::sync::{Mutex, MutexGuard};
-use std::task::{Context, Waker};
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
-use steering_ecu::canopen::NodeId;
-use steering_ecu::canopen::epos4::{Epos4Config, PositionScale};
-use steering_ecu::commutation::{BRIDGE_OFF, BridgeCommand, HallDecoder, code_of};
 use steering_ecu::controller::ControllerKind;
-use steering_ecu::direct::FastLoop;
-use steering_ecu::ecu::{DriveChoice, Ecu, EcuBuild};
-use steering_ecu::ports::{Bridge, ColumnEncoderPort, CurrentSense, EncoderError, HallInputs};
+use steering_ecu::ecu::Ecu;
 use steering_ecu::protocol::PERIOD_US;
-use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
 use steering_ecu::steering::Output;
-use steering_ecu::tasks::{self, FirmwareRoutes, FrameQueue, Route, SharedEcu};
-use steering_ecu::units::{Amps, Volts};
 
-/// Simulation step, µs (the current loop's 20 kHz).
-pub const STEP_US: u64 = 50;
-/// The bridge's DC supply, V (Table 2: 24 V).
-pub const SUPPLY_V: f64 = 24.0;
-/// Frame time on the bus, µs (8 bytes at 1 Mbit/s, about 130 bit times).
-pub const BUS_LATENCY_US: u64 = 130;
+// The fixture's names, as the simulated car's users have always named them.
+pub use crate::firmware_fixture::{
+    BUS_LATENCY_US, EPOS_NODE, STEP_US, SUPPLY_V, SimDrive, direct_drive_period,
+    direct_drive_period_sensed, epos4_ecu, route_to_ecu,
+};
+
 /// Wall-clock time of the simulation's t = 0 in its recordings, s since the Unix epoch: a fixed,
 /// recognisable origin, so recordings of the simulation repeat byte for byte.
 pub const EPOCH_S: f64 = 1_700_000_000.0;
-/// The EPOS4's node on the simulated bus (the firmware's default).
-pub const EPOS_NODE: u8 = 1;
-
-/// One simulated ECU per process at a time (the mock clock is global).
-static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
-
-/// Which firmware build the simulated car runs (the firmware's `drive-epos4` / `drive-direct`
-/// features).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum SimDrive {
-    /// The default build: the ECU commands the EPOS4 over CANopen (CSP, SYNC, PDOs).
-    #[default]
-    Epos4,
-    /// The ECU's own three-phase bridge.
-    Direct,
-}
-
 /// How the simulated car is built and powered up.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimCar {
@@ -109,68 +76,6 @@ impl SimCar {
         drive: SimDrive::Epos4,
         effects: CarEffects::NONE,
     };
-}
-
-/// The direct-drive car's plant: the linear one of eqs. 1-8, or with effects the effect plant.
-#[derive(Debug)]
-enum CarPlant {
-    Linear(Box<LinearPlant>),
-    Effects(Box<EffectPlant>),
-}
-
-impl CarPlant {
-    fn new(effects: PlantEffects, dt: f64) -> CarPlant {
-        if effects.is_none() {
-            CarPlant::Linear(Box::new(
-                LinearPlant::new(PlantParams::PAPER, dt).expect("the paper plant discretises"),
-            ))
-        } else {
-            CarPlant::Effects(Box::new(
-                EffectPlant::new(PlantParams::PAPER, effects, dt)
-                    .expect("the paper plant discretises"),
-            ))
-        }
-    }
-
-    fn get(&mut self) -> &mut dyn Actuator {
-        match self {
-            CarPlant::Linear(p) => p.as_mut(),
-            CarPlant::Effects(p) => p.as_mut(),
-        }
-    }
-}
-
-impl Actuator for CarPlant {
-    fn step(&mut self, voltage_v: f64) {
-        self.get().step(voltage_v)
-    }
-    fn current_a(&self) -> f64 {
-        match self {
-            CarPlant::Linear(p) => p.current_a(),
-            CarPlant::Effects(p) => p.current_a(),
-        }
-    }
-    fn motor_rad(&self) -> f64 {
-        match self {
-            CarPlant::Linear(p) => p.motor_rad(),
-            CarPlant::Effects(p) => p.motor_rad(),
-        }
-    }
-    fn motor_speed_rad_s(&self) -> f64 {
-        match self {
-            CarPlant::Linear(p) => p.motor_speed_rad_s(),
-            CarPlant::Effects(p) => p.motor_speed_rad_s(),
-        }
-    }
-    fn column_rad(&self) -> f64 {
-        match self {
-            CarPlant::Linear(p) => p.column_rad(),
-            CarPlant::Effects(p) => p.column_rad(),
-        }
-    }
-    fn set_at_rest(&mut self, column_rad: f64) {
-        self.get().set_at_rest(column_rad)
-    }
 }
 
 /// A simulated car's hidden effects, `--plant-effects KEY=VALUE,...`: the plant's (host-sim's
@@ -239,30 +144,6 @@ impl std::fmt::Display for CarEffects {
     }
 }
 
-/// The ECU as the firmware's EPOS4 build makes it at start-up (`main.rs`, [`Ecu::build`]),
-/// with the EPOS4 at [`EPOS_NODE`]: the link with the paper's settings (ECU mode writes its
-/// own feedforward gains over them). Also those settings, for the simulated drive's scale.
-pub fn epos4_ecu(controller: ControllerKind, now_us: u64) -> Option<(Ecu, Epos4Config)> {
-    let config = Epos4Config::paper(NodeId::new(EPOS_NODE)?);
-    let ecu = Ecu::build(
-        EcuBuild::new(controller, DriveChoice::Epos4(config)),
-        now_us,
-    )?;
-    Some((ecu, config))
-}
-
-/// Hands a frame the ECU received to the task that consumes it, as the firmware's receive
-/// task does ([`FirmwareRoutes`]: consumer 0 the reference task, 1 the EPOS4 link); a full
-/// queue drops the frame, as on the chip. Frames for no consumer are dropped.
-pub fn route_to_ecu(frame: Frame, reference: &FrameQueue, drive: &FrameQueue) {
-    let queue = match FirmwareRoutes.route(&frame) {
-        Some(0) => reference,
-        Some(_) => drive,
-        None => return,
-    };
-    let _ = queue.try_send(frame);
-}
-
 /// A fault put into the simulation on purpose.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Injection {
@@ -288,100 +169,6 @@ impl Injection {
     }
 }
 
-#[derive(Debug)]
-struct EncoderState {
-    column_rad: Cell<f64>,
-    broken: Cell<bool>,
-}
-
-struct SimEncoder(Rc<EncoderState>);
-
-impl ColumnEncoderPort for SimEncoder {
-    async fn read(&mut self) -> Result<u16, EncoderError> {
-        if self.0.broken.get() {
-            return Err(EncoderError::NoResponse);
-        }
-        Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(self.0.column_rad.get()))
-    }
-}
-
-/// The Hall sensors as the fast loop reads them: the code of the motor's true sector.
-struct SimHall(u8);
-impl HallInputs for SimHall {
-    fn read(&mut self) -> u8 {
-        self.0
-    }
-}
-
-/// The phase currents as the ADC reads them.
-struct SimSense([Amps; 3]);
-impl CurrentSense for SimSense {
-    fn phase_currents(&mut self) -> [Amps; 3] {
-        self.0
-    }
-}
-
-/// The bridge: keeps the command for the plant's terminal voltage.
-struct SimBridge(BridgeCommand);
-impl Bridge for SimBridge {
-    fn apply(&mut self, command: &BridgeCommand) {
-        self.0 = *command;
-    }
-}
-
-/// One 50 us PWM period of the direct drive on the paper's actuator, as the firmware's ADC
-/// interrupt runs it (`steering_ecu::direct::FastLoop::run`): the Hall code of the motor's
-/// sector and the phase currents (the winding current in the pair the sector drives, plus
-/// `current_offset_a` of sense error) from the plant, then the bridge command back to a
-/// terminal voltage for one plant step. With the bridge off the winding is left to its
-/// back-EMF and the current dies out.
-pub fn direct_drive_period(
-    plant: &mut impl Actuator,
-    fast: &mut FastLoop,
-    ecu: &SharedEcu,
-    now_us: u64,
-    current_offset_a: f64,
-) {
-    direct_drive_period_sensed(plant, fast, ecu, now_us, |i| i + current_offset_a);
-}
-
-/// [`direct_drive_period`] with any current-sense error: `sense` maps the winding's true
-/// current to what the phase-current ADC reads (an offset, a flipped sign, a wrong gain).
-pub fn direct_drive_period_sensed(
-    plant: &mut impl Actuator,
-    fast: &mut FastLoop,
-    ecu: &SharedEcu,
-    now_us: u64,
-    sense: impl Fn(f64) -> f64,
-) {
-    let sector = hall_from_motor(plant.motor_rad()).rem_euclid(6) as u8;
-    let mut truth = HallDecoder::new(0);
-    let _ = truth.update(code_of(sector));
-    let mut phases = [Amps::ZERO; 3];
-    if let Some((high, low)) = truth.driven_legs() {
-        let measured = sense(plant.current_a()) as f32;
-        phases[high] = Amps(measured);
-        phases[low] = Amps(-measured);
-    }
-    let mut bridge = SimBridge(BRIDGE_OFF);
-    ecu.lock(|e| {
-        fast.run(
-            &mut e.borrow_mut(),
-            now_us,
-            &mut SimHall(code_of(sector)),
-            &mut SimSense(phases),
-            &mut bridge,
-        )
-    });
-    let v = match truth.terminal_voltage(&bridge.0, SUPPLY_V as f32) {
-        Some(v) => f64::from(v),
-        None => PlantParams::PAPER.ke * plant.motor_speed_rad_s(),
-    };
-    plant.step(v);
-}
-
-type Task = Pin<Box<dyn Future<Output = ()>>>;
-
 /// A scripted vehicle computer ([`SimEcu::script_vehicle`]).
 struct Vehicle {
     port: Port,
@@ -392,35 +179,17 @@ struct Vehicle {
 
 /// The simulated ECU, its actuator, the EPOS4 and the bus.
 pub struct SimEcu {
-    ecu: &'static SharedEcu,
-    reference_frames: &'static FrameQueue,
-    drive_frames: &'static FrameQueue,
-    tx_frames: &'static FrameQueue,
-    tasks: Vec<Task>,
-    drive: SimDrive,
-    encoder: Rc<EncoderState>,
-    bus: CanBus,
-    ecu_port: Port,
-    epos_port: Port,
+    fixture: FirmwareFixture,
     host_port: Port,
     vehicle: Option<Vehicle>,
-    plant: CarPlant,
-    /// Reference frames held back from the ECU (`reference_delay_ms`), with when they are due.
-    delayed_references: VecDeque<(u64, Frame)>,
-    reference_delay_us: u64,
-    fast: FastLoop,
-    epos: Epos4Sim,
-    now_us: u64,
     inbox: VecDeque<Stamped>,
-    current_offset: f64,
     scheduled: Vec<(u64, Injection)>,
-    _one_at_a_time: MutexGuard<'static, ()>,
 }
 
 impl std::fmt::Debug for SimEcu {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SimEcu")
-            .field("now_us", &self.now_us)
+            .field("now_us", &self.fixture.now_us())
             .field("output", &self.output())
             .finish_non_exhaustive()
     }
@@ -460,85 +229,30 @@ impl SimEcu {
         } else {
             0.0
         };
-        let guard = ONE_AT_A_TIME
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
-        MockDriver::get().reset();
-        let node = NodeId::new(EPOS_NODE).expect("node 1 is valid");
-        let (ecu, config) = match car.drive {
-            SimDrive::Direct => Ecu::build(EcuBuild::new(car.controller, DriveChoice::Direct), 0)
-                .map(|e| (e, Epos4Config::paper(node))),
-            SimDrive::Epos4 => epos4_ecu(car.controller, 0),
-        }
-        .expect("the paper configuration is valid");
-        // Leaked: the task futures borrow them for 'static, like the firmware's statics.
-        let ecu: &'static SharedEcu =
-            Box::leak(Box::new(SharedEcu::new(std::cell::RefCell::new(ecu))));
-        let reference_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
-        let drive_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
-        let tx_frames: &'static FrameQueue = Box::leak(Box::new(FrameQueue::new()));
-        let encoder = Rc::new(EncoderState {
-            column_rad: Cell::new(column_rad),
-            broken: Cell::new(false),
-        });
-        let port: &'static mut SimEncoder = Box::leak(Box::new(SimEncoder(encoder.clone())));
-        let mut tasks: Vec<Task> = vec![
-            Box::pin(async move {
-                tasks::reference_task(reference_frames.receiver(), ecu).await;
-            }),
-            Box::pin(async move {
-                tasks::status_task(tx_frames.sender(), ecu).await;
-            }),
-            Box::pin(async move {
-                tasks::encoder_task(port, ColumnEncoder { zero_raw: 0 }, ecu).await;
-            }),
-        ];
-        if car.drive == SimDrive::Epos4 {
-            tasks.push(Box::pin(async move {
-                tasks::drive_task(drive_frames.receiver(), tx_frames.sender(), ecu).await;
-            }));
-        }
-        let mut bus = CanBus::new(1, BUS_LATENCY_US);
-        let ecu_port = bus.attach();
-        let epos_port = bus.attach();
-        let host_port = bus.attach();
-        let scale = PositionScale::new(config.counts_per_rev).expect("84 inc/rev");
-        let mut epos = Epos4Sim::new_at_with(node, scale, column_rad, car.effects.plant)
-            .expect("the paper plant discretises");
-        for frame in epos.advance(0) {
-            bus.send(epos_port, frame, 0);
-        }
-        let mut plant = CarPlant::new(car.effects.plant, STEP_US as f64 * 1e-6);
-        plant.set_at_rest(column_rad);
-        SimEcu {
-            ecu,
-            reference_frames,
-            drive_frames,
-            tx_frames,
-            tasks,
+        let mut fixture = FirmwareFixture::new(FixtureBuild {
+            controller: car.controller,
             drive: car.drive,
-            encoder,
-            bus,
-            ecu_port,
-            epos_port,
+            column_rad,
+            epos4_effects: car.effects.plant,
+            direct_plant: CarPlant::new(car.effects.plant, STEP_US as f64 * 1e-6),
+            bus_faults: RandomFaults::default(),
+            bus_seed: 1,
+            watchdog: false,
+            reference_delay_us: (car.effects.reference_delay_s * 1e6).round() as u64,
+        });
+        let host_port = fixture.bus_mut().attach();
+        SimEcu {
+            fixture,
             host_port,
             vehicle: None,
-            plant,
-            delayed_references: VecDeque::new(),
-            reference_delay_us: (car.effects.reference_delay_s * 1e6).round() as u64,
-            fast: FastLoop::new(0, Volts(SUPPLY_V as f32)),
-            epos,
-            now_us: 0,
             inbox: VecDeque::new(),
-            current_offset: 0.0,
             scheduled: Vec::new(),
-            _one_at_a_time: guard,
         }
     }
 
     /// Which drive the car runs.
     pub fn drive(&self) -> SimDrive {
-        self.drive
+        self.fixture.drive()
     }
 
     /// A vehicle computer on its own node that sends `script` as its reference frames (AS
@@ -549,64 +263,54 @@ impl SimEcu {
     pub fn script_vehicle(&mut self, script: Vec<(AsState, f64)>) {
         let port = match &self.vehicle {
             Some(v) => v.port,
-            None => self.bus.attach(),
+            None => self.fixture.bus_mut().attach(),
         };
         let period = u64::from(PERIOD_US);
         self.vehicle = Some(Vehicle {
             port,
             script: script.into(),
             sender: ReferenceSender::default(),
-            next_us: self.now_us.div_ceil(period) * period,
+            next_us: self.fixture.now_us().div_ceil(period) * period,
         });
     }
 
     /// The ECU's last output (demand, state, faults).
     pub fn output(&self) -> Output {
-        self.ecu.lock(|e| e.borrow().output())
+        self.fixture.output()
     }
 
     /// Read or change the ECU directly (tests).
     pub fn with_ecu<R>(&self, f: impl FnOnce(&mut Ecu) -> R) -> R {
-        self.ecu.lock(|e| f(&mut e.borrow_mut()))
+        self.fixture.with_ecu(f)
     }
 
     pub fn epos(&self) -> &Epos4Sim {
-        &self.epos
+        self.fixture.epos()
     }
 
     pub fn epos_mut(&mut self) -> &mut Epos4Sim {
-        &mut self.epos
+        self.fixture.epos_mut()
     }
 
     pub fn bus_mut(&mut self) -> &mut CanBus {
-        &mut self.bus
+        self.fixture.bus_mut()
     }
 
     /// Column angle of the simulated actuator, deg at the wheel.
     pub fn column_deg(&self) -> f64 {
-        self.column_rad().to_degrees()
-    }
-
-    fn column_rad(&self) -> f64 {
-        match self.drive {
-            SimDrive::Epos4 => self.epos.column_rad(),
-            SimDrive::Direct => self.plant.column_rad(),
-        }
+        self.fixture.column_rad().to_degrees()
     }
 
     /// Motor current of the simulated actuator, A.
     pub fn current_a(&self) -> f64 {
-        match self.drive {
-            SimDrive::Epos4 => self.epos.current_a(),
-            SimDrive::Direct => self.plant.current_a(),
-        }
+        self.fixture.current_a()
     }
 
     /// Whether `injection` has an effect on this car: a current-sense offset needs the ECU's
     /// own current sensing (direct drive).
     pub fn can_inject(&self, injection: Injection) -> bool {
         !matches!(
-            (injection, self.drive),
+            (injection, self.drive()),
             (Injection::CurrentOffset(_), SimDrive::Epos4)
         )
     }
@@ -614,9 +318,9 @@ impl SimEcu {
     /// Apply `injection` now (one [`SimEcu::can_inject`] refuses has no effect).
     pub fn inject(&mut self, injection: Injection) {
         match injection {
-            Injection::EncoderNoResponse => self.encoder.broken.set(true),
-            Injection::CurrentOffset(a) => self.current_offset = a,
-            Injection::EposFault(code) => self.epos.inject_fault(code),
+            Injection::EncoderNoResponse => self.fixture.set_encoder_fault(EncoderFault::Silent),
+            Injection::CurrentOffset(a) => self.fixture.set_sense_fault(SenseFault::BiasA(a)),
+            Injection::EposFault(code) => self.fixture.epos_mut().inject_fault(code),
         }
     }
 
@@ -627,13 +331,14 @@ impl SimEcu {
 
     /// Run until `t_us` (frames for the host go to its inbox).
     pub fn run_until(&mut self, t_us: u64) {
-        while self.now_us < t_us {
+        while self.fixture.now_us() < t_us {
             self.step();
         }
     }
 
+    /// One 50 µs step: the bus before the tasks, so a frame due now is seen now.
     fn step(&mut self) {
-        let now = self.now_us;
+        let now = self.fixture.now_us();
         let due: Vec<Injection> = self
             .scheduled
             .iter()
@@ -644,34 +349,8 @@ impl SimEcu {
         for i in due {
             self.inject(i);
         }
-        // A hidden reference delay: the vehicle's frames reach the ECU's reference task late.
-        while self
-            .delayed_references
-            .front()
-            .is_some_and(|(due, _)| *due <= now)
-        {
-            if let Some((_, frame)) = self.delayed_references.pop_front() {
-                route_to_ecu(frame, self.reference_frames, self.drive_frames);
-            }
-        }
-        for (port, frame) in self.bus.deliver(now) {
-            if port == self.ecu_port {
-                if self.reference_delay_us > 0 && FirmwareRoutes.route(&frame) == Some(0) {
-                    self.delayed_references
-                        .push_back((now + self.reference_delay_us, frame));
-                    continue;
-                }
-                // Direct drive has no EPOS4 link task: its queue stays empty-handed, as the
-                // firmware built for direct drive routes to a link it does not run.
-                route_to_ecu(frame, self.reference_frames, self.drive_frames);
-                if self.drive == SimDrive::Direct {
-                    while self.drive_frames.try_receive().is_ok() {}
-                }
-            } else if port == self.epos_port {
-                for answer in self.epos.on_frame(&frame) {
-                    self.bus.send(self.epos_port, answer, now);
-                }
-            } else if port == self.host_port {
+        for (port, frame) in self.fixture.deliver() {
+            if port == self.host_port {
                 self.inbox.push_back(Stamped { t_us: now, frame });
             }
         }
@@ -680,43 +359,27 @@ impl SimEcu {
             && let Some((as_state, deg)) = v.script.pop_front()
         {
             let frame = v.sender.frame(deg, as_state, false);
-            self.bus.send(v.port, frame, now);
+            self.fixture.bus_mut().send(v.port, frame, now);
             v.next_us += u64::from(PERIOD_US);
         }
-        let mut cx = Context::from_waker(Waker::noop());
-        for task in &mut self.tasks {
-            let _ = task.as_mut().poll(&mut cx);
-        }
-        while let Ok(frame) = self.tx_frames.try_receive() {
-            self.bus.send(self.ecu_port, frame, now);
-        }
-        for frame in self.epos.advance(now) {
-            self.bus.send(self.epos_port, frame, now);
-        }
-        if self.drive == SimDrive::Direct {
-            direct_drive_period(
-                &mut self.plant,
-                &mut self.fast,
-                self.ecu,
-                now,
-                self.current_offset,
-            );
-        }
-        self.encoder.column_rad.set(self.column_rad());
-        MockDriver::get().advance(Duration::from_micros(STEP_US));
-        self.now_us += STEP_US;
+        self.fixture.poll_tasks();
+        self.fixture.tx_to_bus();
+        self.fixture.advance_epos();
+        self.fixture.fast_loop();
+        self.fixture.end_step();
     }
 }
 
 impl Clock for SimEcu {
     fn now_us(&self) -> u64 {
-        self.now_us
+        self.fixture.now_us()
     }
 }
 
 impl Transport for SimEcu {
     fn send(&mut self, frame: &Frame) -> Result<(), LinkError> {
-        self.bus.send(self.host_port, *frame, self.now_us);
+        let now = self.fixture.now_us();
+        self.fixture.bus_mut().send(self.host_port, *frame, now);
         Ok(())
     }
 
@@ -725,7 +388,7 @@ impl Transport for SimEcu {
             if let Some(rx) = self.inbox.pop_front() {
                 return Ok(Some(rx));
             }
-            if self.now_us >= deadline_us {
+            if self.fixture.now_us() >= deadline_us {
                 return Ok(None);
             }
             self.step();

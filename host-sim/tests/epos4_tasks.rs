@@ -5,14 +5,16 @@
 //! the mock clock and the task pools are global.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
-use embassy_executor::{Executor, Spawner};
-use embassy_time::{Duration, MockDriver};
-use host_sim::canbus::{CanBus, RandomFaults};
+#[path = "support/task_scenarios.rs"]
+mod task_scenarios;
+use task_scenarios::{
+    append_resting_steps, assert_settled, controller, in_both_modes, on_plant, plant_effects,
+    with_controller,
+};
+
+use host_sim::canbus::RandomFaults;
 use host_sim::effect_plant::PlantEffects;
-use host_sim::epos4_sim::Epos4Sim;
-use host_sim::sim_ecu::{epos4_ecu, route_to_ecu};
-use std::cell::RefCell;
-use std::sync::Mutex as StdMutex;
+use host_sim::firmware_fixture::{CarPlant, FirmwareFixture, FixtureBuild, STEP_US, SimDrive};
 use steering_ecu::as_state::AsState;
 use steering_ecu::canopen::cia402::State;
 use steering_ecu::canopen::epos4::{Epos4Config, PositionScale, od};
@@ -20,31 +22,9 @@ use steering_ecu::canopen::{NodeId, ObjectAddress};
 use steering_ecu::controller::ControllerKind;
 use steering_ecu::faults::Fault;
 use steering_ecu::gearing::Gearing;
-use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
-use steering_ecu::sensors::ColumnEncoder;
 use steering_ecu::steering::{DriveDemand, EcuState};
-use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
 use steering_ecu::units::SteeringDeg;
-
-static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
-static DRIVE_FRAMES: FrameQueue = FrameQueue::new();
-static TX_FRAMES: FrameQueue = FrameQueue::new();
-/// The column angle the simulated encoder reads, rad (written by the harness each step).
-static COLUMN_RAD: StdMutex<f64> = StdMutex::new(0.0);
-/// One scenario at a time: the mock clock and the queues are shared by the whole binary.
-static SERIAL: StdMutex<()> = StdMutex::new(());
-
-const STEP_US: u64 = 50;
-/// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
-const RUNS: usize = 56;
-/// The controller the next scenario's ECU runs (both drive the same tests).
-static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Paper);
-/// Held by each test for its whole run, so no scenario starts with another test's choice.
-static SCENARIOS: StdMutex<()> = StdMutex::new(());
-/// The plant the next scenario runs, if not the controller's default (paper mode: the paper's
-/// linear plant; ECU mode: play and friction).
-static PLANT_EFFECTS: StdMutex<Option<PlantEffects>> = StdMutex::new(None);
 
 /// How far from a resting reference the column may settle, deg: `lag` on the paper's linear
 /// plant (paper mode), plus, for ECU mode on the plant with play and friction, half the belt
@@ -52,67 +32,18 @@ static PLANT_EFFECTS: StdMutex<Option<PlantEffects>> = StdMutex::new(None);
 /// k_B: 0.30 deg): the column integral takes that back to within 0.3 deg, but over up to 1.7 s
 /// (`ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant`), later than these checks.
 fn settle_tolerance_deg(lag: f64) -> f64 {
-    let kind = CONTROLLER
-        .lock()
-        .map(|c| *c)
-        .unwrap_or(ControllerKind::Paper);
+    let kind = controller();
     match kind {
         ControllerKind::Paper => lag,
         ControllerKind::Ecu => lag + 0.75 + 0.30,
     }
 }
 
-/// Runs `scenario` once with each controller, holding [`SCENARIOS`] throughout so no other
-/// test's scenario starts with this one's choice.
-fn in_both_modes(scenario: impl Fn(ControllerKind)) {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        if let Ok(mut c) = CONTROLLER.lock() {
-            *c = kind;
-        }
-        scenario(kind);
-    }
-}
+/// 50 µs steps in one 10 ms period.
 const PERIOD_STEPS: u64 = 10_000 / STEP_US;
 
 fn node() -> NodeId {
     NodeId::new(1).unwrap()
-}
-
-struct SimEncoder;
-impl ColumnEncoderPort for SimEncoder {
-    async fn read(&mut self) -> Result<u16, EncoderError> {
-        let rad = COLUMN_RAD.lock().map(|v| *v).unwrap_or(f64::NAN);
-        Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad))
-    }
-}
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn reference(ecu: &'static SharedEcu) {
-    tasks::reference_task(REFERENCE_FRAMES.receiver(), ecu).await
-}
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn status(ecu: &'static SharedEcu) {
-    tasks::status_task(TX_FRAMES.sender(), ecu).await
-}
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn encoder(ecu: &'static SharedEcu) {
-    tasks::encoder_task(&mut SimEncoder, ColumnEncoder { zero_raw: 0 }, ecu).await
-}
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn drive(ecu: &'static SharedEcu) {
-    tasks::drive_task(DRIVE_FRAMES.receiver(), TX_FRAMES.sender(), ecu).await
-}
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn keep_awake() {
-    loop {
-        embassy_futures::yield_now().await;
-    }
 }
 
 /// What happens in one 10 ms period.
@@ -177,185 +108,128 @@ fn run(script: &[Event], faults: RandomFaults, seed: u64) -> Run {
 }
 
 /// [`run`] with the actuator at rest at `column_deg` when the drive powers up (its position
-/// counts from there, as the real drive's does).
+/// counts from there, as the real drive's does). The fixture's phases in this test's order:
+/// the tasks polled first, then, at each period boundary, the sample and the vehicle's frame;
+/// the drive's period, the ECU's frames onto the bus, the bus's deliveries.
 fn run_from(column_deg: f64, script: &[Event], faults: RandomFaults, seed: u64) -> Run {
-    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    MockDriver::get().reset();
-    while REFERENCE_FRAMES.try_receive().is_ok() {}
-    while DRIVE_FRAMES.try_receive().is_ok() {}
-    while TX_FRAMES.try_receive().is_ok() {}
-    let kind = CONTROLLER
-        .lock()
-        .map(|c| *c)
-        .unwrap_or(ControllerKind::Paper);
-    let (_, config) = epos4_ecu(kind, 0).unwrap();
+    let kind = controller();
+    let scale = PositionScale::new(Epos4Config::paper(node()).counts_per_rev).unwrap();
     let protocol = ProtocolConfig::default();
-    let mut bus = CanBus::new(seed, 130);
-    let vehicle = bus.attach();
-    let ecu_port = bus.attach();
-    let drive_port = bus.attach();
-    bus.set_random_faults(faults);
-    // ECU mode drives the plant with belt play and rack friction, as a car has them; paper
-    // mode the paper's linear plant.
-    let effects = match (PLANT_EFFECTS.lock().map(|e| *e).unwrap_or(None), kind) {
-        (Some(effects), _) => effects,
-        (None, ControllerKind::Paper) => PlantEffects::NONE,
-        (None, ControllerKind::Ecu) => PlantEffects::PLAY_AND_FRICTION,
-    };
-    let mut sim = Epos4Sim::new_at_with(
-        node(),
-        PositionScale::new(config.counts_per_rev).unwrap(),
-        column_deg.to_radians(),
-        effects,
-    )
-    .unwrap();
-    if let Ok(mut c) = COLUMN_RAD.lock() {
-        *c = sim.column_rad();
-    }
+    let effects = plant_effects(kind);
     // The drive boots before the ECU's link starts: its boot-up message is on the bus first.
-    for f in sim.advance(0) {
-        bus.send(drive_port, f, 0);
-    }
+    let mut fixture = FirmwareFixture::new(FixtureBuild {
+        controller: kind,
+        drive: SimDrive::Epos4,
+        column_rad: column_deg.to_radians(),
+        epos4_effects: effects,
+        direct_plant: CarPlant::new(PlantEffects::NONE, STEP_US as f64 * 1e-6),
+        bus_faults: faults,
+        bus_seed: seed,
+        watchdog: false,
+        reference_delay_us: 0,
+    });
+    let vehicle = fixture.bus_mut().attach();
     let mut counter = AliveCounter::wrapping(0);
     let mut samples = Vec::new();
     let mut status_current = f32::NAN;
     let mut tick: u64 = 0;
     let end = script.len() as u64 * PERIOD_STEPS;
-    let script = script.to_vec();
-    let mut resets = Vec::new();
-    // One pass per life of the ECU: a reset ends the pass, and the next one starts a fresh ECU
-    // with fresh tasks on a fresh executor at the same instant, the drive and the bus running on.
-    loop {
-        let now_us = tick * STEP_US;
-        let reset_at = resets.last().map(|r: &ResetTiming| r.period);
-        let ecu = epos4_ecu(kind, now_us).unwrap().0;
-        let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(ecu))));
-        let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
-        let mut reset = None;
-        executor.run_until(
-            |spawner: Spawner| {
-                spawner.spawn(reference(ecu).unwrap());
-                spawner.spawn(status(ecu).unwrap());
-                spawner.spawn(encoder(ecu).unwrap());
-                spawner.spawn(drive(ecu).unwrap());
-                spawner.spawn(keep_awake().unwrap());
-            },
-            || {
-                let now_us = tick * STEP_US;
-                let period = (tick / PERIOD_STEPS) as usize;
-                if tick.is_multiple_of(PERIOD_STEPS)
-                    && matches!(script.get(period), Some(Event::ResetEcu))
-                    && reset_at != Some(period)
-                {
-                    // What the dead ECU had queued never reaches the bus.
-                    while TX_FRAMES.try_receive().is_ok() {}
-                    while REFERENCE_FRAMES.try_receive().is_ok() {}
-                    while DRIVE_FRAMES.try_receive().is_ok() {}
-                    reset = Some(ResetTiming {
-                        period,
-                        at_us: now_us,
-                        drive_at_reset: sim.cia402_state(),
-                        first_frame_us: None,
-                        power_off_us: None,
-                    });
-                    return true;
-                }
-                if tick.is_multiple_of(PERIOD_STEPS) {
-                    let o = ecu.lock(|e| e.borrow().output());
-                    samples.push(Sample {
-                        demand: o.demand,
-                        state: o.state,
-                        faults: o.faults.bits(),
-                        drive: sim.cia402_state(),
-                        column_deg: sim.column_rad().to_degrees(),
-                        current_a: sim.current_a(),
-                        status_current_a: status_current,
-                        target_deg: {
-                            let inc = sim.object(od::TARGET_POSITION).unwrap_or(0) as i32;
-                            let motor = PositionScale::new(config.counts_per_rev)
-                                .unwrap()
-                                .motor_from_inc(inc);
-                            f64::from(
-                                SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0,
-                            )
-                        },
-                    });
-                    let (as_state, deg, clear) = match script.get(period) {
-                        Some(Event::Ref(a, d)) => (*a, *d, false),
-                        Some(Event::Clear(a, d)) => (*a, *d, true),
-                        Some(Event::DriveFault(a, d)) => {
-                            sim.inject_fault(0x2310);
-                            (*a, *d, false)
-                        }
-                        Some(Event::SilenceDrive(a, d)) => {
-                            bus.silence(drive_port, true);
-                            (*a, *d, false)
-                        }
-                        // The vehicle computer goes on as before across the ECU's reset.
-                        Some(Event::ResetEcu) => {
-                            match script[..period].iter().rev().find_map(|e| match e {
-                                Event::Ref(a, d) | Event::Clear(a, d) => Some((*a, *d)),
-                                _ => None,
-                            }) {
-                                Some((a, d)) => (a, d, false),
-                                None => (AsState::Off, 0.0, false),
-                            }
-                        }
-                        None => (AsState::Off, 0.0, false),
-                    };
-                    counter = counter.next();
-                    let f = protocol.encode_reference(&Reference {
-                        angle: SteeringDeg(deg),
-                        as_state,
-                        counter,
-                        clear_faults: clear,
-                    });
-                    bus.send(vehicle, f, now_us);
-                }
-                for f in sim.advance(now_us) {
-                    bus.send(drive_port, f, now_us);
-                }
-                while let Ok(f) = TX_FRAMES.try_receive() {
-                    if let Some(r) = resets.last_mut()
-                        && r.first_frame_us.is_none()
-                    {
-                        r.first_frame_us = Some(now_us);
-                    }
-                    bus.send(ecu_port, f, now_us);
-                }
-                for (to, f) in bus.deliver(now_us) {
-                    if to == drive_port {
-                        for r in sim.on_frame(&f) {
-                            bus.send(drive_port, r, now_us);
-                        }
-                    } else if to == ecu_port {
-                        route_to_ecu(f, &REFERENCE_FRAMES, &DRIVE_FRAMES);
-                    } else if to == vehicle
-                        && let Ok(status) = protocol.decode_status(&f)
-                    {
-                        status_current = status.current.0;
-                    }
-                }
-                if let Some(r) = resets.last_mut()
-                    && r.power_off_us.is_none()
-                    && sim.cia402_state() == State::SwitchOnDisabled
-                {
-                    r.power_off_us = Some(now_us);
-                }
-                if let Ok(mut c) = COLUMN_RAD.lock() {
-                    *c = sim.column_rad();
-                }
-                MockDriver::get().advance(Duration::from_micros(STEP_US));
-                tick += 1;
-                tick >= end
-            },
-        );
-        match reset {
-            Some(r) => resets.push(r),
-            None => break,
+    let mut resets: Vec<ResetTiming> = Vec::new();
+    while tick < end {
+        fixture.poll_tasks();
+        let now_us = fixture.now_us();
+        let period = (tick / PERIOD_STEPS) as usize;
+        if tick.is_multiple_of(PERIOD_STEPS)
+            && matches!(script.get(period), Some(Event::ResetEcu))
+            && resets.last().map(|r| r.period) != Some(period)
+        {
+            resets.push(ResetTiming {
+                period,
+                at_us: now_us,
+                drive_at_reset: fixture.epos().cia402_state(),
+                first_frame_us: None,
+                power_off_us: None,
+            });
+            // A fresh ECU and fresh tasks at the same instant, the drive and the bus running
+            // on; the fresh tasks are polled before the step goes on.
+            fixture.reset_ecu();
+            continue;
         }
+        if tick.is_multiple_of(PERIOD_STEPS) {
+            let o = fixture.output();
+            let sim = fixture.epos();
+            samples.push(Sample {
+                demand: o.demand,
+                state: o.state,
+                faults: o.faults.bits(),
+                drive: sim.cia402_state(),
+                column_deg: sim.column_rad().to_degrees(),
+                current_a: sim.current_a(),
+                status_current_a: status_current,
+                target_deg: {
+                    let inc = sim.object(od::TARGET_POSITION).unwrap_or(0) as i32;
+                    let motor = scale.motor_from_inc(inc);
+                    f64::from(SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor)).0)
+                },
+            });
+            let (as_state, deg, clear) = match script.get(period) {
+                Some(Event::Ref(a, d)) => (*a, *d, false),
+                Some(Event::Clear(a, d)) => (*a, *d, true),
+                Some(Event::DriveFault(a, d)) => {
+                    fixture.epos_mut().inject_fault(0x2310);
+                    (*a, *d, false)
+                }
+                Some(Event::SilenceDrive(a, d)) => {
+                    let port = fixture.epos_port();
+                    fixture.bus_mut().silence(port, true);
+                    (*a, *d, false)
+                }
+                // The vehicle computer goes on as before across the ECU's reset.
+                Some(Event::ResetEcu) => {
+                    match script[..period].iter().rev().find_map(|e| match e {
+                        Event::Ref(a, d) | Event::Clear(a, d) => Some((*a, *d)),
+                        _ => None,
+                    }) {
+                        Some((a, d)) => (a, d, false),
+                        None => (AsState::Off, 0.0, false),
+                    }
+                }
+                None => (AsState::Off, 0.0, false),
+            };
+            counter = counter.next();
+            let f = protocol.encode_reference(&Reference {
+                angle: SteeringDeg(deg),
+                as_state,
+                counter,
+                clear_faults: clear,
+            });
+            fixture.bus_mut().send(vehicle, f, now_us);
+        }
+        fixture.advance_epos();
+        if fixture.tx_to_bus() > 0
+            && let Some(r) = resets.last_mut()
+            && r.first_frame_us.is_none()
+        {
+            r.first_frame_us = Some(now_us);
+        }
+        for (to, f) in fixture.deliver() {
+            if to == vehicle
+                && let Ok(status) = protocol.decode_status(&f)
+            {
+                status_current = status.current.0;
+            }
+        }
+        if let Some(r) = resets.last_mut()
+            && r.power_off_us.is_none()
+            && fixture.epos().cia402_state() == State::SwitchOnDisabled
+        {
+            r.power_off_us = Some(now_us);
+        }
+        fixture.end_step();
+        tick += 1;
     }
-    let stats = bus.stats();
+    let stats = fixture.bus().stats();
+    let sim = fixture.epos();
     let limits = [
         ObjectAddress::new(0x3001, 2),
         ObjectAddress::new(0x6065, 0),
@@ -517,73 +391,26 @@ fn an_ecu_reset_with_the_drive_enabled_switches_the_power_stage_off_first_in() {
     assert_eq!(r.refusals, 0, "no illegal CiA 402 transition");
 }
 
-/// The resting steps of the settling test, deg at the wheel (from, to): both directions, small
-/// and large, across straight ahead and not.
-const STEPS_DEG: [(f32, f32); 6] = [
-    (0.0, 5.0),
-    (5.0, -5.0),
-    (-5.0, 10.0),
-    (10.0, -10.0),
-    (-10.0, -8.0),
-    (-8.0, 0.0),
-];
-/// How long each step of [`STEPS_DEG`] is held, periods of 10 ms.
-const HOLD_PERIODS: usize = 250;
-
 /// ECU mode settles a resting step within 0.3 deg, on the plant with 1.5 deg of belt play and
-/// 200 N of rack friction and on the paper's linear plant: the steps of [`STEPS_DEG`] at
+/// 200 N of rack friction and on the paper's linear plant: the steps of `STEPS_DEG` at
 /// the protocol's rate, each held 2.5 s. Returns, per plant, the error left at the end of each hold
 /// and the time from the step's last frame until the column stayed within 0.3 deg.
 #[test]
 fn ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant() {
     use AsState::*;
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    if let Ok(mut c) = CONTROLLER.lock() {
-        *c = ControllerKind::Ecu;
-    }
+    let _serial = with_controller(ControllerKind::Ecu);
     let mut script = repeat(Event::Ref(Off, 0.0), 60); // 0-59: bring-up, power off
     script.extend(repeat(Event::Ref(Driving, 0.0), 40)); // 60-99
-    let mut holds = Vec::new();
-    for (from, to) in STEPS_DEG {
-        // At 4 deg per frame, the rate the protocol allows.
-        let n = ((to - from).abs() / 4.0).ceil() as usize;
-        script
-            .extend((1..=n).map(|k| Event::Ref(Driving, from + (to - from) * k as f32 / n as f32)));
-        holds.push((script.len(), to));
-        script.extend(repeat(Event::Ref(Driving, to), HOLD_PERIODS));
-    }
+    let holds = append_resting_steps(&mut script, |deg| Event::Ref(Driving, deg));
     for (name, effects) in [
         ("play and friction", PlantEffects::PLAY_AND_FRICTION),
         ("paper plant", PlantEffects::NONE),
     ] {
-        if let Ok(mut e) = PLANT_EFFECTS.lock() {
-            *e = Some(effects);
-        }
-        let r = run(&script, RandomFaults::default(), 9);
-        if let Ok(mut e) = PLANT_EFFECTS.lock() {
-            *e = None;
-        }
+        let r = on_plant(effects, || run(&script, RandomFaults::default(), 9));
         let s = &r.samples;
         assert!(s.iter().all(|x| x.faults == 0), "{name}: a fault");
-        for &(start, to) in &holds {
-            let end = start + HOLD_PERIODS - 1;
-            let error = |i: usize| s[i].column_deg - f64::from(to);
-            let settled = (start..=end)
-                .rev()
-                .take_while(|&i| error(i).abs() <= 0.3)
-                .last();
-            eprintln!(
-                "EPOS4, ECU mode, {name}: step to {to} deg: {:+.3} deg after 2.5 s, within 0.3 deg \
-                 from {} ms on",
-                error(end),
-                settled.map_or(-1, |i| ((i - start) * 10) as i64)
-            );
-            assert!(
-                error(end).abs() <= 0.3,
-                "{name}: the column settled {:+.2} deg from {to} deg",
-                error(end)
-            );
-        }
+        let column: Vec<f64> = s.iter().map(|x| x.column_deg).collect();
+        assert_settled("EPOS4, ECU mode", name, &column, &holds);
     }
 }
 

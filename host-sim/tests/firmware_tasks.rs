@@ -4,61 +4,31 @@
 //! steering rules, end to end. Own test binary: the mock clock and task pools are global.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
-use canlink::Stamped;
-use embassy_executor::{Executor, Spawner};
-use embassy_time::{Duration, MockDriver};
-use host_sim::effect_plant::{EffectPlant, PlantEffects};
-use host_sim::plant::{Actuator, PlantParams};
-use host_sim::sim_ecu::{
-    CarEffects, STEP_US, SUPPLY_V, SimCar, SimDrive, SimEcu, direct_drive_period_sensed,
+#[path = "support/task_scenarios.rs"]
+mod task_scenarios;
+use task_scenarios::{
+    append_resting_steps, assert_settled, controller, in_both_modes, on_plant, plant_effects,
+    with_controller,
 };
+
+use canlink::Stamped;
+use host_sim::effect_plant::PlantEffects;
+use host_sim::firmware_fixture::{
+    CarPlant, EncoderFault, FirmwareFixture, FixtureBuild, SenseFault, hold_clock,
+};
+use host_sim::sim_ecu::{CarEffects, STEP_US, SimCar, SimDrive, SimEcu};
 use std::cell::RefCell;
-use std::sync::Mutex as StdMutex;
 use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
 use steering_ecu::controller::ControllerKind;
-use steering_ecu::direct::FastLoop;
-use steering_ecu::ecu::{Drive, DriveChoice, Ecu, EcuBuild};
+use steering_ecu::ecu::{Drive, Ecu};
 use steering_ecu::faults::Fault;
-use steering_ecu::ports::{ColumnEncoderPort, EncoderError};
 use steering_ecu::protocol::{AliveCounter, ProtocolConfig, Reference};
-use steering_ecu::sensors::ColumnEncoder;
 use steering_ecu::steering::{DriveDemand, EcuState};
 use steering_ecu::tasks::{self, FrameQueue, SharedEcu};
-use steering_ecu::units::{SteeringDeg, Volts};
+use steering_ecu::units::SteeringDeg;
 
-static REFERENCE_FRAMES: FrameQueue = FrameQueue::new();
-static TX_FRAMES: FrameQueue = FrameQueue::new();
-/// The column angle the simulated encoder reads, rad (written by the harness each step).
-static COLUMN_RAD: StdMutex<f64> = StdMutex::new(0.0);
-/// A sensor fault the scenario injects (set from `at_period`).
-static INJECT: StdMutex<Inject> = StdMutex::new(Inject::None);
-/// Tests that switch the controller hold this for their whole run, so no other test's
-/// scenario starts with their choice (tests that do not take it run paper mode).
-static SCENARIOS: StdMutex<()> = StdMutex::new(());
-/// The plant the next scenario runs, if not the controller's default (paper mode: the paper's
-/// linear plant; ECU mode: play and friction).
-static PLANT_EFFECTS: StdMutex<Option<PlantEffects>> = StdMutex::new(None);
-/// One scenario at a time: the mock clock and the queues are shared by the whole binary.
-static SERIAL: StdMutex<()> = StdMutex::new(());
-/// Scenario runs in this binary: each spawns its own task instances (the tasks never end).
-const RUNS: usize = 40;
-/// The controller the next scenario's ECU runs (both drive the same tests).
-static CONTROLLER: StdMutex<ControllerKind> = StdMutex::new(ControllerKind::Paper);
-
-/// Runs `scenario` once with each controller, holding [`SCENARIOS`] throughout so no other
-/// test's scenario starts with this one's choice.
-fn in_both_modes(scenario: impl Fn(ControllerKind)) {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    for kind in [ControllerKind::Paper, ControllerKind::Ecu] {
-        eprintln!("{kind:?} mode");
-        if let Ok(mut c) = CONTROLLER.lock() {
-            *c = kind;
-        }
-        scenario(kind);
-    }
-}
-
+/// A sensor fault the scenario injects, from a period on (`at_period` sets it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Inject {
     None,
@@ -76,56 +46,20 @@ enum Inject {
     FastLoopStopped,
 }
 
-fn inject() -> Inject {
-    INJECT.lock().map(|v| *v).unwrap_or(Inject::None)
-}
-
-struct SimEncoder;
-impl ColumnEncoderPort for SimEncoder {
-    async fn read(&mut self) -> Result<u16, EncoderError> {
-        let rad = COLUMN_RAD.lock().map(|v| *v).unwrap_or(f64::NAN);
-        match inject() {
-            Inject::EncoderSilent => Err(EncoderError::NoResponse),
-            Inject::EncoderOffsetDeg(d) => {
-                Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad + d.to_radians()))
-            }
-            _ => Ok(ColumnEncoder { zero_raw: 0 }.raw_from_angle(rad)),
-        }
-    }
-}
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn reference(ecu: &'static SharedEcu) {
-    tasks::reference_task(REFERENCE_FRAMES.receiver(), ecu).await
-}
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn status(ecu: &'static SharedEcu) {
-    tasks::status_task(TX_FRAMES.sender(), ecu).await
-}
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn encoder(ecu: &'static SharedEcu) {
-    tasks::encoder_task(&mut SimEncoder, ColumnEncoder { zero_raw: 0 }, ecu).await
-}
-
-/// When the watchdog was fed, us (the harness's stand-in for `IndependentWatchdog::pet`).
-static FEEDS: StdMutex<Vec<u64>> = StdMutex::new(Vec::new());
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn watchdog(ecu: &'static SharedEcu) {
-    tasks::watchdog_task(ecu, || {
-        if let Ok(mut f) = FEEDS.lock() {
-            f.push(embassy_time::Instant::now().as_micros());
-        }
-    })
-    .await
-}
-
-#[embassy_executor::task(pool_size = RUNS)]
-async fn keep_awake() {
-    loop {
-        embassy_futures::yield_now().await;
+impl Inject {
+    /// Puts the injection into the fixture's sensors and fast loop.
+    fn apply(self, fixture: &mut FirmwareFixture) {
+        fixture.set_encoder_fault(match self {
+            Inject::EncoderSilent => EncoderFault::Silent,
+            Inject::EncoderOffsetDeg(d) => EncoderFault::OffsetDeg(d),
+            _ => EncoderFault::None,
+        });
+        fixture.set_sense_fault(match self {
+            Inject::CurrentBiasA(a) => SenseFault::BiasA(f64::from(a)),
+            Inject::CurrentSignFlipped => SenseFault::SignFlipped,
+            _ => SenseFault::None,
+        });
+        fixture.set_fast_loop_running(self != Inject::FastLoopStopped);
     }
 }
 
@@ -151,8 +85,8 @@ struct Sample {
 }
 
 /// Runs the tasks for `script.len()` periods of 10 ms; `at_period` may act on the ECU (the
-/// clear request, which has no frame yet).
-fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample> {
+/// clear request, which has no frame yet) and set the injection.
+fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, &mut Inject)) -> Vec<Sample> {
     run_from(0.0, script, at_period)
 }
 
@@ -161,136 +95,104 @@ fn run(script: &[Send], at_period: impl Fn(usize, &mut Ecu, u64)) -> Vec<Sample>
 fn run_from(
     column_deg: f64,
     script: &[Send],
-    at_period: impl Fn(usize, &mut Ecu, u64),
+    at_period: impl Fn(usize, &mut Ecu, &mut Inject),
 ) -> Vec<Sample> {
-    run_logged(column_deg, script, at_period).0
+    run_logged(column_deg, script, at_period).samples
 }
 
-/// [`run_from`], also returning every frame the ECU's tasks put on the bus, stamped with the
-/// period boundary at which the harness took it off the transmit queue.
+/// A run's samples, every frame the ECU's tasks put on the bus (stamped with the period
+/// boundary at which the harness took it off the transmit queue) and when the watchdog was
+/// fed, us.
+struct Logged {
+    samples: Vec<Sample>,
+    sent: Vec<Stamped>,
+    feeds_us: Vec<u64>,
+}
+
+/// [`run_from`], logged. The fixture's phases in this test's order: the tasks polled first,
+/// then, at each period boundary, the sample, the vehicle's frame straight into the ECU's
+/// reference queue and the transmit queue taken off; then the fast loop.
 fn run_logged(
     column_deg: f64,
     script: &[Send],
-    at_period: impl Fn(usize, &mut Ecu, u64),
-) -> (Vec<Sample>, Vec<Stamped>) {
-    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    MockDriver::get().reset();
-    while REFERENCE_FRAMES.try_receive().is_ok() {}
-    while TX_FRAMES.try_receive().is_ok() {}
-    if let Ok(mut i) = INJECT.lock() {
-        *i = Inject::None;
-    }
-    if let Ok(mut f) = FEEDS.lock() {
-        f.clear();
-    }
-    let kind = CONTROLLER
-        .lock()
-        .map(|c| *c)
-        .unwrap_or(ControllerKind::Paper);
-    let ecu = Ecu::build(EcuBuild::new(kind, DriveChoice::Direct), 0).unwrap();
-    let ecu: &'static SharedEcu = Box::leak(Box::new(SharedEcu::new(RefCell::new(ecu))));
-    let executor: &'static mut Executor = Box::leak(Box::new(Executor::new()));
+    at_period: impl Fn(usize, &mut Ecu, &mut Inject),
+) -> Logged {
+    let kind = controller();
+    let effects = plant_effects(kind);
+    let mut fixture = FirmwareFixture::new(FixtureBuild {
+        controller: kind,
+        drive: SimDrive::Direct,
+        column_rad: column_deg.to_radians(),
+        epos4_effects: PlantEffects::NONE,
+        direct_plant: CarPlant::with_effects(effects, 50e-6),
+        bus_faults: Default::default(),
+        bus_seed: 1,
+        watchdog: true,
+        reference_delay_us: 0,
+    });
     let protocol = ProtocolConfig::default();
-    // ECU mode runs against the plant with belt play and rack friction, as a car has them;
-    // paper mode against the paper's linear plant, its figures' own.
-    let effects = match (PLANT_EFFECTS.lock().map(|e| *e).unwrap_or(None), kind) {
-        (Some(effects), _) => effects,
-        (None, ControllerKind::Paper) => PlantEffects::NONE,
-        (None, ControllerKind::Ecu) => PlantEffects::PLAY_AND_FRICTION,
-    };
-    let mut plant = EffectPlant::new(PlantParams::PAPER, effects, 50e-6).unwrap();
-    plant.set_at_rest(column_deg.to_radians());
-    if let Ok(mut c) = COLUMN_RAD.lock() {
-        *c = plant.column_rad();
-    }
     let mut counter = AliveCounter::wrapping(0);
+    let mut inject = Inject::None;
     let mut samples = Vec::new();
     let mut sent = Vec::new();
-    let mut fast = FastLoop::new(0, Volts(SUPPLY_V as f32));
-    let mut tick: u64 = 0; // 50 us steps
-    let end = script.len() as u64 * 200;
-    let script = script.to_vec();
-    executor.run_until(
-        |spawner: Spawner| {
-            spawner.spawn(reference(ecu).unwrap());
-            spawner.spawn(status(ecu).unwrap());
-            spawner.spawn(encoder(ecu).unwrap());
-            spawner.spawn(watchdog(ecu).unwrap());
-            spawner.spawn(keep_awake().unwrap());
-        },
-        || {
-            let now_us = tick * 50;
-            if tick.is_multiple_of(200) {
-                let period = (tick / 200) as usize;
-                let (demand, state, faults) = ecu.lock(|e| {
-                    let mut e = e.borrow_mut();
-                    at_period(period, &mut e, now_us);
-                    let o = e.output();
-                    (o.demand, o.state, o.faults.bits())
+    let period_steps = 10_000 / STEP_US;
+    for tick in 0..script.len() as u64 * period_steps {
+        fixture.poll_tasks();
+        let now_us = fixture.now_us();
+        if tick.is_multiple_of(period_steps) {
+            let period = (tick / period_steps) as usize;
+            let (demand, state, faults) = fixture.with_ecu(|e| {
+                at_period(period, e, &mut inject);
+                let o = e.output();
+                (o.demand, o.state, o.faults.bits())
+            });
+            inject.apply(&mut fixture);
+            samples.push(Sample {
+                t_ms: now_us / 1000,
+                demand,
+                state,
+                column_deg: fixture.column_rad().to_degrees(),
+                current_a: fixture.current_a(),
+                faults,
+            });
+            let frame = match script.get(period) {
+                Some(Send::Ref(as_state, deg)) => Some((*as_state, *deg, false, false)),
+                Some(Send::Clear(as_state, deg)) => Some((*as_state, *deg, false, true)),
+                Some(Send::CorruptCrc(as_state, deg)) => Some((*as_state, *deg, true, false)),
+                _ => None,
+            };
+            if let Some((as_state, deg, corrupt, clear_faults)) = frame {
+                counter = counter.next();
+                let f = protocol.encode_reference(&Reference {
+                    angle: SteeringDeg(deg),
+                    as_state,
+                    counter,
+                    clear_faults,
                 });
-                samples.push(Sample {
-                    t_ms: now_us / 1000,
-                    demand,
-                    state,
-                    column_deg: plant.column_rad().to_degrees(),
-                    current_a: plant.current_a(),
-                    faults,
-                });
-                let frame = match script.get(period) {
-                    Some(Send::Ref(as_state, deg)) => Some((*as_state, *deg, false, false)),
-                    Some(Send::Clear(as_state, deg)) => Some((*as_state, *deg, false, true)),
-                    Some(Send::CorruptCrc(as_state, deg)) => Some((*as_state, *deg, true, false)),
-                    _ => None,
+                let f = if corrupt {
+                    let mut bytes = [0u8; 8];
+                    bytes.copy_from_slice(f.data());
+                    bytes[0] ^= 0x5A;
+                    Frame::new(f.id(), &bytes).unwrap()
+                } else {
+                    f
                 };
-                if let Some((as_state, deg, corrupt, clear_faults)) = frame {
-                    counter = counter.next();
-                    let f = protocol.encode_reference(&Reference {
-                        angle: SteeringDeg(deg),
-                        as_state,
-                        counter,
-                        clear_faults,
-                    });
-                    let f = if corrupt {
-                        let mut bytes = [0u8; 8];
-                        bytes.copy_from_slice(f.data());
-                        bytes[0] ^= 0x5A;
-                        Frame::new(f.id(), &bytes).unwrap()
-                    } else {
-                        f
-                    };
-                    let _ = REFERENCE_FRAMES.try_send(f);
-                }
-                while let Ok(frame) = TX_FRAMES.try_receive() {
-                    sent.push(Stamped {
-                        t_us: now_us,
-                        frame,
-                    });
-                }
+                fixture.to_ecu(f);
             }
-            // The fast loop, as the firmware's ADC interrupt runs it.
-            let injected = inject();
-            if injected != Inject::FastLoopStopped {
-                direct_drive_period_sensed(
-                    &mut plant,
-                    &mut fast,
-                    ecu,
-                    now_us,
-                    |i| match injected {
-                        Inject::CurrentBiasA(a) => i + f64::from(a),
-                        Inject::CurrentSignFlipped => -i,
-                        _ => i,
-                    },
-                );
-            }
-            if let Ok(mut c) = COLUMN_RAD.lock() {
-                *c = plant.column_rad();
-            }
-            MockDriver::get().advance(Duration::from_micros(50));
-            tick += 1;
-            tick >= end
-        },
-    );
-    (samples, sent)
+            sent.extend(fixture.take_tx().into_iter().map(|frame| Stamped {
+                t_us: now_us,
+                frame,
+            }));
+        }
+        // The fast loop, as the firmware's ADC interrupt runs it.
+        fixture.fast_loop();
+        fixture.end_step();
+    }
+    Logged {
+        samples,
+        sent,
+        feeds_us: fixture.feeds_us(),
+    }
 }
 
 #[test]
@@ -411,11 +313,9 @@ fn sensor_faults_latch(kind: ControllerKind) {
         ),
     ];
     for (name, injection, fault) in cases {
-        let s = run(&script, |period, _, _| {
-            if period >= 30
-                && let Ok(mut i) = INJECT.lock()
-            {
-                *i = injection(period);
+        let s = run(&script, |period, _, inject| {
+            if period >= 30 {
+                *inject = injection(period);
             }
         });
         assert_eq!(s[29].demand, DriveDemand::Track, "{name}: tracking before");
@@ -455,11 +355,9 @@ fn a_runaway_latches_within_50_ms_of_the_saturated_push_in() {
         ("sense reads 30 A high", Inject::CurrentBiasA(30.0)),
         ("sense sign flipped", Inject::CurrentSignFlipped),
     ] {
-        let s = run(&script, |period, _, _| {
-            if period >= 30
-                && let Ok(mut i) = INJECT.lock()
-            {
-                *i = injection;
+        let s = run(&script, |period, _, inject| {
+            if period >= 30 {
+                *inject = injection;
             }
         });
         assert_eq!(s[29].faults, 0, "{name}");
@@ -545,7 +443,7 @@ fn bus_off_ends_reception_and_latches_the_fault_in() {
         }
     }
 
-    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _clock = hold_clock();
     let ecu = SharedEcu::new(RefCell::new(Ecu::paper().unwrap()));
     let queue = FrameQueue::new();
     let frame = Frame::new(StandardId::new(0x100).unwrap(), &[0; 8]).unwrap();
@@ -580,10 +478,7 @@ fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() 
     use steering_ecu::canopen::NodeId;
     use steering_ecu::canopen::epos4::PositionScale;
 
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    if let Ok(mut c) = CONTROLLER.lock() {
-        *c = ControllerKind::Paper;
-    }
+    let _serial = with_controller(ControllerKind::Paper);
     // 0-9 AS Off; 10-29 AS Driving 0 deg; 30-44 nothing (hold, then the timeout latches);
     // 45-49 AS Off, a clear at 50, AS Off to 59; 60-69 Driving; 70-75 six corrupted CRCs (the
     // fifth latches the invalid-frame fault); 76-99 AS Off, long enough for every page.
@@ -596,7 +491,9 @@ fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() 
     script.extend(vec![Send::Ref(AsState::Driving, 0.0); 10]);
     script.extend(vec![Send::CorruptCrc(AsState::Driving, 0.0); 6]);
     script.extend(vec![Send::Ref(AsState::Off, 0.0); 24]);
-    let (s, sent) = run_logged(0.0, &script, |_, _, _| {});
+    let Logged {
+        samples: s, sent, ..
+    } = run_logged(0.0, &script, |_, _, _| {});
     assert!(s[44].faults & (1 << Fault::ReferenceTimeout.bit()) != 0);
     assert_eq!(s[59].faults, 0, "cleared in AS Off");
     assert!(s[76].faults & (1 << Fault::InvalidFrames.bit()) != 0);
@@ -681,71 +578,23 @@ fn the_diagnostic_frame_brings_drop_counters_and_fault_records_to_the_monitor() 
     );
 }
 
-/// The resting steps of the settling test, deg at the wheel (from, to): both directions, small
-/// and large, across straight ahead and not.
-const STEPS_DEG: [(f32, f32); 6] = [
-    (0.0, 5.0),
-    (5.0, -5.0),
-    (-5.0, 10.0),
-    (10.0, -10.0),
-    (-10.0, -8.0),
-    (-8.0, 0.0),
-];
-/// How long each step of [`STEPS_DEG`] is held, periods of 10 ms.
-const HOLD_PERIODS: usize = 250;
-
 /// ECU mode in direct drive settles a resting step within 0.3 deg, on the plant with 1.5 deg of
-/// belt play and 200 N of rack friction and on the paper's linear plant: the steps of [`STEPS_DEG`]
+/// belt play and 200 N of rack friction and on the paper's linear plant: the steps of `STEPS_DEG`
 /// at the protocol's rate, each held 2.5 s.
 #[test]
 fn ecu_mode_settles_a_resting_step_within_0_3_deg_on_either_plant() {
-    let _serial = SCENARIOS.lock().unwrap_or_else(|e| e.into_inner());
-    if let Ok(mut c) = CONTROLLER.lock() {
-        *c = ControllerKind::Ecu;
-    }
+    let _serial = with_controller(ControllerKind::Ecu);
     let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
     script.extend(vec![Send::Ref(AsState::Driving, 0.0); 40]);
-    let mut holds = Vec::new();
-    for (from, to) in STEPS_DEG {
-        // At 4 deg per frame, the rate the protocol allows.
-        let n = ((to - from).abs() / 4.0).ceil() as usize;
-        script.extend(
-            (1..=n).map(|k| Send::Ref(AsState::Driving, from + (to - from) * k as f32 / n as f32)),
-        );
-        holds.push((script.len(), to));
-        script.extend(vec![Send::Ref(AsState::Driving, to); HOLD_PERIODS]);
-    }
+    let holds = append_resting_steps(&mut script, |deg| Send::Ref(AsState::Driving, deg));
     for (name, effects) in [
         ("play and friction", PlantEffects::PLAY_AND_FRICTION),
         ("paper plant", PlantEffects::NONE),
     ] {
-        if let Ok(mut e) = PLANT_EFFECTS.lock() {
-            *e = Some(effects);
-        }
-        let s = run(&script, |_, _, _| {});
-        if let Ok(mut e) = PLANT_EFFECTS.lock() {
-            *e = None;
-        }
+        let s = on_plant(effects, || run(&script, |_, _, _| {}));
         assert!(s.iter().all(|x| x.faults == 0), "{name}: a fault");
-        for &(start, to) in &holds {
-            let end = start + HOLD_PERIODS - 1;
-            let error = |i: usize| s[i].column_deg - f64::from(to);
-            let settled = (start..=end)
-                .rev()
-                .take_while(|&i| error(i).abs() <= 0.3)
-                .last();
-            eprintln!(
-                "direct, ECU mode, {name}: step to {to} deg: {:+.3} deg after 2.5 s, within \
-                 0.3 deg from {} ms on",
-                error(end),
-                settled.map_or(-1, |i| ((i - start) * 10) as i64)
-            );
-            assert!(
-                error(end).abs() <= 0.3,
-                "{name}: the column settled {:+.2} deg from {to} deg",
-                error(end)
-            );
-        }
+        let column: Vec<f64> = s.iter().map(|x| x.column_deg).collect();
+        assert_settled("direct, ECU mode", name, &column, &holds);
     }
 }
 
@@ -761,16 +610,14 @@ fn the_watchdog_is_fed_only_while_both_run() {
     // 0-9 AS Off, 10-59 AS Driving 5 deg; the fast loop stops for periods 20-34.
     let mut script = vec![Send::Ref(AsState::Off, 0.0); 10];
     script.extend(vec![Send::Ref(AsState::Driving, 5.0); 50]);
-    let _ = run(&script, |period, _, _| {
-        if let Ok(mut i) = INJECT.lock() {
-            *i = if (20..35).contains(&period) {
-                Inject::FastLoopStopped
-            } else {
-                Inject::None
-            };
-        }
-    });
-    let feeds = FEEDS.lock().map(|f| f.clone()).unwrap_or_default();
+    let feeds = run_logged(0.0, &script, |period, _, inject| {
+        *inject = if (20..35).contains(&period) {
+            Inject::FastLoopStopped
+        } else {
+            Inject::None
+        };
+    })
+    .feeds_us;
     let ms = |p: u64| p * 10_000;
     let running = |from: u64, to: u64| {
         feeds
@@ -820,9 +667,6 @@ struct EnableCurrent {
 /// at `target_deg` for 1.5 s (the 0.7 s ramp of 60 deg and its settling), sampled every
 /// 50 us.
 fn enable_current(drive: SimDrive, controller: ControllerKind, target_deg: f64) -> EnableCurrent {
-    // The simulated car resets the global mock clock: no scenario of this binary may run
-    // meanwhile.
-    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let mut car = SimEcu::new(SimCar {
         column_deg: 0.0,
         controller,

@@ -6,7 +6,7 @@ use host_sim::gap::model::Effects;
 use host_sim::gap::rig::Rig;
 use host_sim::gap::selftest::{Case, record_of};
 use host_sim::gap::{Options, diagnose};
-use std::io::Write;
+use host_sim::logfmt::{Log, Row};
 
 /// The linear chirp of `host_sim::scenario::Sweep` from 0.2 Hz, deg at the wheel, 100 Hz.
 fn chirp(amplitude: f64, f1: f64, duration_s: f64) -> Vec<f64> {
@@ -19,7 +19,7 @@ fn chirp(amplitude: f64, f1: f64, duration_s: f64) -> Vec<f64> {
     .samples()
 }
 
-/// A log of the paper rig with `effects`, written as `t,ref_sw_deg,sw_deg,motor_rad,current_a`.
+/// A log of the paper rig with `effects`, in the project log format (`logfmt`).
 fn write_log(dir: &std::path::Path, name: &str, effects: Effects) -> std::path::PathBuf {
     write_log_of(dir, name, effects, chirp(6.0, 4.0, 10.0))
 }
@@ -41,23 +41,23 @@ fn write_log_of(
     };
     let rec = record_of(&rig, &case, 11);
     let per = motor_per_pinion();
-    let path = dir.join(name);
-    let mut f = std::fs::File::create(&path).expect("create log");
-    writeln!(f, "t,ref_sw_deg,sw_deg,motor_rad,current_a").expect("write");
     let motor = rec.motor.clone().unwrap_or_default();
+    let mut log = Log::new();
     #[allow(clippy::needless_range_loop)]
     for k in 0..rec.len() {
-        writeln!(
-            f,
-            "{:.4},{:.4},{:.4},{:.5},{:.4}",
-            (k + 1) as f64 * 0.01,
-            rec.reference[k],
-            rec.output[k],
-            motor[k].to_radians() * per,
-            rec.effort[k]
-        )
-        .expect("write");
+        log.push(
+            Row {
+                t: (k + 1) as f64 * 0.01,
+                ref_sw_deg: rec.reference[k],
+                sw_deg: rec.output[k],
+                motor_rad: motor[k].to_radians() * per,
+                current_a: rec.effort[k],
+            },
+            &[],
+        );
     }
+    let path = dir.join(name);
+    log.save(&path).expect("write log");
     path
 }
 
@@ -241,19 +241,13 @@ fn the_segment_replay_puts_a_delay_before_the_motor_and_backlash_after_it() {
 /// current of the row `rows` before it; the first rows repeat the first current): a current
 /// that reaches the logger later than the angles, made here on the file, not by the model.
 fn current_late_by_rows(path: &std::path::Path, rows: usize) -> std::path::PathBuf {
-    let text = std::fs::read_to_string(path).expect("read log");
-    let mut lines = text.lines();
-    let header = lines.next().expect("header");
-    let rows_in: Vec<Vec<String>> = lines
-        .map(|l| l.split(',').map(str::to_string).collect())
-        .collect();
-    let out = path.with_extension("late.csv");
-    let mut f = std::fs::File::create(&out).expect("create log");
-    writeln!(f, "{header}").expect("write");
-    for (k, row) in rows_in.iter().enumerate() {
-        let late = &rows_in[k.saturating_sub(rows)][4];
-        writeln!(f, "{},{},{},{},{}", row[0], row[1], row[2], row[3], late).expect("write");
+    let mut log = Log::load(path).expect("read log");
+    let prompt = log.current_a.clone();
+    for (k, current) in log.current_a.iter_mut().enumerate() {
+        *current = prompt[k.saturating_sub(rows)];
     }
+    let out = path.with_extension("late.csv");
+    log.save(&out).expect("write log");
     out
 }
 

@@ -127,67 +127,88 @@ impl FakeEpos4 {
     }
 }
 
-/// One millisecond of the drive task: the drive's answers to what the ECU sent in the
-/// previous one (a bus round trip later) go to the ECU, then the ECU polls; everything the
-/// ECU sends goes to the drive. The frames the ECU sent, in order.
-fn step(ecu: &mut Ecu, drive: &mut FakeEpos4, t: u64) -> Vec<Frame> {
-    let answers = std::mem::take(&mut drive.answers);
-    let mut sent = Vec::new();
-    for answer in &answers {
-        sent.extend(ecu.on_drive_frame(t, answer));
-    }
-    sent.extend(ecu.drive_poll(t));
-    for f in &sent {
-        let answers = drive.on_frame(f);
-        drive.answers.extend(answers);
-    }
-    sent
+/// The ECU in EPOS4 mode, the fake drive on the other end of its link and the
+/// vehicle computer: the set-up every test of this file starts from.
+struct Bench {
+    ecu: Ecu,
+    drive: FakeEpos4,
+    vehicle: Vehicle,
+    /// What the link sent when it started (at 0).
+    started: Vec<Frame>,
 }
 
-/// An EPOS4-mode ECU (paper mode) whose drive powered up at `position_inc`, started at 0.
-fn epos4_ecu(position_inc: i32) -> (Ecu, FakeEpos4, Vec<Frame>) {
-    let config = Epos4Config::paper(node());
-    let mut ecu = Ecu::build(
-        EcuBuild::new(ControllerKind::Paper, DriveChoice::Epos4(config)),
-        0,
-    )
-    .unwrap();
-    let mut drive = FakeEpos4::new(position_inc);
-    let sent = ecu.drive_start(0).to_vec();
-    for f in &sent {
-        let answers = drive.on_frame(f);
-        drive.answers.extend(answers);
+impl Bench {
+    /// The ECU started at 0, its drive powered up at `position_inc`.
+    fn new(position_inc: i32) -> Bench {
+        Bench::with(
+            ControllerKind::Paper,
+            Epos4Config::paper(node()),
+            position_inc,
+        )
     }
-    (ecu, drive, sent)
-}
 
-/// Runs the car from `from` to `to` as the firmware's tasks do: the drive task every 1 ms,
-/// the encoder (column at `column`) and the vehicle's frame (`as_state`, `deg`; none for
-/// a NaN `deg`) every 10 ms. Every frame the ECU sent.
-#[allow(clippy::too_many_arguments)]
-fn run(
-    ecu: &mut Ecu,
-    drive: &mut FakeEpos4,
-    vehicle: &mut Vehicle,
-    from: u64,
-    to: u64,
-    as_state: AsState,
-    deg: f32,
-    column: f32,
-) -> Vec<Frame> {
-    let mut sent = Vec::new();
-    let mut t = from;
-    while t < to {
-        if (t - from).is_multiple_of(10 * MS) {
-            let _ = ecu.on_encoder(t, SteeringDeg(column));
-            if !deg.is_nan() {
-                let _ = vehicle.send(ecu, t, as_state, deg);
-            }
+    /// [`Bench::new`] with `controller` and the link's `config`.
+    fn with(controller: ControllerKind, config: Epos4Config, position_inc: i32) -> Bench {
+        let mut ecu = Ecu::build(EcuBuild::new(controller, DriveChoice::Epos4(config)), 0).unwrap();
+        let mut drive = FakeEpos4::new(position_inc);
+        let started = ecu.drive_start(0).to_vec();
+        for f in &started {
+            let answers = drive.on_frame(f);
+            drive.answers.extend(answers);
         }
-        sent.extend(step(ecu, drive, t));
-        t += MS;
+        Bench {
+            ecu,
+            drive,
+            vehicle: Vehicle::new(),
+            started,
+        }
     }
-    sent
+
+    /// Tracking 0 deg in AS Driving at the returned time (400 ms), the drive at 500.
+    fn tracking() -> (Bench, u64) {
+        let mut b = Bench::new(500);
+        let t = 400 * MS;
+        let _ = b.run(0, t, AsState::Driving, 0.0, 0.0);
+        let log: Vec<_> = b.ecu.machine().fault_log().iter().copied().collect();
+        assert_eq!(b.ecu.output().state, EcuState::Tracking, "{log:?}");
+        (b, t)
+    }
+
+    /// One millisecond of the drive task: the drive's answers to what the ECU sent in the
+    /// previous one (a bus round trip later) go to the ECU, then the ECU polls; everything the
+    /// ECU sends goes to the drive. The frames the ECU sent, in order.
+    fn step(&mut self, t: u64) -> Vec<Frame> {
+        let answers = std::mem::take(&mut self.drive.answers);
+        let mut sent = Vec::new();
+        for answer in &answers {
+            sent.extend(self.ecu.on_drive_frame(t, answer));
+        }
+        sent.extend(self.ecu.drive_poll(t));
+        for f in &sent {
+            let answers = self.drive.on_frame(f);
+            self.drive.answers.extend(answers);
+        }
+        sent
+    }
+
+    /// Runs the car from `from` to `to` as the firmware's tasks do: the drive task every 1 ms,
+    /// the encoder (column at `column`) and the vehicle's frame (`as_state`, `deg`; none for
+    /// a NaN `deg`) every 10 ms. Every frame the ECU sent.
+    fn run(&mut self, from: u64, to: u64, as_state: AsState, deg: f32, column: f32) -> Vec<Frame> {
+        let mut sent = Vec::new();
+        let mut t = from;
+        while t < to {
+            if (t - from).is_multiple_of(10 * MS) {
+                let _ = self.ecu.on_encoder(t, SteeringDeg(column));
+                if !deg.is_nan() {
+                    let _ = self.vehicle.send(&mut self.ecu, t, as_state, deg);
+                }
+            }
+            sent.extend(self.step(t));
+            t += MS;
+        }
+        sent
+    }
 }
 
 fn is_disable(f: &Frame) -> bool {
@@ -200,53 +221,30 @@ fn is_disable(f: &Frame) -> bool {
 /// column stood at 0).
 #[test]
 fn the_ecu_brings_the_epos4_up_and_steers_it() {
-    let (mut ecu, mut drive, sent) = epos4_ecu(500);
+    let mut b = Bench::new(500);
+    let sent = b.started.clone();
     assert!(!sent.is_empty(), "no configuration frame at the start");
-    let mut vehicle = Vehicle::new();
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        0,
-        200 * MS,
-        AsState::Off,
-        0.0,
-        0.0,
+    let _ = b.run(0, 200 * MS, AsState::Off, 0.0, 0.0);
+    assert_eq!(b.ecu.link().map(|l| l.phase()), Some(Phase::Standby));
+    assert_eq!(b.ecu.output().state, EcuState::Idle);
+    assert_eq!(b.ecu.motor_origin_counts(), Some(500));
+    let _ = b.run(200 * MS, 400 * MS, AsState::Driving, 0.0, 0.0);
+    assert_eq!(b.drive.state, State::OperationEnabled);
+    assert_eq!(b.ecu.output().state, EcuState::Tracking);
+    assert!(
+        b.ecu.output().faults.is_empty(),
+        "{:?}",
+        b.ecu.output().faults
     );
-    assert_eq!(ecu.link().map(|l| l.phase()), Some(Phase::Standby));
-    assert_eq!(ecu.output().state, EcuState::Idle);
-    assert_eq!(ecu.motor_origin_counts(), Some(500));
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        200 * MS,
-        400 * MS,
-        AsState::Driving,
-        0.0,
-        0.0,
-    );
-    assert_eq!(drive.state, State::OperationEnabled);
-    assert_eq!(ecu.output().state, EcuState::Tracking);
-    assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
-    assert_eq!(drive.targets.last(), Some(&500));
+    assert_eq!(b.drive.targets.last(), Some(&500));
     // 10 deg at the wheel, reached through the enable ramp.
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        400 * MS,
-        600 * MS,
-        AsState::Driving,
-        10.0,
-        0.0,
-    );
-    let scale = ecu.link().unwrap().scale();
+    let _ = b.run(400 * MS, 600 * MS, AsState::Driving, 10.0, 0.0);
+    let scale = b.ecu.link().unwrap().scale();
     let want = scale
         .inc_from_motor(Gearing::PAPER.motor_from_steering(SteeringDeg(10.0).into()))
         .unwrap();
-    assert_eq!(drive.targets.last(), Some(&(500 + want)));
-    assert_eq!(ecu.pending_overflow(), 0);
+    assert_eq!(b.drive.targets.last(), Some(&(500 + want)));
+    assert_eq!(b.ecu.pending_overflow(), 0);
 }
 
 /// The CSP target for `deg` at the wheel, in the drive's increments from the origin.
@@ -255,49 +253,29 @@ fn inc_at(ecu: &Ecu, deg: f32) -> i32 {
     ecu.link().unwrap().scale().inc_from_motor(motor).unwrap()
 }
 
-/// An EPOS4-mode ECU tracking 0 deg in AS Driving at 400 ms, the drive at 500.
-fn tracking_epos4() -> (Ecu, FakeEpos4, Vehicle, u64) {
-    let (mut ecu, mut drive, _) = epos4_ecu(500);
-    let mut vehicle = Vehicle::new();
-    let t = 400 * MS;
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        0,
-        t,
-        AsState::Driving,
-        0.0,
-        0.0,
-    );
-    let log: Vec<_> = ecu.machine().fault_log().iter().copied().collect();
-    assert_eq!(ecu.output().state, EcuState::Tracking, "{log:?}");
-    (ecu, drive, vehicle, t)
-}
-
 /// A demand change found outside the drive calls (here the reference timeout, seen by
 /// the supervisor's tick) leaves its disable for the next drive poll: on the bus within
 /// 1 ms, before anything else.
 #[test]
 fn a_disable_decided_by_a_tick_goes_out_first_at_the_next_drive_poll() {
-    let (mut ecu, mut drive, _, t0) = tracking_epos4();
+    let (mut b, t0) = Bench::tracking();
     // The vehicle falls silent; the encoder and the supervisor keep running.
     let mut t = t0;
     let disabled_at = loop {
         t += MS;
         if (t - t0).is_multiple_of(2 * MS) {
-            let _ = ecu.on_encoder(t, SteeringDeg(0.0));
+            let _ = b.ecu.on_encoder(t, SteeringDeg(0.0));
         }
-        if ecu.tick(t).demand == DriveDemand::Disabled {
+        if b.ecu.tick(t).demand == DriveDemand::Disabled {
             break t;
         }
-        let _ = step(&mut ecu, &mut drive, t);
+        let _ = b.step(t);
         assert!(t < t0 + 200 * MS, "never disabled");
     };
-    let sent = step(&mut ecu, &mut drive, disabled_at);
+    let sent = b.step(disabled_at);
     assert!(sent.first().is_some_and(is_disable), "{sent:?}");
-    assert_eq!(drive.state, State::SwitchOnDisabled);
-    assert!(ecu.output().faults.contains(Fault::ReferenceTimeout));
+    assert_eq!(b.drive.state, State::SwitchOnDisabled);
+    assert!(b.ecu.output().faults.contains(Fault::ReferenceTimeout));
 }
 
 /// The drive's current (TPDO2) feeds the over-current check: 30 A in the drive's 10 ms
@@ -305,39 +283,30 @@ fn a_disable_decided_by_a_tick_goes_out_first_at_the_next_drive_poll() {
 /// the drive's current.
 #[test]
 fn the_drives_current_feeds_the_over_current_check_and_the_frames() {
-    let (mut ecu, mut drive, mut vehicle, t0) = tracking_epos4();
-    drive.current_ma = 5_000;
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        t0,
-        t0 + 20 * MS,
-        AsState::Driving,
-        0.0,
-        0.0,
-    );
+    let (mut b, t0) = Bench::tracking();
+    b.drive.current_ma = 5_000;
+    let _ = b.run(t0, t0 + 20 * MS, AsState::Driving, 0.0, 0.0);
     let protocol = ProtocolConfig::default();
-    let status = protocol.decode_status(&ecu.status_frame()).unwrap();
+    let status = protocol.decode_status(&b.ecu.status_frame()).unwrap();
     assert!((status.current.0 - 5.0).abs() < 0.1, "{:?}", status.current);
-    let motor = protocol.decode_motor(&ecu.motor_frame()).unwrap();
+    let motor = protocol.decode_motor(&b.ecu.motor_frame()).unwrap();
     assert!(
         (motor.current_mean.0 - 5.0).abs() < 0.1,
         "{:?}",
         motor.current_mean
     );
-    drive.current_ma = 30_000;
+    b.drive.current_ma = 30_000;
     let t1 = t0 + 20 * MS;
     let mut latched_at = None;
     for k in 0..40 {
         let t = t1 + k * MS;
-        let _ = step(&mut ecu, &mut drive, t);
-        if latched_at.is_none() && ecu.output().faults.contains(Fault::OverCurrent) {
+        let _ = b.step(t);
+        if latched_at.is_none() && b.ecu.output().faults.contains(Fault::OverCurrent) {
             latched_at = Some(t - t1);
         }
     }
     assert!(latched_at.is_some_and(|at| at <= 20 * MS), "{latched_at:?}");
-    assert_eq!(drive.state, State::SwitchOnDisabled);
+    assert_eq!(b.drive.state, State::SwitchOnDisabled);
 }
 
 /// An EMCY from the drive latches `EposFault` with its code. The failed link is not
@@ -345,7 +314,7 @@ fn the_drives_current_feeds_the_over_current_check_and_the_frames() {
 /// once a second; back in Standby the cause is gone and a clear request clears.
 #[test]
 fn a_failed_link_is_reset_only_in_as_off_and_at_most_once_a_second() {
-    let (mut ecu, mut drive, mut vehicle, t0) = tracking_epos4();
+    let (mut b, t0) = Bench::tracking();
     let emcy = crate::canopen::emcy::Emcy {
         error_code: 0x3210,
         error_register: 0x04,
@@ -353,121 +322,83 @@ fn a_failed_link_is_reset_only_in_as_off_and_at_most_once_a_second() {
     }
     .to_frame(node())
     .unwrap();
-    let _ = ecu.on_drive_frame(t0, &emcy);
-    let out = ecu.output();
+    let _ = b.ecu.on_drive_frame(t0, &emcy);
+    let out = b.ecu.output();
     assert!(out.faults.contains(Fault::EposFault), "{out:?}");
-    let record = ecu.machine().fault_log().iter().last().copied();
+    let record = b.ecu.machine().fault_log().iter().last().copied();
     assert_eq!(
         record.map(|r| (r.fault, r.detail)),
         Some((Fault::EposFault, 0x3210))
     );
     let t1 = t0 + 2000 * MS;
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        t0,
-        t1,
-        AsState::Driving,
-        0.0,
-        0.0,
-    );
+    let _ = b.run(t0, t1, AsState::Driving, 0.0, 0.0);
     assert!(
-        ecu.link().unwrap().error().is_some(),
+        b.ecu.link().unwrap().error().is_some(),
         "reset while AS Driving"
     );
     // A clear asked for in AS Driving is refused, and counted.
-    assert_eq!(ecu.clear_refusals(), 0);
-    let f = vehicle.frame(AsState::Driving, 0.0, true);
-    let _ = ecu.on_reference_frame(t1, &f);
-    assert_eq!(ecu.clear_refusals(), 1);
+    assert_eq!(b.ecu.clear_refusals(), 0);
+    let f = b.vehicle.frame(AsState::Driving, 0.0, true);
+    let _ = b.ecu.on_reference_frame(t1, &f);
+    assert_eq!(b.ecu.clear_refusals(), 1);
     // AS Off: reset at once, the link is back in Standby within 100 ms.
     let t2 = t1 + 100 * MS;
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        t1,
-        t2,
-        AsState::Off,
-        0.0,
-        0.0,
-    );
-    assert_eq!(ecu.link().unwrap().phase(), Phase::Standby);
+    let _ = b.run(t1, t2, AsState::Off, 0.0, 0.0);
+    assert_eq!(b.ecu.link().unwrap().phase(), Phase::Standby);
     // A second failure 100 ms later waits for the second's end (t1 + 1 s).
-    let _ = ecu.on_drive_frame(t2, &emcy);
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        t2,
-        t1 + 990 * MS,
-        AsState::Off,
-        0.0,
-        0.0,
-    );
+    let _ = b.ecu.on_drive_frame(t2, &emcy);
+    let _ = b.run(t2, t1 + 990 * MS, AsState::Off, 0.0, 0.0);
     assert!(
-        ecu.link().unwrap().error().is_some(),
+        b.ecu.link().unwrap().error().is_some(),
         "reset within the second"
     );
     let t3 = t1 + 1100 * MS;
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        t1 + 990 * MS,
-        t3,
-        AsState::Off,
-        0.0,
-        0.0,
-    );
-    assert_eq!(ecu.link().unwrap().phase(), Phase::Standby);
+    let _ = b.run(t1 + 990 * MS, t3, AsState::Off, 0.0, 0.0);
+    assert_eq!(b.ecu.link().unwrap().phase(), Phase::Standby);
     // The cause is gone: the clear bit's rising edge clears.
-    let f = vehicle.frame(AsState::Off, 0.0, true);
-    let out = ecu.on_reference_frame(t3, &f);
+    let f = b.vehicle.frame(AsState::Off, 0.0, true);
+    let out = b.ecu.on_reference_frame(t3, &f);
     assert!(out.faults.is_empty(), "{:?}", out.faults);
-    assert_eq!(ecu.clear_refusals(), 1);
+    assert_eq!(b.ecu.clear_refusals(), 1);
 }
 
 /// EPOS4 mode: the enable ramp starts where the column is once the drive is in Operation
 /// enabled, and the CSP target then moves at most the ramp's speed toward a far reference.
 #[test]
 fn an_epos4_enable_ramps_the_target_from_the_column() {
-    let (mut ecu, mut drive, _) = epos4_ecu(500);
-    let mut vehicle = Vehicle::new();
+    let mut b = Bench::new(500);
     // The link comes up with no vehicle frame yet ...
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        0,
-        200 * MS,
-        AsState::Off,
-        f32::NAN,
-        0.0,
-    );
+    let _ = b.run(0, 200 * MS, AsState::Off, f32::NAN, 0.0);
     // ... which asks for 30 deg from its first frame, in AS Driving, on. The motor follows
     // each target and the column the motor (a stiff belt).
-    drive.follows = true;
+    b.drive.follows = true;
     let mut t = 200 * MS;
     while t < 900 * MS {
         if t.is_multiple_of(10 * MS) {
-            let motor = ecu.motor_angle();
+            let motor = b.ecu.motor_angle();
             let column = SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor));
-            let _ = ecu.on_encoder(t, column);
-            let _ = vehicle.send(&mut ecu, t, AsState::Driving, 30.0);
+            let _ = b.ecu.on_encoder(t, column);
+            let _ = b.vehicle.send(&mut b.ecu, t, AsState::Driving, 30.0);
         }
-        let _ = step(&mut ecu, &mut drive, t);
+        let _ = b.step(t);
         t += MS;
     }
-    assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
+    assert!(
+        b.ecu.output().faults.is_empty(),
+        "{:?}",
+        b.ecu.output().faults
+    );
     // The ramp's speed for a 10 ms cycle, one increment of rounding.
-    let per_cycle = inc_at(&ecu, ENABLE_RAMP_DPS * 0.01) + 1;
-    let steps: Vec<i32> = drive.targets.windows(2).map(|w| w[1] - w[0]).collect();
-    assert!(drive.targets.first() == Some(&500), "{:?}", drive.targets);
+    let per_cycle = inc_at(&b.ecu, ENABLE_RAMP_DPS * 0.01) + 1;
+    let steps: Vec<i32> = b.drive.targets.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(
+        b.drive.targets.first() == Some(&500),
+        "{:?}",
+        b.drive.targets
+    );
     assert!(steps.iter().all(|s| s.abs() <= per_cycle), "{steps:?}");
     // 30 deg at the ramp's speed and acceleration: there after 0.5 s of the 0.7 s.
-    assert_eq!(drive.targets.last(), Some(&(500 + inc_at(&ecu, 30.0))));
+    assert_eq!(b.drive.targets.last(), Some(&(500 + inc_at(&b.ecu, 30.0))));
 }
 
 /// The origin comes from the column: a drive that powered up at 500 increments with the
@@ -475,35 +406,16 @@ fn an_epos4_enable_ramps_the_target_from_the_column() {
 /// angle reads 5 deg at the wheel.
 #[test]
 fn the_epos4_origin_is_taken_from_the_column() {
-    let (mut ecu, mut drive, _) = epos4_ecu(500);
-    let mut vehicle = Vehicle::new();
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        0,
-        200 * MS,
-        AsState::Off,
-        0.0,
-        5.0,
-    );
-    let origin = 500 - inc_at(&ecu, 5.0);
-    assert_eq!(ecu.motor_origin_counts(), Some(origin));
-    let wheel = SteeringDeg::from(Gearing::PAPER.steering_from_motor(ecu.motor_angle()));
-    let resolution = 360.0 / inc_at(&ecu, 360.0) as f32;
+    let mut b = Bench::new(500);
+    let _ = b.run(0, 200 * MS, AsState::Off, 0.0, 5.0);
+    let origin = 500 - inc_at(&b.ecu, 5.0);
+    assert_eq!(b.ecu.motor_origin_counts(), Some(origin));
+    let wheel = SteeringDeg::from(Gearing::PAPER.steering_from_motor(b.ecu.motor_angle()));
+    let resolution = 360.0 / inc_at(&b.ecu, 360.0) as f32;
     assert!((wheel.0 - 5.0).abs() <= resolution, "{wheel:?}");
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        200 * MS,
-        400 * MS,
-        AsState::Driving,
-        5.0,
-        5.0,
-    );
-    assert_eq!(ecu.output().state, EcuState::Tracking);
-    assert_eq!(drive.targets.last(), Some(&500));
+    let _ = b.run(200 * MS, 400 * MS, AsState::Driving, 5.0, 5.0);
+    assert_eq!(b.ecu.output().state, EcuState::Tracking);
+    assert_eq!(b.drive.targets.last(), Some(&500));
 }
 
 /// Direct mode: the origin is the Hall count nearest to the column's angle through the
@@ -571,32 +483,13 @@ fn a_motor_turning_without_the_column_is_a_disagreement() {
 /// reference is 30 deg away) latches `TrackingError` through the ECU's encoder path.
 #[test]
 fn an_epos4_that_does_not_follow_latches_a_tracking_error() {
-    let (mut ecu, mut drive, _) = epos4_ecu(500);
-    let mut vehicle = Vehicle::new();
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        0,
-        200 * MS,
-        AsState::Off,
-        f32::NAN,
-        0.0,
-    );
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        200 * MS,
-        1200 * MS,
-        AsState::Driving,
-        30.0,
-        0.0,
-    );
+    let mut b = Bench::new(500);
+    let _ = b.run(0, 200 * MS, AsState::Off, f32::NAN, 0.0);
+    let _ = b.run(200 * MS, 1200 * MS, AsState::Driving, 30.0, 0.0);
     assert!(
-        ecu.output().faults.contains(Fault::TrackingError),
+        b.ecu.output().faults.contains(Fault::TrackingError),
         "{:?}",
-        ecu.output()
+        b.ecu.output()
     );
 }
 
@@ -626,34 +519,15 @@ fn ecu_mode_runs_its_cascade_direct_and_its_feedforward_on_the_epos4() {
 
     let mut config = Epos4Config::paper(node());
     config.gains = gains;
-    let mut ecu = Ecu::build(
-        EcuBuild::new(ControllerKind::Ecu, DriveChoice::Epos4(config)),
-        0,
-    )
-    .unwrap();
-    let mut drive = FakeEpos4::new(500);
-    for f in ecu.drive_start(0) {
-        let answers = drive.on_frame(&f);
-        drive.answers.extend(answers);
-    }
-    let mut vehicle = Vehicle::new();
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        0,
-        400 * MS,
-        AsState::Driving,
-        0.0,
-        0.0,
-    );
-    assert_eq!(ecu.output().state, EcuState::Tracking);
-    let written = drive.od.get(&od::POSITION_FF_VELOCITY).copied();
+    let mut b = Bench::with(ControllerKind::Ecu, config, 500);
+    let _ = b.run(0, 400 * MS, AsState::Driving, 0.0, 0.0);
+    assert_eq!(b.ecu.output().state, EcuState::Tracking);
+    let written = b.drive.od.get(&od::POSITION_FF_VELOCITY).copied();
     assert_eq!(
         written,
         Some((gains.ff_velocity_ma_s_per_rad * 1000.0).round() as u32)
     );
-    assert_eq!(drive.targets.last(), Some(&500));
+    assert_eq!(b.drive.targets.last(), Some(&500));
 }
 
 /// A frame whose angle breaks the rate rule is dropped; its AS state counts only when it
@@ -718,10 +592,10 @@ fn the_progress_counts_and_the_supervisors_time_follow_the_calls() {
     ecu.fast_loop_ran();
     ecu.fast_loop_ran();
     assert_eq!((ecu.progress().supervisor, ecu.progress().fast), (4, 2));
-    let (mut ecu, mut drive, _) = epos4_ecu(0);
-    let _ = step(&mut ecu, &mut drive, MS);
-    let _ = step(&mut ecu, &mut drive, 2 * MS);
-    assert_eq!(ecu.progress().fast, 2);
+    let mut b = Bench::new(0);
+    let _ = b.step(MS);
+    let _ = b.step(2 * MS);
+    assert_eq!(b.ecu.progress().fast, 2);
 }
 
 /// Direct mode: after a stall (bridge off, cascade not stepped) the fast loop restarts
@@ -758,7 +632,7 @@ fn a_resync_restarts_the_cascade_at_the_motor() {
 /// one asked for right after the call that brought the link up is granted.
 #[test]
 fn a_drive_fault_clears_only_once_the_link_is_back_up() {
-    let (mut ecu, mut drive, mut vehicle, t0) = tracking_epos4();
+    let (mut b, t0) = Bench::tracking();
     let emcy = crate::canopen::emcy::Emcy {
         error_code: 0x3210,
         error_register: 0x04,
@@ -766,30 +640,21 @@ fn a_drive_fault_clears_only_once_the_link_is_back_up() {
     }
     .to_frame(node())
     .unwrap();
-    let _ = ecu.on_drive_frame(t0, &emcy);
+    let _ = b.ecu.on_drive_frame(t0, &emcy);
     // Still in AS Driving (no reset): the link stays failed for 20 ms of drive polls.
     let t1 = t0 + 20 * MS;
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        t0,
-        t1,
-        AsState::Driving,
-        0.0,
-        0.0,
-    );
-    assert!(ecu.link().unwrap().error().is_some());
+    let _ = b.run(t0, t1, AsState::Driving, 0.0, 0.0);
+    assert!(b.ecu.link().unwrap().error().is_some());
     // AS Off and a clear at once, before the next drive poll resets the link: refused.
-    let _ = vehicle.send(&mut ecu, t1, AsState::Off, 0.0);
-    let f = vehicle.frame(AsState::Off, 0.0, true);
-    let out = ecu.on_reference_frame(t1, &f);
+    let _ = b.vehicle.send(&mut b.ecu, t1, AsState::Off, 0.0);
+    let f = b.vehicle.frame(AsState::Off, 0.0, true);
+    let out = b.ecu.on_reference_frame(t1, &f);
     assert!(
         out.faults.contains(Fault::EposFault),
         "cleared while failed"
     );
     // The bit low again, so the next request is a rising edge.
-    let _ = vehicle.send(&mut ecu, t1, AsState::Off, 0.0);
+    let _ = b.vehicle.send(&mut b.ecu, t1, AsState::Off, 0.0);
     // Run the drive task until the call that brings the link up; clear right after it.
     let up = |ecu: &Ecu| {
         matches!(
@@ -802,27 +667,27 @@ fn a_drive_fault_clears_only_once_the_link_is_back_up() {
         t += MS;
         assert!(t < t1 + 500 * MS, "the link never came back");
         if (t - t1).is_multiple_of(10 * MS) {
-            let _ = ecu.on_encoder(t, SteeringDeg(0.0));
-            let _ = vehicle.send(&mut ecu, t, AsState::Off, 0.0);
+            let _ = b.ecu.on_encoder(t, SteeringDeg(0.0));
+            let _ = b.vehicle.send(&mut b.ecu, t, AsState::Off, 0.0);
         }
         let mut sent = Vec::new();
-        for answer in std::mem::take(&mut drive.answers) {
-            sent.extend(ecu.on_drive_frame(t, &answer));
-            if up(&ecu) {
+        for answer in std::mem::take(&mut b.drive.answers) {
+            sent.extend(b.ecu.on_drive_frame(t, &answer));
+            if up(&b.ecu) {
                 break 'up;
             }
         }
-        sent.extend(ecu.drive_poll(t));
-        if up(&ecu) {
+        sent.extend(b.ecu.drive_poll(t));
+        if up(&b.ecu) {
             break;
         }
         for f in &sent {
-            let answers = drive.on_frame(f);
-            drive.answers.extend(answers);
+            let answers = b.drive.on_frame(f);
+            b.drive.answers.extend(answers);
         }
     }
-    let f = vehicle.frame(AsState::Off, 0.0, true);
-    let out = ecu.on_reference_frame(t, &f);
+    let f = b.vehicle.frame(AsState::Off, 0.0, true);
+    let out = b.ecu.on_reference_frame(t, &f);
     assert!(out.faults.is_empty(), "{:?}", out.faults);
 }
 
@@ -831,38 +696,33 @@ fn a_drive_fault_clears_only_once_the_link_is_back_up() {
 /// 10 ms SYNC cycle, however the frames fall between SYNCs.
 #[test]
 fn after_a_gap_the_epos4_target_moves_at_the_rate_limit() {
-    let (mut ecu, mut drive, mut vehicle, t) = tracking_epos4();
-    drive.follows = true;
-    let before = drive.targets.len();
+    let (mut b, t) = Bench::tracking();
+    b.drive.follows = true;
+    let before = b.drive.targets.len();
     // Silence, then 48 deg, on time again.
-    let _ = run(
-        &mut ecu,
-        &mut drive,
-        &mut vehicle,
-        t,
-        t + 120 * MS,
-        AsState::Driving,
-        f32::NAN,
-        0.0,
-    );
+    let _ = b.run(t, t + 120 * MS, AsState::Driving, f32::NAN, 0.0);
     let start = t + 120 * MS;
     let mut t = start;
     while t < start + 200 * MS {
         if t.is_multiple_of(10 * MS) {
-            let motor = ecu.motor_angle();
+            let motor = b.ecu.motor_angle();
             let column = SteeringDeg::from(Gearing::PAPER.steering_from_motor(motor));
-            let _ = ecu.on_encoder(t, column);
-            let _ = vehicle.send(&mut ecu, t, AsState::Driving, 48.0);
+            let _ = b.ecu.on_encoder(t, column);
+            let _ = b.vehicle.send(&mut b.ecu, t, AsState::Driving, 48.0);
         }
-        let _ = step(&mut ecu, &mut drive, t);
+        let _ = b.step(t);
         t += MS;
     }
-    assert!(ecu.output().faults.is_empty(), "{:?}", ecu.output().faults);
-    let per_cycle = inc_at(&ecu, 4.0) + 1;
-    let steps: Vec<i32> = drive.targets[before..]
+    assert!(
+        b.ecu.output().faults.is_empty(),
+        "{:?}",
+        b.ecu.output().faults
+    );
+    let per_cycle = inc_at(&b.ecu, 4.0) + 1;
+    let steps: Vec<i32> = b.drive.targets[before..]
         .windows(2)
         .map(|w| w[1] - w[0])
         .collect();
     assert!(steps.iter().all(|s| s.abs() <= per_cycle), "{steps:?}");
-    assert_eq!(drive.targets.last(), Some(&(500 + inc_at(&ecu, 48.0))));
+    assert_eq!(b.drive.targets.last(), Some(&(500 + inc_at(&b.ecu, 48.0))));
 }

@@ -48,6 +48,24 @@ fn hall_at(deg: f32) -> i32 {
     hall_from_motor(f64::from(motor.0))
 }
 
+/// One 0.5 ms step of the tasks at their rates around an enable at 100 ms: the column sample
+/// (`column`, deg) every 2 ms, the vehicle's frame every 10 ms (AS Off before 100 ms, then AS
+/// Driving, at 10 deg), then the position tick with the motor at `hall`.
+fn enabled_at_100_ms(ecu: &mut Ecu, vehicle: &mut Vehicle, t: u64, column: f32, hall: i32) {
+    if t.is_multiple_of(2 * MS) {
+        let _ = ecu.on_encoder(t, SteeringDeg(column));
+    }
+    if t.is_multiple_of(10 * MS) {
+        let s = if t < 100 * MS {
+            AsState::Off
+        } else {
+            AsState::Driving
+        };
+        let _ = vehicle.send(ecu, t, s, 10.0);
+    }
+    let _ = ecu.position_tick(hall);
+}
+
 #[test]
 fn an_enable_by_an_encoder_sample_resets_the_cascade() {
     let mut ecu = Ecu::paper().unwrap();
@@ -103,20 +121,9 @@ fn a_glitch_in_the_sample_before_the_enable_leaves_no_silent_origin_offset() {
         let mut t = 0u64;
         // AS Off, the column and the motor resting at 10 deg, the tasks at their rates.
         while t <= 300 * MS {
-            if t.is_multiple_of(2 * MS) {
-                // The sample at 100 ms is the last before the first AS Driving frame.
-                let column = if t == 100 * MS { 10.0 + glitch } else { 10.0 };
-                let _ = ecu.on_encoder(t, SteeringDeg(column));
-            }
-            if t.is_multiple_of(10 * MS) {
-                let s = if t < 100 * MS {
-                    AsState::Off
-                } else {
-                    AsState::Driving
-                };
-                let _ = vehicle.send(&mut ecu, t, s, 10.0);
-            }
-            let _ = ecu.position_tick(hall);
+            // The sample at 100 ms is the last before the first AS Driving frame.
+            let column = if t == 100 * MS { 10.0 + glitch } else { 10.0 };
+            enabled_at_100_ms(&mut ecu, &mut vehicle, t, column, hall);
             t += 500;
         }
         let offset = SteeringDeg::from(
@@ -169,20 +176,9 @@ fn a_wrong_origin_latches_once_the_drive_rests() {
         let mut t = 0u64;
         let mut latched_at = None;
         while t <= 1_000 * MS {
-            if t.is_multiple_of(2 * MS) {
-                let glitched = (84 * MS..=100 * MS).contains(&t);
-                let column = if glitched { motor + offset } else { motor };
-                let _ = ecu.on_encoder(t, SteeringDeg(column));
-            }
-            if t.is_multiple_of(10 * MS) {
-                let s = if t < 100 * MS {
-                    AsState::Off
-                } else {
-                    AsState::Driving
-                };
-                let _ = vehicle.send(&mut ecu, t, s, 10.0);
-            }
-            let _ = ecu.position_tick(hall_at(motor));
+            let glitched = (84 * MS..=100 * MS).contains(&t);
+            let column = if glitched { motor + offset } else { motor };
+            enabled_at_100_ms(&mut ecu, &mut vehicle, t, column, hall_at(motor));
             if ecu.output().demand != DriveDemand::Disabled {
                 // A stiff drive: the motor is where the set-point is, in truth.
                 let aligned = setpoint_deg(&ecu);
