@@ -58,7 +58,7 @@ use steering_ecu::controller::ControllerKind;
 use steering_ecu::direct::FastLoop;
 use steering_ecu::ecu::{DriveChoice, Ecu, EcuBuild};
 use steering_ecu::ports::{Bridge, ColumnEncoderPort, CurrentSense, EncoderError, HallInputs};
-use steering_ecu::protocol::PERIOD_US;
+use steering_ecu::protocol::{AliveCounter, PERIOD_US, ProtocolConfig};
 use steering_ecu::sensors::{ColumnEncoder, hall_from_motor};
 use steering_ecu::steering::Output;
 use steering_ecu::tasks::{self, FirmwareRoutes, FrameQueue, Route, SharedEcu};
@@ -404,6 +404,10 @@ pub struct SimEcu {
     epos_port: Port,
     host_port: Port,
     vehicle: Option<Vehicle>,
+    /// The reference counter of the ECU's last motor frame on the bus (`MOT_RefCounter`): a
+    /// scripted vehicle continues after it, as a vehicle computer that listens before its
+    /// first frame does.
+    ecu_reference_counter: AliveCounter,
     plant: CarPlant,
     /// Reference frames held back from the ECU (`reference_delay_ms`), with when they are due.
     delayed_references: VecDeque<(u64, Frame)>,
@@ -523,6 +527,7 @@ impl SimEcu {
             epos_port,
             host_port,
             vehicle: None,
+            ecu_reference_counter: AliveCounter::default(),
             plant,
             delayed_references: VecDeque::new(),
             reference_delay_us: (car.effects.reference_delay_s * 1e6).round() as u64,
@@ -552,10 +557,12 @@ impl SimEcu {
             None => self.bus.attach(),
         };
         let period = u64::from(PERIOD_US);
+        let mut sender = ReferenceSender::default();
+        sender.continue_after(self.ecu_reference_counter);
         self.vehicle = Some(Vehicle {
             port,
             script: script.into(),
-            sender: ReferenceSender::default(),
+            sender,
             next_us: self.now_us.div_ceil(period) * period,
         });
     }
@@ -688,6 +695,9 @@ impl SimEcu {
             let _ = task.as_mut().poll(&mut cx);
         }
         while let Ok(frame) = self.tx_frames.try_receive() {
+            if let Ok(motor) = ProtocolConfig::DEFAULT.decode_motor(&frame) {
+                self.ecu_reference_counter = motor.reference_counter;
+            }
             self.bus.send(self.ecu_port, frame, now);
         }
         for frame in self.epos.advance(now) {

@@ -842,6 +842,28 @@ struct EnableCurrent {
     setpoint_a: f64,
 }
 
+/// A vehicle computer scripted on a car that already saw references (the simulated car's
+/// vehicle while `steer-can record` listens, after a `send`) continues the ECU's reference
+/// counter, as a real one listening for the motor frame would: the ECU drops no frame as a
+/// counter jump.
+#[test]
+fn a_scripted_vehicle_continues_the_counter_the_ecu_last_saw() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let mut car = SimEcu::new(SimCar {
+        column_deg: 0.0,
+        controller: ControllerKind::Paper,
+        drive: SimDrive::Direct,
+        effects: CarEffects::NONE,
+    });
+    for round in 1..=2u64 {
+        car.script_vehicle(vec![(AsState::Off, 0.0); 5]);
+        car.run_until(round * 100_000);
+    }
+    let drops = car.with_ecu(|e| *e.e2e().drops());
+    assert_eq!(drops.counter_jump, 0, "{drops:?}");
+    assert_eq!(drops.invalid_total(), 0, "{drops:?}");
+}
+
 /// [`EnableCurrent`] while a resting car at 0 deg is enabled toward `target_deg`, in the
 /// simulated car (the firmware's tasks, its EPOS4 link and its fast loop at their own rates,
 /// the simulated EPOS4 and the plant): AS Off for 1 s (the EPOS4's bring-up), then AS Driving
