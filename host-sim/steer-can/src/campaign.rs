@@ -31,7 +31,7 @@ use super::decode::{Decoded, Decoder, faults_in_words};
 use super::logbuild::{self, Rows};
 use super::monitor::Monitor;
 use super::profile::Profile;
-use super::resume::LastCounter;
+use super::resume::{self, LastCounter};
 use super::{BringupError, Stamped, Transport, pump};
 use canlink::reference::ReferenceSender;
 use host_io::logfmt::Log;
@@ -262,9 +262,7 @@ impl Campaign {
     ) -> Result<Run, BringupError> {
         let plan = self.plan(f64::from(ready.status.angle.0));
         let mut sender = ReferenceSender::default();
-        if let Some(last) = ready.last_counter {
-            sender.continue_after(last.counter());
-        }
+        resume::continue_sender(&mut sender, ready.last_counter);
         let mut monitor = Monitor::new(*decoder);
         let mut frames: Vec<Stamped> = ready.frames.clone();
         let start = transport.now_us();

@@ -430,13 +430,6 @@ fn campaign_cmd(
     if !ready.motor_frames {
         eprintln!("steer-can: warning: no motor frame (0x102) from the ECU: motor_rad will be nan");
     }
-    match ready.last_counter {
-        Some(last) => eprintln!("{}", last.words()),
-        None => eprintln!(
-            "{}",
-            resume::not_heard_warning(steering_ecu::protocol::AliveCounter::wrapping(1))
-        ),
-    }
     let c = Campaign {
         profile,
         as_state: args.as_state,
