@@ -45,7 +45,7 @@ use steering_ecu::as_state::AsState;
 use steering_ecu::can::Frame;
 use steering_ecu::controller::ControllerKind;
 use steering_ecu::ecu::Ecu;
-use steering_ecu::protocol::PERIOD_US;
+use steering_ecu::protocol::{AliveCounter, PERIOD_US, ProtocolConfig};
 use steering_ecu::steering::Output;
 
 // The fixture's names, as the simulated car's users have always named them.
@@ -182,6 +182,10 @@ pub struct SimEcu {
     fixture: FirmwareFixture,
     host_port: Port,
     vehicle: Option<Vehicle>,
+    /// The reference counter of the ECU's last motor frame on the bus (`MOT_RefCounter`): a
+    /// scripted vehicle continues after it, as a vehicle computer that listens before its
+    /// first frame does.
+    ecu_reference_counter: AliveCounter,
     inbox: VecDeque<Stamped>,
     scheduled: Vec<(u64, Injection)>,
 }
@@ -245,6 +249,7 @@ impl SimEcu {
             fixture,
             host_port,
             vehicle: None,
+            ecu_reference_counter: AliveCounter::default(),
             inbox: VecDeque::new(),
             scheduled: Vec::new(),
         }
@@ -266,10 +271,12 @@ impl SimEcu {
             None => self.fixture.bus_mut().attach(),
         };
         let period = u64::from(PERIOD_US);
+        let mut sender = ReferenceSender::default();
+        sender.continue_after(self.ecu_reference_counter);
         self.vehicle = Some(Vehicle {
             port,
             script: script.into(),
-            sender: ReferenceSender::default(),
+            sender,
             next_us: self.fixture.now_us().div_ceil(period) * period,
         });
     }
@@ -363,7 +370,13 @@ impl SimEcu {
             v.next_us += u64::from(PERIOD_US);
         }
         self.fixture.poll_tasks();
-        self.fixture.tx_to_bus();
+        let ecu_port = self.fixture.ecu_port();
+        for frame in self.fixture.take_tx() {
+            if let Ok(motor) = ProtocolConfig::DEFAULT.decode_motor(&frame) {
+                self.ecu_reference_counter = motor.reference_counter;
+            }
+            self.fixture.bus_mut().send(ecu_port, frame, now);
+        }
         self.fixture.advance_epos();
         self.fixture.fast_loop();
         self.fixture.end_step();

@@ -469,6 +469,34 @@ fn bus_off_ends_reception_and_latches_the_fault_in() {
     );
 }
 
+/// Every motor frame carries the counter of the last reference frame that passed the CRC, so a
+/// sender that starts while the ECU runs can continue it: frames with a corrupted CRC do not
+/// move it, and it stays while no reference comes.
+#[test]
+fn the_motor_frame_carries_the_last_authentic_reference_counter() {
+    let _paper = task_scenarios::with_controller(ControllerKind::Paper);
+    // Counters 1..=5 good, 6..=8 with a corrupted CRC, then silence.
+    let mut script = vec![Send::Ref(AsState::Off, 0.0); 5];
+    script.extend(vec![Send::CorruptCrc(AsState::Off, 0.0); 3]);
+    script.extend(vec![Send::Nothing; 5]);
+    let sent = run_logged(0.0, &script, |_, _, _| {}).sent;
+    let protocol = ProtocolConfig::default();
+    let counters: Vec<u8> = sent
+        .iter()
+        .filter_map(|s| protocol.decode_motor(&s.frame).ok())
+        .map(|m| m.reference_counter.raw())
+        .collect();
+    assert!(counters.len() >= 12, "{counters:?}");
+    assert!(
+        counters[0] <= 1,
+        "at most the first reference before the first: {counters:?}"
+    );
+    // Nondecreasing through the good frames, then held at 5.
+    assert!(counters.windows(2).all(|w| w[0] <= w[1]), "{counters:?}");
+    assert!(counters.contains(&3), "{counters:?}");
+    assert_eq!(counters.last(), Some(&5), "{counters:?}");
+}
+
 /// The counters and the fault ring leave the ECU on 0x103, one page per
 /// status period, and `steer-can monitor`'s decoding shows them by name.
 #[test]
@@ -659,6 +687,27 @@ struct EnableCurrent {
     period_mean_a: f64,
     instantaneous_a: f64,
     setpoint_a: f64,
+}
+
+/// A vehicle computer scripted on a car that already saw references (the simulated car's
+/// vehicle while `steer-can record` listens, after a `send`) continues the ECU's reference
+/// counter, as a real one listening for the motor frame would: the ECU drops no frame as a
+/// counter jump.
+#[test]
+fn a_scripted_vehicle_continues_the_counter_the_ecu_last_saw() {
+    let mut car = SimEcu::new(SimCar {
+        column_deg: 0.0,
+        controller: ControllerKind::Paper,
+        drive: SimDrive::Direct,
+        effects: CarEffects::NONE,
+    });
+    for round in 1..=2u64 {
+        car.script_vehicle(vec![(AsState::Off, 0.0); 5]);
+        car.run_until(round * 100_000);
+    }
+    let drops = car.with_ecu(|e| *e.e2e().drops());
+    assert_eq!(drops.counter_jump, 0, "{drops:?}");
+    assert_eq!(drops.invalid_total(), 0, "{drops:?}");
 }
 
 /// [`EnableCurrent`] while a resting car at 0 deg is enabled toward `target_deg`, in the

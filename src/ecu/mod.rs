@@ -991,7 +991,9 @@ impl Ecu {
     /// The next motor frame (call once per status period, after [`Ecu::status_frame`]): the
     /// motor angle the ECU believes ([`Ecu::motor_angle`]) and the mean measured current since
     /// the last motor frame. In EPOS4 mode no current tick runs here, so the current is the
-    /// drive's last TPDO2; NaN when no sample came (or one was not a number).
+    /// drive's last TPDO2; NaN when no sample came (or one was not a number). It also carries
+    /// the reference counter the E2E check last saw, for a sender that starts while the ECU
+    /// runs to continue from (0 before the first reference: any counter is accepted then).
     pub fn motor_frame(&mut self) -> Frame {
         self.motor_counter = self.motor_counter.next();
         let current_mean = if self.current_samples > 0 {
@@ -1007,6 +1009,7 @@ impl Ecu {
             angle: self.motor_angle(),
             current_mean,
             counter: self.motor_counter,
+            reference_counter: self.e2e.last_counter().unwrap_or_default(),
         })
     }
 }

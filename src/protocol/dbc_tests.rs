@@ -104,6 +104,7 @@ fn ids_lengths_and_signal_sets_agree() {
         [
             "MOT_Crc",
             "MOT_Counter",
+            "MOT_RefCounter",
             "MOT_MotorAngle",
             "MOT_CurrentMean"
         ]
@@ -400,6 +401,7 @@ proptest! {
         raw_angle: i32,
         raw_current: i16,
         counter in 0u8..16,
+        reference_counter in 0u8..16,
     ) {
         let dbc = dbc_cached();
         let cfg = ProtocolConfig::DEFAULT;
@@ -419,6 +421,7 @@ proptest! {
             angle: MotorRad(angle),
             current_mean: Amps(current),
             counter: AliveCounter::new(counter).unwrap(),
+            reference_counter: AliveCounter::new(reference_counter).unwrap(),
         };
         let f = cfg.encode_motor(&sent);
         let data = f.data();
@@ -429,7 +432,11 @@ proptest! {
         prop_assert_eq!(raw(signal(m, "MOT_Crc"), data), i64::from(data[0]));
         prop_assert_eq!(raw(signal(m, "MOT_Counter"), data), i64::from(counter));
         prop_assert_eq!(got.counter.raw(), counter);
-        prop_assert_eq!(data[1] >> 4, 0, "reserved bits sent 0");
+        prop_assert_eq!(
+            raw(signal(m, "MOT_RefCounter"), data),
+            i64::from(reference_counter)
+        );
+        prop_assert_eq!(got.reference_counter.raw(), reference_counter);
         prop_assert_eq!(raw(signal(m, "MOT_CurrentMean"), data), i64::from(raw_current));
         if raw_angle == MOTOR_ANGLE_NOT_AVAILABLE {
             prop_assert!(got.angle.0.is_nan());

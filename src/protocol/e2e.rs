@@ -331,6 +331,13 @@ impl E2eChecker {
         self.early_frames
     }
 
+    /// The counter of the last frame that passed ID, length and CRC, accepted or not: the one
+    /// the next frame's counter must follow. `None` before the first, and after
+    /// [`E2eChecker::reset`] (then any counter is accepted).
+    pub fn last_counter(&self) -> Option<AliveCounter> {
+        self.last_counter
+    }
+
     /// Frames dropped so far, per reason.
     pub fn drops(&self) -> &DropCounters {
         &self.drops

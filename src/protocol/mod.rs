@@ -47,7 +47,8 @@
 //! -----+--------+--------------------+----------+--------------+--------------------------
 //!  0   |  0..7  | MOT_Crc            | u8       | -            | CRC-8/AUTOSAR, see below
 //!  1   |  8..11 | MOT_Counter        | u4       | 1            | 0..15, +1 per frame, wraps
-//!  1   | 12..15 | reserved           | -        | -            | sent 0
+//!  1   | 12..15 | MOT_RefCounter     | u4       | 1            | 0..15, the reference counter
+//!      |        |                    |          |              | the E2E check last saw
 //!  2-5 | 16..47 | MOT_MotorAngle     | i32      | 1e-4 rad/bit | +-214748 rad at the motor
 //!  6-7 | 48..63 | MOT_CurrentMean    | i16      | 0.001 A/bit  | +-32.767 A
 //! ```
@@ -58,6 +59,13 @@
 //! period, the figure the paper plots and the sim-to-real diagnosis compares: a single sample
 //! of a current that chatters by 20 A between position ticks says little. The most negative
 //! raw value of each field means "not available", as in the status frame.
+//!
+//! The reference counter is the alive counter of the last reference frame that passed the
+//! CRC, accepted or not: the one the E2E check judges the next frame's counter against (0
+//! before the first, when any counter is accepted). A sender that starts while the ECU runs
+//! (a second bench tool after a first, the vehicle computer after a restart) continues from it
+//! +1, so its first frame is not dropped as a counter jump. It rides in the motor frame, every
+//! period, so a sender waits one period for it, not a diagnostic round.
 //!
 //! The status frame has 68 bits of wish list for 64 bits of frame: the motor current gets 12
 //! bits at 0.02 A/bit (twice the 20 A current limit, 20 mA resolution) so that the ECU state
@@ -317,6 +325,9 @@ pub struct MotorStatus {
     /// Mean measured motor current over the last status period, A; NaN = not available.
     pub current_mean: Amps,
     pub counter: AliveCounter,
+    /// The counter of the last reference frame that passed the CRC (0 before the first): a
+    /// new sender's first frame carries the next one.
+    pub reference_counter: AliveCounter,
 }
 
 /// Why a received frame was dropped. The decoders return `WrongId`, `WrongLength`, `Crc` and
@@ -477,13 +488,13 @@ impl ProtocolConfig {
     /// The motor frame (ID [`MOTOR_ID`]) for `motor`.
     pub fn encode_motor(&self, motor: &MotorStatus) -> Frame {
         let word = u64::from(motor.counter.raw()) << 8
+            | u64::from(motor.reference_counter.raw()) << 12
             | u64::from(motor_angle_to_raw(motor.angle) as u32) << 16
             | u64::from(motor_current_to_raw(motor.current_mean) as u16) << 48;
         frame_with_crc(MOTOR_ID, word)
     }
 
-    /// Decodes a motor frame (vehicle-computer side, host tools): ID, length, CRC; bits 12..15
-    /// are reserved and ignored.
+    /// Decodes a motor frame (vehicle-computer side, host tools): ID, length, CRC.
     pub fn decode_motor(&self, frame: &Frame) -> Result<MotorStatus, FrameError> {
         let word = checked_word(MOTOR_ID, frame)?;
         let angle_raw = field(word, 16, 32) as u32 as i32;
@@ -500,6 +511,7 @@ impl ProtocolConfig {
                 Amps(f32::from(current_raw) / MOTOR_CURRENT_BITS_PER_A)
             },
             counter: AliveCounter::wrapping(field(word, 8, 4) as u8),
+            reference_counter: AliveCounter::wrapping(field(word, 12, 4) as u8),
         })
     }
 }

@@ -313,23 +313,28 @@ fn motor(angle: f32, current: f32, counter: u8) -> MotorStatus {
         angle: MotorRad(angle),
         current_mean: Amps(current),
         counter: AliveCounter::wrapping(counter),
+        reference_counter: AliveCounter::wrapping(0),
     }
 }
 
 #[test]
 fn motor_frame_layout_is_the_documented_one() {
     let cfg = ProtocolConfig::DEFAULT;
-    let frame = cfg.encode_motor(&motor(-1.2345, 12.5, 9));
+    let frame = cfg.encode_motor(&MotorStatus {
+        reference_counter: AliveCounter::wrapping(14),
+        ..motor(-1.2345, 12.5, 9)
+    });
     assert_eq!(frame.id().raw(), 0x102);
-    // counter 9, reserved 0; -12345 = 0xFFFFCFC7 LE; 12500 = 0x30D4 LE.
+    // counter 9, reference counter 14 (0xE); -12345 = 0xFFFFCFC7 LE; 12500 = 0x30D4 LE.
     assert_eq!(
         &frame.data()[1..],
-        &[0x09, 0xC7, 0xCF, 0xFF, 0xFF, 0xD4, 0x30]
+        &[0xE9, 0xC7, 0xCF, 0xFF, 0xFF, 0xD4, 0x30]
     );
     let got = cfg.decode_motor(&frame).unwrap();
     assert!((got.angle.0 + 1.2345).abs() < 1e-6);
     assert_eq!(got.current_mean, Amps(12.5));
     assert_eq!(got.counter.raw(), 9);
+    assert_eq!(got.reference_counter.raw(), 14);
 }
 
 #[test]

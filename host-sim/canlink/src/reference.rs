@@ -25,6 +25,18 @@ impl Default for ReferenceSender {
 }
 
 impl ReferenceSender {
+    /// Continue after `last`: the next frame carries `last + 1`. A sender that starts while the
+    /// ECU runs takes `last` from the ECU's motor frame (`MOT_RefCounter`), so the ECU does not
+    /// drop its first frame as a counter jump.
+    pub fn continue_after(&mut self, last: AliveCounter) {
+        self.counter = last;
+    }
+
+    /// The counter of the last frame built (0 before the first).
+    pub fn last(&self) -> AliveCounter {
+        self.counter
+    }
+
     /// The next frame: `angle_deg` at the wheel, in AS state `as_state`.
     pub fn frame(&mut self, angle_deg: f64, as_state: AsState, clear_faults: bool) -> Frame {
         self.counter = self.counter.next();

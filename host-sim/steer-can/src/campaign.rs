@@ -5,7 +5,8 @@
 //! Theory of operation:
 //!
 //! ```text
-//!  ready_check: a status frame within 1 s, no fault bit, ECU idle, nobody else sending 0x100
+//!  ready_check: a status frame within 1 s, no fault bit, ECU idle, nobody else sending 0x100,
+//!      |       the reference counter the ECU last saw (motor frame): the run continues it
 //!      |
 //!      v
 //!  lead-in   AS Ready, a ramp at 20 deg/s from where the wheel is to the profile's first
@@ -30,6 +31,7 @@ use super::decode::{Decoded, Decoder, faults_in_words};
 use super::logbuild::{self, Rows};
 use super::monitor::Monitor;
 use super::profile::Profile;
+use super::resume::{self, LastCounter};
 use super::{BringupError, Stamped, Transport, pump};
 use canlink::reference::ReferenceSender;
 use host_io::logfmt::Log;
@@ -57,6 +59,8 @@ pub struct Ready {
     pub motor_frames: bool,
     /// The frames seen while checking: the start of the recording.
     pub frames: Vec<Stamped>,
+    /// The reference counter the ECU last saw (its motor frame): the run continues after it.
+    pub last_counter: Option<LastCounter>,
 }
 
 /// Waits for the ECU and checks it may be driven.
@@ -68,10 +72,13 @@ pub fn ready_check(
     let mut status = None;
     let mut motor = false;
     let mut other_sender = false;
+    let mut last_counter = None;
     let mut frames = Vec::new();
     pump(transport, start + READY_WAIT_US, |rx| {
         frames.push(*rx);
-        match decoder.decode(&rx.frame) {
+        let decoded = decoder.decode(&rx.frame);
+        LastCounter::update(&mut last_counter, &decoded);
+        match decoded {
             Decoded::Status(Ok(s)) => status = Some(s),
             Decoded::Motor(Ok(_)) => motor = true,
             Decoded::Reference(_) => other_sender = true,
@@ -120,6 +127,7 @@ pub fn ready_check(
         status,
         motor_frames: motor,
         frames,
+        last_counter,
     })
 }
 
@@ -254,6 +262,7 @@ impl Campaign {
     ) -> Result<Run, BringupError> {
         let plan = self.plan(f64::from(ready.status.angle.0));
         let mut sender = ReferenceSender::default();
+        resume::continue_sender(&mut sender, ready.last_counter);
         let mut monitor = Monitor::new(*decoder);
         let mut frames: Vec<Stamped> = ready.frames.clone();
         let start = transport.now_us();

@@ -17,6 +17,7 @@
 //!   decode   frame -> Decoded (reference, status, motor, EPOS4 PDO/SDO/EMCY/heartbeat, NMT)
 //!   monitor  Decoded stream -> counters, CRC errors, counter gaps, last values
 //!   profile  step / sine / sweep / track samples at 100 Hz, limited to the ECU's 400 deg/s
+//!   resume   before a sender's first frame: the reference counter the ECU last saw (0x102)
 //!   campaign ready check -> confirmation -> lead-in -> profile -> settle -> AS Off;
 //!            aborts on a fault bit, an EMCY, a silent ECU or Ctrl-C, always ending in AS Off
 //!   record   every frame with its time -> candump `-l` file        `candump.rs`
@@ -46,6 +47,7 @@ pub mod monitor;
 pub mod profile;
 #[cfg(feature = "sim")]
 pub mod rehearse;
+pub mod resume;
 pub mod simcar;
 #[cfg(all(unix, feature = "sim"))]
 pub mod simsock;

@@ -386,6 +386,7 @@ mod tests {
                     angle: MotorRad((v * std::f64::consts::TAU) as f32),
                     current_mean: Amps(v as f32),
                     counter: AliveCounter::wrapping(k as u8),
+                    reference_counter: AliveCounter::wrapping(k as u8),
                 }),
             });
         }

@@ -378,10 +378,12 @@ impl Monitor {
                 s.counter.raw()
             ),
             Decoded::Motor(Ok(m)) => format!(
-                "motor {:+10.4} rad  mean current {:+7.3} A  counter {:2}",
+                "motor {:+10.4} rad  mean current {:+7.3} A  counter {:2}  ECU's reference \
+                 counter {:2}",
                 m.angle.0,
                 m.current_mean.0,
-                m.counter.raw()
+                m.counter.raw(),
+                m.reference_counter.raw()
             ),
             Decoded::Diagnostic(Ok(p)) => diagnostic_line(p),
             Decoded::Reference(Err(e))
@@ -465,8 +467,10 @@ impl Monitor {
         }
         if let Some((_, m)) = &self.last_motor {
             out.push_str(&format!(
-                "  motor      {:+10.4} rad, mean current {:+7.3} A\n",
-                m.angle.0, m.current_mean.0
+                "  motor      {:+10.4} rad, mean current {:+7.3} A, last reference counter {}\n",
+                m.angle.0,
+                m.current_mean.0,
+                m.reference_counter.raw()
             ));
         }
         if let Some((_, s)) = &self.last_heartbeat {
@@ -604,6 +608,34 @@ mod tests {
         assert!(
             bus_off.is_some() && bus_off < heartbeat && heartbeat < epos,
             "{text}"
+        );
+    }
+
+    /// The motor frame's reference counter (the one a new sender continues) is shown in the
+    /// `--each` line and in the summary.
+    #[test]
+    fn the_ecus_reference_counter_is_shown() {
+        use steering_ecu::canopen::NodeId;
+        use steering_ecu::canopen::epos4::PositionScale;
+        use steering_ecu::protocol::ProtocolConfig;
+        use steering_ecu::units::{Amps, MotorRad};
+        let dec = Decoder::new(NodeId::new(1).unwrap(), PositionScale::new(4096).unwrap());
+        let mut m = Monitor::new(dec);
+        let rx = Stamped {
+            t_us: 0,
+            frame: ProtocolConfig::DEFAULT.encode_motor(&MotorStatus {
+                angle: MotorRad(1.0),
+                current_mean: Amps(0.5),
+                counter: AliveCounter::wrapping(3),
+                reference_counter: AliveCounter::wrapping(11),
+            }),
+        };
+        let d = m.on_frame(&rx);
+        assert!(m.line(&rx, &d).ends_with("ECU's reference counter 11"));
+        assert!(
+            m.summary().contains(", last reference counter 11\n"),
+            "{}",
+            m.summary()
         );
     }
 

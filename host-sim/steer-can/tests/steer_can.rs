@@ -94,6 +94,27 @@ fn sweep_campaign_log_gets_no_effect_from_the_gap_diagnosis() {
     assert!(d.baseline_gof > 0.95, "baseline GoF {}", d.baseline_gof);
 }
 
+/// A second campaign on a car a first one ran on (a second `steer-can campaign` process):
+/// it continues the reference counter the ECU reports, so the ECU drops no frame of it as a
+/// counter jump.
+#[test]
+fn a_second_campaign_continues_the_counter_the_ecu_last_saw() {
+    let mut sim = SimEcu::paper();
+    let dec = decoder();
+    let jumps = |sim: &SimEcu| sim.with_ecu(|e| e.e2e().drops().counter_jump);
+    for run in 0..2 {
+        let ready = campaign::ready_check(&mut sim, &dec).unwrap();
+        let c = campaign(profile::step(2.0, 0.1, 0.3).unwrap());
+        let done = c.run(&mut sim, &dec, &ready, |_| {}).unwrap();
+        assert_eq!(done.aborted, None, "campaign {run}");
+        assert_eq!(
+            jumps(&sim),
+            0,
+            "campaign {run}'s first frame was a counter jump"
+        );
+    }
+}
+
 #[test]
 fn encoder_fault_mid_campaign_aborts_disables_the_drive_and_keeps_the_log() {
     let mut sim = SimEcu::paper();

@@ -30,17 +30,11 @@ fn steer_can(socket: &Path, args: &str) -> Output {
         .unwrap()
 }
 
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-#[test]
-fn calls_share_one_car_and_a_record_sees_another_calls_frames() {
-    let dir = tempfile::tempdir().unwrap();
-    let socket = dir.path().join("car.sock");
-    let _car = Car(Command::new(env!("CARGO_BIN_EXE_steer-can"))
+/// `steer-can sim-car --socket SOCKET`, once its socket is there.
+fn start_car(socket: &Path) -> Car {
+    let car = Car(Command::new(env!("CARGO_BIN_EXE_steer-can"))
         .args(["sim-car", "--socket"])
-        .arg(&socket)
+        .arg(socket)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::null())
@@ -51,6 +45,18 @@ fn calls_share_one_car_and_a_record_sees_another_calls_frames() {
         assert!(started.elapsed() < Duration::from_secs(10), "no socket");
         std::thread::sleep(Duration::from_millis(20));
     }
+    car
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+#[test]
+fn calls_share_one_car_and_a_record_sees_another_calls_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let socket = dir.path().join("car.sock");
+    let _car = start_car(&socket);
 
     // The README's step 5 across three calls.
     let o = steer_can(
@@ -119,4 +125,29 @@ fn attaching_to_no_car_says_how_to_start_one() {
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("steer-can sim-car --socket"), "{err}");
+}
+
+/// Two `send` calls one after the other on one car, as two processes on `can0` would be: the
+/// second continues the reference counter the ECU last saw, so the ECU's E2E check counts no
+/// counter jump at its first frame.
+#[test]
+fn a_second_send_call_continues_the_counter_the_ecu_last_saw() {
+    let dir = tempfile::tempdir().unwrap();
+    let socket = dir.path().join("car.sock");
+    let _car = start_car(&socket);
+    for _ in 0..2 {
+        let o = steer_can(
+            &socket,
+            "send --as-state driving step --amplitude-deg 1 --duration-s 0.3",
+        );
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    // One round of the diagnostic frame (0x103) brings the drop counters.
+    let o = steer_can(&socket, "monitor --duration-s 0.5");
+    assert!(o.status.success());
+    let text = stdout(&o);
+    assert!(
+        text.contains("dropped: counter jump 0,"),
+        "the ECU counted a counter jump: {text}"
+    );
 }

@@ -99,6 +99,32 @@ fn a_counter_jump_is_dropped_and_the_next_frame_in_sequence_accepted() {
     assert!(is_valid(c.check(&frame(2, DRIVING, 600), 3 * T)));
 }
 
+/// The counter a new sender continues from is the last authentic frame's, accepted or not:
+/// a frame dropped for its angle still moves it, a frame that fails the CRC does not.
+#[test]
+fn the_last_counter_is_the_one_the_next_frame_must_follow() {
+    let mut c = checker();
+    assert_eq!(c.last_counter(), None, "any counter before the first frame");
+    assert!(is_valid(c.check(&frame(6, DRIVING, 0), 0)));
+    assert_eq!(c.last_counter(), AliveCounter::new(6));
+    // 95 deg: out of range, dropped, but its counter is authentic.
+    assert!(error(c.check(&frame(7, DRIVING, 9500), T)).is_some());
+    assert_eq!(c.last_counter(), AliveCounter::new(7));
+    let mut bytes: [u8; 8] = frame(8, DRIVING, 0).data().try_into().unwrap();
+    bytes[1] ^= 0x0F;
+    let corrupted = Frame::new(REFERENCE_ID, &bytes).unwrap();
+    assert!(matches!(
+        error(c.check(&corrupted, 2 * T)),
+        Some(FrameError::Crc { .. })
+    ));
+    assert_eq!(c.last_counter(), AliveCounter::new(7));
+    // A sender that continues from it is accepted at once.
+    let next = c.last_counter().unwrap().next().raw();
+    assert!(is_valid(c.check(&frame(next, DRIVING, 0), 3 * T)));
+    c.reset();
+    assert_eq!(c.last_counter(), None);
+}
+
 #[test]
 fn five_invalid_in_a_row_is_a_fault() {
     let mut c = checker();
