@@ -191,8 +191,8 @@ fn lcg(state: &mut u64) -> f64 {
 }
 
 /// `n` cars per drive mode, drawn from `seed`: effect-free, play in the belt 1-3 deg, rack
-/// friction 200-500 N, a reference delay 20-60 ms, a tyre 300-800 N, each well above the
-/// diagnosis's minimum size.
+/// friction 200-500 N, a reference delay 20-60 ms, a tyre 300-800 N; each above the
+/// diagnosis's minimum size, the friction's lowest at it (200 N).
 fn chain_cases(n: usize, seed: u64) -> Vec<(ChainCase, String)> {
     let mut state = seed;
     let mut out = Vec::new();
