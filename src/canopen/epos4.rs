@@ -1360,6 +1360,8 @@ impl Epos4Link {
 #[cfg(test)]
 mod enable_walk;
 #[cfg(test)]
+mod script;
+#[cfg(test)]
 mod supervision;
 
 #[cfg(test)]
