@@ -216,16 +216,15 @@ mod tests {
     /// moving ramp, and the ramp turns to it.
     #[test]
     fn a_ramp_that_has_not_moved_turns_to_a_reference_on_the_other_side() {
-        let mut ramp = EnableRamp::at_rest(SteeringDeg(0.0), 0);
+        let mut fresh = EnableRamp::at_rest(SteeringDeg(0.0), 0);
+        let mut stepped = fresh;
+        let _ = stepped.step(0, SteeringDeg(10.0), PERIOD_US);
+        assert_eq!(stepped.angle(), SteeringDeg(0.0));
+        let expected = fresh.step(PERIOD_US, SteeringDeg(-10.0), PERIOD_US);
+        assert!(expected.is_some_and(|a| a.0 < 0.0), "{expected:?}");
         assert_eq!(
-            ramp.step(0, SteeringDeg(10.0), PERIOD_US),
-            Some(SteeringDeg(0.0))
-        );
-        let next = ramp.step(PERIOD_US, SteeringDeg(-10.0), PERIOD_US);
-        let expected = -ENABLE_RAMP_ACCEL_DPS2 * 1e-4;
-        assert!(
-            next.is_some_and(|a| (a.0 - expected).abs() < 1e-4),
-            "{next:?}"
+            stepped.step(PERIOD_US, SteeringDeg(-10.0), PERIOD_US),
+            expected
         );
     }
 
