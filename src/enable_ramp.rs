@@ -187,6 +187,47 @@ mod tests {
         );
     }
 
+    /// The ramp is as fast as its acceleration allows: a target of k^2 speed steps (one
+    /// period's acceleration times a period: 0.1 deg) is met in 2k - 1 periods, k - 1 of them
+    /// accelerating, one at k steps' speed and k - 1 slowing down, the last of which reaches
+    /// the target. These gaps are where the stopping speed's root is a whole number, the
+    /// rounding the thousandth of a step guards.
+    #[test]
+    fn a_target_of_k_squared_speed_steps_is_met_in_2k_minus_1_periods() {
+        let speed_step_deg = ENABLE_RAMP_ACCEL_DPS2 * 1e-4;
+        for k in 2..=6u32 {
+            for sign in [1.0f32, -1.0] {
+                let target = sign * (k * k) as f32 * speed_step_deg;
+                let (angles, _) = ramp_to(target);
+                // The period the angle reaches the target (the ramp may say so one period
+                // later, when a float's rounding leaves a sliver of the gap).
+                let there = angles.iter().position(|a| (a - target).abs() < 1e-4);
+                assert_eq!(
+                    there,
+                    Some((2 * k - 1) as usize),
+                    "{target} deg: {angles:?}"
+                );
+            }
+        }
+    }
+
+    /// A step that moved nothing (two frames at the same instant) leaves the ramp at rest
+    /// with no direction: a reference that then lies on the other side has not crossed a
+    /// moving ramp, and the ramp turns to it.
+    #[test]
+    fn a_ramp_that_has_not_moved_turns_to_a_reference_on_the_other_side() {
+        let mut fresh = EnableRamp::at_rest(SteeringDeg(0.0), 0);
+        let mut stepped = fresh;
+        let _ = stepped.step(0, SteeringDeg(10.0), PERIOD_US);
+        assert_eq!(stepped.angle(), SteeringDeg(0.0));
+        let expected = fresh.step(PERIOD_US, SteeringDeg(-10.0), PERIOD_US);
+        assert!(expected.is_some_and(|a| a.0 < 0.0), "{expected:?}");
+        assert_eq!(
+            stepped.step(PERIOD_US, SteeringDeg(-10.0), PERIOD_US),
+            expected
+        );
+    }
+
     #[test]
     fn the_square_root_is_exact_to_f32() {
         for x in [1.0f32, 2.0, 9.0, 25.0, 17_601.0, 1.0e6, 3.3e7] {

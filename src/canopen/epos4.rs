@@ -566,7 +566,6 @@ pub struct Epos4Link {
     tpdo1: StandardId,
     tpdo2: StandardId,
     rpdo1: StandardId,
-    started: bool,
     /// Power stage wanted on ([`Epos4Link::set_power`]); off at start.
     power: bool,
     /// The one best-effort "disable voltage" after a failure was sent.
@@ -635,7 +634,6 @@ impl Epos4Link {
             tpdo1,
             tpdo2,
             rpdo1,
-            started: false,
             power: false,
             failsafe_sent: false,
             next_ecu_heartbeat_us: now_us,
@@ -928,7 +926,6 @@ impl Epos4Link {
             }
             _ => {
                 self.step = 0;
-                self.started = false;
                 self.position_known = false;
                 self.phase = Phase::Configuring { step: 0, total: 0 };
                 self.run_script(now_us, &mut out);
@@ -976,7 +973,6 @@ impl Epos4Link {
 
     fn enter_enabling(&mut self, reset: bool, now_us: u64, out: &mut Outbox) {
         self.phase = Phase::Enabling;
-        self.started = true;
         self.limits_verified = false;
         self.reset_pending = reset;
         self.enable_count = 0;
@@ -1168,9 +1164,9 @@ impl Epos4Link {
             (Phase::Enabling | Phase::Cyclic | Phase::Disabling | Phase::Standby, other) => {
                 self.fail(LinkError::NodeLeftOperational { state: other })
             }
-            (Phase::Starting, NmtState::BootUp) if self.started => {
-                self.fail(LinkError::NodeLeftOperational { state })
-            }
+            // Before Operational in Starting a boot-up or pre-operational heartbeat is the drive
+            // not started yet (the NMT start is retried on the heartbeat time-out); Configuring
+            // and Failed take no action on a heartbeat.
             _ => {}
         }
     }
@@ -1363,6 +1359,8 @@ impl Epos4Link {
 
 #[cfg(test)]
 mod enable_walk;
+#[cfg(test)]
+mod script;
 #[cfg(test)]
 mod supervision;
 

@@ -372,3 +372,49 @@ impl Drive {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::canopen::NodeId;
+    use crate::canopen::epos4::Epos4Config;
+
+    /// In EPOS4 mode the rate limit's time base is the interval between the last two SYNCs,
+    /// at most a reference period: a SYNC sent early (the link enters Cyclic and syncs at
+    /// once, 3 ms after Standby's last) lets the target move only 3 ms' worth, and a late one
+    /// no more than a period's.
+    #[test]
+    fn the_epos4_rate_anchor_spans_the_sync_interval_at_most_a_period() {
+        let node = NodeId::new(1).unwrap();
+        let link = Epos4Link::new(Epos4Config::paper(node), 0).unwrap();
+        let mut drive = Drive::Epos4(Epos4Drive::new(link, None, 10_000));
+        let Drive::Epos4(d) = &mut drive else {
+            unreachable!()
+        };
+        d.synced(0, Some(SteeringDeg(4.0)));
+        d.synced(3_000, Some(SteeringDeg(5.0)));
+        let (anchor, span_s) = drive.rate_anchor(None, 0.01);
+        assert_eq!(anchor, Some(SteeringDeg(5.0)));
+        assert!((span_s - 0.003).abs() < 1e-7, "{span_s} s");
+
+        let Drive::Epos4(d) = &mut drive else {
+            unreachable!()
+        };
+        d.synced(28_000, Some(SteeringDeg(6.0)));
+        assert_eq!(
+            drive.rate_anchor(None, 0.01),
+            (Some(SteeringDeg(6.0)), 0.01)
+        );
+    }
+
+    /// In EPOS4 mode what pushes the motor, for the runaway check, is the drive's measured
+    /// current as given (its own set-point is not on the bus), either sign.
+    #[test]
+    fn the_epos4_effort_is_the_measured_current() {
+        let node = NodeId::new(1).unwrap();
+        let link = Epos4Link::new(Epos4Config::paper(node), 0).unwrap();
+        let drive = Drive::Epos4(Epos4Drive::new(link, None, 10_000));
+        assert_eq!(drive.effort(Amps(18.5)), Amps(18.5));
+        assert_eq!(drive.effort(Amps(-7.25)), Amps(-7.25));
+    }
+}
