@@ -81,7 +81,8 @@ fn two_cars_under_two_loggers() {
     let mut opts = selftest::default_options();
     opts.threads = 2;
     let team = selftest::LoggerKind::parse("starting-100-jitter-drop").unwrap();
-    let report = selftest::run_loggers(&[team], &[0, 9], 1, 12.0, &opts, &|_| {}).unwrap();
+    let report =
+        selftest::run_loggers(&[team], (None, None), &[0, 9], 1, 12.0, &opts, &|_| {}).unwrap();
     print!("{}", report.table());
     let kinds: Vec<&str> = report.loggers.iter().map(|l| l.kind.as_str()).collect();
     assert_eq!(kinds, ["ours", "starting-100-jitter-drop"]);

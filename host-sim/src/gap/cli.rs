@@ -5,6 +5,7 @@ use super::rig::CarDrive;
 use super::rig::Rig;
 use super::{EffectKind, Options, diagnose, selftest};
 use crate::report_html::{HtmlReport, num};
+use crate::sim::Controller;
 use clap::Args;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -65,7 +66,8 @@ pub struct GapArgs {
     /// selftest: diagnose each car from the files of these loggers, as `gap FILE` reads them
     /// (ours always, first): `ours`, `drawn` (a team's logger drawn with each case), or
     /// `ending|starting-100|200|1000[-jitter][-drop]`; bare `--loggers` is `drawn`. Prints per
-    /// logger the verdicts right, those changed against ours, the confusion matrix.
+    /// logger the verdicts right, those changed against ours, the confusion matrix. With
+    /// `--drive` / `--controller` the car is given, as to `gap FILE`.
     #[arg(long, value_delimiter = ',', num_args = 0.., default_missing_value = "drawn", value_name = "LIST")]
     pub loggers: Option<Vec<String>>,
     /// The car's drive (paper rig): an EPOS4 over CANopen, or the ECU's own bridge. Default:
@@ -124,6 +126,24 @@ fn car_for(
     timing: super::LogTiming,
     threads: usize,
 ) -> Result<(Rig, super::Record, Option<CarChoice>)> {
+    let (drive, controller) = car_options(args)?;
+    if !matches!(rig.model, super::rig::RigModel::Paper(_)) {
+        if args.drive.is_some() || args.controller.is_some() {
+            return Err(format!(
+                "--drive / --controller apply to the paper rig, not `{}`",
+                rig.name
+            )
+            .into());
+        }
+        return Ok((rig.clone(), rec.clone(), None));
+    }
+    Ok(super::drive::choose_for_log(
+        rig, rec, header, timing, drive, controller, threads,
+    ))
+}
+
+/// `--drive` and `--controller`, read.
+fn car_options(args: &GapArgs) -> Result<(Option<CarDrive>, Option<Controller>)> {
     let drive = match &args.drive {
         Some(d) => Some(
             CarDrive::from_name(d)
@@ -138,19 +158,7 @@ fn car_for(
         ),
         None => None,
     };
-    if !matches!(rig.model, super::rig::RigModel::Paper(_)) {
-        if args.drive.is_some() || args.controller.is_some() {
-            return Err(format!(
-                "--drive / --controller apply to the paper rig, not `{}`",
-                rig.name
-            )
-            .into());
-        }
-        return Ok((rig.clone(), rec.clone(), None));
-    }
-    Ok(super::drive::choose_for_log(
-        rig, rec, header, timing, drive, controller, threads,
-    ))
+    Ok((drive, controller))
 }
 
 fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
@@ -195,6 +203,8 @@ fn print_help(selftest: bool) -> Result<()> {
         "duration_s",
         "model_world",
         "loggers",
+        "drive",
+        "controller",
         "threads",
         "json",
         "help",
@@ -430,6 +440,7 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
             .collect::<std::result::Result<Vec<_>, _>>()?;
         let report = selftest::run_loggers(
             &kinds,
+            car_options(args)?,
             &indices,
             args.seed,
             args.duration_s,
@@ -438,6 +449,11 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
         )?;
         (report.table(), serde_json::to_value(&report)?)
     } else {
+        if args.drive.is_some() || args.controller.is_some() {
+            return Err(
+                "--drive / --controller: the selftest gives the car only with --loggers".into(),
+            );
+        }
         let report = selftest::run(
             world,
             &indices,

@@ -11,10 +11,11 @@
 use super::drive::{CarChoice, LogHeader};
 use super::generator::{self, GenCase, Logger, ReferenceConvention};
 use super::model::Effects;
-use super::rig::Rig;
+use super::rig::{CarDrive, Rig};
 use super::rng::{self, Rng};
 use super::{EffectKind, LogTiming, Options, Record, diagnose, parallel_map};
 use crate::scenario::Sweep;
+use crate::sim::Controller;
 use std::collections::BTreeMap;
 
 /// What a case hides and how its log was made.
@@ -405,10 +406,12 @@ pub struct LoggersReport {
 
 /// The independent world's cases `cases`, each written by every logger of `kinds` (ours
 /// always, first) into a file and diagnosed as `host-sim gap FILE` diagnoses it: the file
-/// read by the rig's reader, the car and the reference convention taken from its header
-/// lines where it has them and fitted where not ([`super::drive::choose_for_log`]).
+/// read by the rig's reader, the car (drive, controller) given in `car` as `--drive` and
+/// `--controller` give it, else from the file's header lines, else fitted, and so the
+/// reference convention ([`super::drive::choose_for_log`]).
 pub fn run_loggers(
     kinds: &[LoggerKind],
+    car: (Option<CarDrive>, Option<Controller>),
     cases: &[usize],
     seed: u64,
     duration_s: f64,
@@ -452,8 +455,8 @@ pub fn run_loggers(
             &loaded.record,
             &header,
             loaded.timing,
-            None,
-            None,
+            car.0,
+            car.1,
             1,
         );
         let info = CaseInfo {
