@@ -1,78 +1,284 @@
 //! A log's timing belongs to the logger: the independent world's cars (`gap::generator`, an
-//! RK4 plant under the firmware's cascade, not the diagnosis's model) written by two loggers,
-//! ours (the reference in force over the period that ends at each row, stamps on the grid)
-//! and another (the reference that starts at each row, stamps +-1 ms, 1 % of rows missing, no
-//! header saying which), and diagnosed as `host-sim gap` diagnoses a file: the log's timing
-//! estimated, its reference convention fitted where the header is silent. The verdict must
-//! not depend on the logger.
+//! RK4 plant under the firmware's cascade, not the diagnosis's model) written by the world's
+//! own loggers, each sampling the simulation at its own rate: ours (the reference in force
+//! over the period that ends at each row, stamps on the grid, the header lines) and a team's
+//! (either convention, 100/200/1000 Hz, stamps +-1 ms, 1 % of rows lost, no header). First
+//! that each logger writes what it claims; then cars diagnosed as `host-sim gap` diagnoses a
+//! file: the log's timing estimated, its reference convention fitted where the header is
+//! silent. The verdict must not depend on the logger.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
 use host_sim::gap::drive;
-use host_sim::gap::generator::{GenCase, Rows, rows_of};
+use host_sim::gap::generator::{
+    self, GenCase, LOGGER_DROP_CHANCE, LOGGER_JITTER_S, Logger, ReferenceConvention, Rows, log_of,
+    rows_logged,
+};
 use host_sim::gap::rig::{CarDrive, Rig};
-use host_sim::gap::{EffectKind, Options, VerdictKind, diagnose};
+use host_sim::gap::{EffectKind, LogTiming, Options, VerdictKind, diagnose};
 use host_sim::sim::Controller;
-use std::fmt::Write as _;
 use std::path::Path;
 
-fn sweep() -> Vec<f64> {
+fn sweep(duration_s: f64) -> Vec<f64> {
     host_sim::scenario::Sweep {
         amplitude_deg: 8.0,
         f_start_hz: 0.2,
         f_end_hz: 4.0,
-        duration_s: 10.0,
+        duration_s,
     }
     .samples()
 }
 
-/// The log file the other logger writes from the world's rows: each row's reference is the
-/// one that starts at its stamp, the stamps jitter (uniform, +-1 ms), and a row is lost now
-/// and then (a CAN recording); `seed` picks which.
-fn write_theirs(rows: &Rows, path: &Path, seed: u64) {
-    let mut state = seed;
-    let mut next = || {
-        state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let mut text = String::from("t,ref_sw_deg,sw_deg,motor_rad,current_a\n");
-    let n = rows.t.len();
-    for k in 0..n {
-        let (jitter, drop) = (next(), next());
-        if drop < 0.01 {
-            continue;
-        }
-        let reference = rows.reference[(k + 1).min(n - 1)];
-        writeln!(
-            text,
-            "{:.6},{:.4},{:.4},{:.6},{:.5}",
-            rows.t[k] + 2e-3 * (jitter - 0.5),
-            reference,
-            rows.sw_deg[k],
-            rows.motor_rad[k],
-            rows.current_a[k]
-        )
-        .unwrap();
+fn team(reference: ReferenceConvention, rate_hz: u32, jitter: bool, drop: bool) -> Logger {
+    Logger {
+        reference,
+        rate_hz,
+        jitter_s: if jitter { LOGGER_JITTER_S } else { 0.0 },
+        drop_chance: if drop { LOGGER_DROP_CHANCE } else { 0.0 },
+        header: false,
     }
-    std::fs::write(path, text).unwrap();
 }
 
-/// Ours: the rows as the world wrote them, with the header lines host-sim writes.
-fn write_ours(rows: &Rows, path: &Path) {
-    let mut text = String::from(
-        "# drive: direct\n# controller: paper\n# current: interval-mean\n# reference: period-ending\n\
-         t,ref_sw_deg,sw_deg,motor_rad,current_a\n",
+/// Microseconds, the resolution of a log file's stamps.
+fn us(t: f64) -> i64 {
+    (t * 1e6).round() as i64
+}
+
+/// The rows of `logger` checked against what it claims, on `full` (the same logger's rows
+/// without jitter and losses: the grid it samples).
+fn check_logger(case: &GenCase, logger: &Logger, rows: &Rows, full: &Rows) -> usize {
+    let what = logger.describe();
+    let row_us = 1_000_000 / i64::from(logger.rate_hz);
+    // The rate: every grid place one row interval (or a whole number of them, where a row
+    // was lost) after the one before, on a grid of that interval.
+    assert!(
+        full.grid_s.windows(2).all(|w| us(w[1] - w[0]) == row_us),
+        "{what}"
     );
-    for k in 0..rows.t.len() {
-        writeln!(
-            text,
-            "{:.6},{:.4},{:.4},{:.6},{:.5}",
-            rows.t[k], rows.reference[k], rows.sw_deg[k], rows.motor_rad[k], rows.current_a[k]
-        )
-        .unwrap();
+    assert!(full.grid_s.iter().all(|&g| us(g) % row_us == 0), "{what}");
+    let mut interior_lost = 0;
+    for w in rows.grid_s.windows(2) {
+        let gap = us(w[1] - w[0]);
+        assert!(gap > 0 && gap % row_us == 0, "{what}: gap {gap} us");
+        interior_lost += gap / row_us - 1;
     }
-    std::fs::write(path, text).unwrap();
+    let lost = full.t.len() - rows.t.len();
+    assert!(interior_lost as usize <= lost, "{what}");
+    // Lost rows: none, or about 1 % of them (a binomial draw of thousands of rows).
+    let share = lost as f64 / full.t.len() as f64;
+    if logger.drop_chance > 0.0 {
+        assert!((0.004..0.016).contains(&share), "{what}: {share}");
+    } else {
+        assert_eq!(lost, 0, "{what}");
+    }
+    // A kept row is the full log's row at its grid place: the logger loses rows, it does not
+    // change what the others hold (the sensor noise is the same draw).
+    let mut j = 0;
+    for k in 0..rows.t.len() {
+        while full.grid_s[j] != rows.grid_s[k] {
+            j += 1;
+        }
+        assert_eq!(
+            (rows.sw_deg[k], rows.current_a[k], rows.reference[k]),
+            (full.sw_deg[j], full.current_a[j], full.reference[j]),
+            "{what}: row {k}"
+        );
+    }
+    // Stamps: in order, within the jitter of their grid place, and really jittered.
+    assert!(
+        rows.t.windows(2).all(|w| w[1] > w[0]),
+        "{what}: stamps out of order"
+    );
+    let dev: Vec<f64> = rows
+        .t
+        .iter()
+        .zip(&rows.grid_s)
+        .map(|(t, g)| t - g)
+        .collect();
+    let largest = dev.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    assert!(largest <= logger.jitter_s + 1e-6, "{what}: {largest}");
+    if logger.jitter_s > 0.0 {
+        let rms = (dev.iter().map(|d| d * d).sum::<f64>() / dev.len() as f64).sqrt();
+        // Uniform over +-J: RMS J / sqrt(3) = 0.58 J.
+        assert!(largest > 0.9 * logger.jitter_s, "{what}: {largest}");
+        assert!(rms > 0.45 * logger.jitter_s, "{what}: RMS {rms}");
+    } else {
+        assert!(rows.t == rows.grid_s, "{what}: stamps off the grid");
+    }
+    // The convention: the reference sample of the half row before the grid place (ending)
+    // or after it (starting). At a reference instant the two differ by one sample.
+    let last = case.reference.len() as i64 - 1;
+    let mut at_instants = 0;
+    for (g, r) in rows.grid_s.iter().zip(&rows.reference) {
+        let g = us(*g);
+        let m = match logger.reference {
+            ReferenceConvention::PeriodEnding => (g - 1).div_euclid(10_000),
+            ReferenceConvention::PeriodStarting => g.div_euclid(10_000),
+        };
+        assert_eq!(
+            *r,
+            case.reference[m.clamp(0, last) as usize],
+            "{what}: row at {g} us"
+        );
+        if g % 10_000 == 0 && (1..last).contains(&m) {
+            at_instants += 1;
+        }
+    }
+    assert!(
+        at_instants > 100,
+        "{what}: {at_instants} rows at reference instants"
+    );
+    interior_lost as usize
+}
+
+#[test]
+fn each_logger_writes_what_it_claims() {
+    use ReferenceConvention::{PeriodEnding, PeriodStarting};
+    let mut case = GenCase::nominal(sweep(30.0), 100);
+    // A receiver's lag: the grid is the logger's clock, whatever the lag of its samples.
+    case.skew_s = 1.5e-3;
+    for logger in [
+        Logger::ours(100),
+        Logger::ours(1000),
+        team(PeriodStarting, 100, true, true),
+        team(PeriodStarting, 200, false, true),
+        team(PeriodEnding, 200, true, false),
+        team(PeriodStarting, 1000, true, true),
+        team(PeriodEnding, 1000, false, false),
+    ] {
+        let rows = rows_logged(&case, 4, &logger);
+        let full = rows_logged(
+            &case,
+            4,
+            &Logger {
+                jitter_s: 0.0,
+                drop_chance: 0.0,
+                ..logger
+            },
+        );
+        assert_eq!(
+            // A row per interval of the reference's 10 ms samples.
+            full.t.len(),
+            case.reference.len() * logger.rate_hz as usize / 100,
+            "{}",
+            logger.describe()
+        );
+        let interior_lost = check_logger(&case, &logger, &rows, &full);
+        // The two conventions hold the same reference but at the reference instants.
+        let other = rows_logged(
+            &case,
+            4,
+            &Logger {
+                reference: match logger.reference {
+                    PeriodEnding => PeriodStarting,
+                    PeriodStarting => PeriodEnding,
+                },
+                ..logger
+            },
+        );
+        let differ = rows
+            .reference
+            .iter()
+            .zip(&other.reference)
+            .zip(&rows.grid_s)
+            .filter(|((a, b), _)| a != b)
+            .inspect(|(_, g)| assert_eq!(us(**g) % 10_000, 0, "{}", logger.describe()))
+            .count();
+        assert!(differ > 100, "{}", logger.describe());
+        // The file: ours with the header lines host-sim writes, a team's without; as read by
+        // `host-sim gap`, at the logger's rate with its lost rows counted.
+        let log = log_of(&case, 4, &logger);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("log.csv");
+        log.save(&path).unwrap();
+        let loaded = Rig::paper().load_log(&path).unwrap();
+        if logger.header {
+            for line in [
+                "drive: direct",
+                "controller: paper",
+                "current: interval-mean",
+                "reference: period-ending",
+            ] {
+                assert!(loaded.comments.iter().any(|c| c == line), "{line}");
+            }
+        } else {
+            assert!(loaded.comments.is_empty(), "{:?}", loaded.comments);
+        }
+        let timing: LogTiming = loaded.timing;
+        assert_eq!(timing.rows, rows.t.len());
+        if logger.jitter_s == 0.0 {
+            assert!((timing.row_dt_s * f64::from(logger.rate_hz) - 1.0).abs() < 1e-6);
+            assert_eq!(timing.missing_rows, interior_lost);
+        }
+    }
+}
+
+/// Our logger at the case's rate is the log the default selftest diagnoses.
+#[test]
+fn our_logger_is_the_cases_own_log() {
+    let case = generator::draw(1, 3, 12.0);
+    let ours = rows_logged(&case, 1, &Logger::ours(case.log_rate_hz));
+    let own = generator::rows_of(&case, 1);
+    assert_eq!(ours.t, own.t);
+    assert_eq!(ours.reference, own.reference);
+    assert_eq!(ours.current_a, own.current_a);
+}
+
+#[test]
+fn every_kind_of_logger_is_drawn_and_none_writes_a_header() {
+    let drawn: Vec<Logger> = (0..300).map(|i| Logger::draw(1, i)).collect();
+    assert!(drawn.iter().all(|l| !l.header));
+    for rate in [100, 200, 1000] {
+        for reference in [
+            ReferenceConvention::PeriodEnding,
+            ReferenceConvention::PeriodStarting,
+        ] {
+            let n = drawn
+                .iter()
+                .filter(|l| l.rate_hz == rate && l.reference == reference)
+                .count();
+            assert!(n > 25, "{rate} Hz {reference:?}: {n} of 300");
+        }
+    }
+    let jittery = drawn
+        .iter()
+        .filter(|l| l.jitter_s == LOGGER_JITTER_S)
+        .count();
+    let lossy = drawn
+        .iter()
+        .filter(|l| l.drop_chance == LOGGER_DROP_CHANCE)
+        .count();
+    assert!((100..200).contains(&jittery), "{jittery}");
+    assert!((100..200).contains(&lossy), "{lossy}");
+    // The case carries its logger, from a stream of its own.
+    assert_eq!(generator::draw(1, 17, 12.0).logger, Logger::draw(1, 17));
+}
+
+#[test]
+fn logger_kinds_are_named_as_they_are_given() {
+    use host_sim::gap::selftest::LoggerKind;
+    for name in [
+        "ours",
+        "drawn",
+        "starting-100-jitter-drop",
+        "ending-1000",
+        "ending-200-drop",
+    ] {
+        assert_eq!(LoggerKind::parse(name).unwrap().name(), name);
+    }
+    assert_eq!(
+        LoggerKind::parse("starting-200-jitter").unwrap(),
+        LoggerKind::Fixed(team(ReferenceConvention::PeriodStarting, 200, true, false))
+    );
+    for bad in [
+        "",
+        "theirs",
+        "starting",
+        "ending-150",
+        "starting-100-late",
+        "ending-100-drop-drop",
+    ] {
+        assert!(LoggerKind::parse(bad).is_err(), "{bad:?}");
+    }
 }
 
 /// The verdict on a file, read as the CLI reads it (the car given, as `--drive direct
@@ -106,18 +312,25 @@ fn verdict_on(path: &Path) -> (Vec<String>, VerdictKind, drive::CarChoice) {
     (d.verdict.effects.clone(), d.verdict.kind, choice)
 }
 
+/// The case written by our logger and by a team's (the reference that starts at each row,
+/// stamps +-1 ms, 1 % of rows lost, no header), both at 100 Hz, and diagnosed.
 fn both_loggers(case: &GenCase) -> [(Vec<String>, VerdictKind, drive::CarChoice); 2] {
-    let rows = rows_of(case, 5);
     let dir = tempfile::tempdir().unwrap();
     let (ours, theirs) = (dir.path().join("ours.csv"), dir.path().join("theirs.csv"));
-    write_ours(&rows, &ours);
-    write_theirs(&rows, &theirs, 11);
+    log_of(case, 5, &Logger::ours(100)).save(&ours).unwrap();
+    log_of(
+        case,
+        5,
+        &team(ReferenceConvention::PeriodStarting, 100, true, true),
+    )
+    .save(&theirs)
+    .unwrap();
     [verdict_on(&ours), verdict_on(&theirs)]
 }
 
 #[test]
 fn an_effect_free_car_is_none_whichever_logger_wrote_it() {
-    let [ours, theirs] = both_loggers(&GenCase::nominal(sweep(), 100));
+    let [ours, theirs] = both_loggers(&GenCase::nominal(sweep(10.0), 100));
     assert_eq!(ours.1, VerdictKind::None, "ours: {:?}", ours.0);
     assert_eq!(theirs.1, VerdictKind::None, "theirs: {:?}", theirs.0);
     // Ours states its convention; the other logger's is found, one row late.
@@ -132,7 +345,7 @@ fn an_effect_free_car_is_none_whichever_logger_wrote_it() {
 
 #[test]
 fn a_late_reference_is_a_delay_whichever_logger_wrote_it() {
-    let mut case = GenCase::nominal(sweep(), 100);
+    let mut case = GenCase::nominal(sweep(10.0), 100);
     case.truth.reference_delay_s = 0.035;
     case.hidden = vec!["delay".into()];
     let [ours, theirs] = both_loggers(&case);

@@ -2,7 +2,11 @@
 //! effect (or none, or two) in the candidate forms, diagnosed blind; at least 90 % must be named
 //! right. It checks the search and the verdict rules. On the independent world
 //! (`World::Independent`, host-sim/README.md's figure, `host-sim gap selftest`): its first 50
-//! cases, which check the model.
+//! cases, which check the model. And two of its cars written by two of its loggers
+//! (`host-sim gap selftest --loggers`), which check that the verdict is the car's, not the
+//! logger's.
+
+#![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
 use host_sim::gap::selftest;
 
@@ -65,4 +69,56 @@ fn the_independent_worlds_first_50_cases() {
             r.reason
         );
     }
+}
+
+/// Two of the independent world's cars at 100 Hz (seed 1: an effect-free sweep and a late
+/// reference) diagnosed from our logger's file and from a team's (the reference that starts
+/// at each row, stamps +-1 ms, 1 % of rows lost, no header), as `host-sim gap selftest
+/// --case 0,9 --loggers starting-100-jitter-drop` runs them: the same car gets the same
+/// verdict, and the team's convention is found from the log.
+#[test]
+fn two_cars_under_two_loggers() {
+    let mut opts = selftest::default_options();
+    opts.threads = 2;
+    let team = selftest::LoggerKind::parse("starting-100-jitter-drop").unwrap();
+    let report =
+        selftest::run_loggers(&[team], (None, None), &[0, 9], 1, 12.0, &opts, &|_| {}).unwrap();
+    print!("{}", report.table());
+    let kinds: Vec<&str> = report.loggers.iter().map(|l| l.kind.as_str()).collect();
+    assert_eq!(kinds, ["ours", "starting-100-jitter-drop"]);
+    for l in &report.loggers {
+        assert_eq!(l.report.cases.len(), 2, "{}", l.kind);
+        for r in &l.report.cases {
+            let by = r.logger.as_ref().unwrap();
+            let car = by.car.as_ref().unwrap();
+            println!(
+                "{} case {}: {} ({}); {:?} {}",
+                l.kind,
+                r.case.index,
+                selftest::label(&r.named),
+                car.describe(),
+                by.log_timing,
+                r.reason
+            );
+            assert_eq!(by.kind, l.kind);
+            assert_eq!(by.logger.rate_hz, 100);
+            assert_eq!(
+                r.named, r.case.hidden,
+                "{} case {}: {}",
+                l.kind, r.case.index, r.reason
+            );
+        }
+    }
+    // Ours says its convention in its header; the team's is found, one row late.
+    let team = &report.loggers[1];
+    for r in &team.report.cases {
+        let by = r.logger.as_ref().unwrap();
+        assert_eq!(by.car.as_ref().unwrap().reference_shift_rows, Some(1));
+        assert!(by.log_timing.missing_rows > 0, "{:?}", by.log_timing);
+    }
+    assert!(
+        team.changed_vs_ours.is_empty(),
+        "{:?}",
+        team.changed_vs_ours
+    );
 }

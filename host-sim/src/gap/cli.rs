@@ -5,6 +5,7 @@ use super::rig::CarDrive;
 use super::rig::Rig;
 use super::{EffectKind, Options, diagnose, selftest};
 use crate::report_html::{HtmlReport, num};
+use crate::sim::Controller;
 use clap::Args;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -62,6 +63,13 @@ pub struct GapArgs {
     /// world (a check of the search, not of the model).
     #[arg(long)]
     pub model_world: bool,
+    /// selftest: diagnose each car from the files of these loggers, as `gap FILE` reads them
+    /// (ours always, first): `ours`, `drawn` (a team's logger drawn with each case), or
+    /// `ending|starting-100|200|1000[-jitter][-drop]`; bare `--loggers` is `drawn`. Prints per
+    /// logger the verdicts right, those changed against ours, the confusion matrix. With
+    /// `--drive` / `--controller` the car is given, as to `gap FILE`.
+    #[arg(long, value_delimiter = ',', num_args = 0.., default_missing_value = "drawn", value_name = "LIST")]
+    pub loggers: Option<Vec<String>>,
     /// The car's drive (paper rig): an EPOS4 over CANopen, or the ECU's own bridge. Default:
     /// the log's `# drive:` line, else the drive whose nominal model the log supports.
     #[arg(long, value_name = "epos4|direct")]
@@ -118,6 +126,24 @@ fn car_for(
     timing: super::LogTiming,
     threads: usize,
 ) -> Result<(Rig, super::Record, Option<CarChoice>)> {
+    let (drive, controller) = car_options(args)?;
+    if !matches!(rig.model, super::rig::RigModel::Paper(_)) {
+        if args.drive.is_some() || args.controller.is_some() {
+            return Err(format!(
+                "--drive / --controller apply to the paper rig, not `{}`",
+                rig.name
+            )
+            .into());
+        }
+        return Ok((rig.clone(), rec.clone(), None));
+    }
+    Ok(super::drive::choose_for_log(
+        rig, rec, header, timing, drive, controller, threads,
+    ))
+}
+
+/// `--drive` and `--controller`, read.
+fn car_options(args: &GapArgs) -> Result<(Option<CarDrive>, Option<Controller>)> {
     let drive = match &args.drive {
         Some(d) => Some(
             CarDrive::from_name(d)
@@ -132,19 +158,7 @@ fn car_for(
         ),
         None => None,
     };
-    if !matches!(rig.model, super::rig::RigModel::Paper(_)) {
-        if args.drive.is_some() || args.controller.is_some() {
-            return Err(format!(
-                "--drive / --controller apply to the paper rig, not `{}`",
-                rig.name
-            )
-            .into());
-        }
-        return Ok((rig.clone(), rec.clone(), None));
-    }
-    Ok(super::drive::choose_for_log(
-        rig, rec, header, timing, drive, controller, threads,
-    ))
+    Ok((drive, controller))
 }
 
 fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
@@ -188,6 +202,9 @@ fn print_help(selftest: bool) -> Result<()> {
         "seed",
         "duration_s",
         "model_world",
+        "loggers",
+        "drive",
+        "controller",
         "threads",
         "json",
         "help",
@@ -391,11 +408,15 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
     } else {
         args.case.clone()
     };
-    let report = selftest::run(world, &indices, args.seed, args.duration_s, &opts, &|r| {
+    let print_case = |r: &selftest::CaseResult| {
         eprintln!(
-            "case {:3} {:<32} hidden {:<28} named {:<28} {}  GoF {:5.1} -> {:5.1} %",
+            "case {:3} {:<32}{} hidden {:<28} named {:<28} {}  GoF {:5.1} -> {:5.1} %",
             r.case.index,
             r.case.scenario,
+            r.logger.as_ref().map_or(String::new(), |l| format!(
+                " logger {:<26}",
+                l.logger.describe()
+            )),
             selftest::label(&r.case.hidden),
             selftest::label(&r.named),
             if r.correct { "ok " } else { "MISS" },
@@ -405,11 +426,48 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
         if !r.correct {
             eprintln!("         {}", r.reason);
         }
-    });
-    print!("{}", report.confusion_table());
+    };
+    let (table, json) = if let Some(names) = &args.loggers {
+        if args.model_world {
+            return Err(
+                "--loggers: the loggers write the independent world's cars, not the model world's"
+                    .into(),
+            );
+        }
+        let kinds = names
+            .iter()
+            .map(|n| selftest::LoggerKind::parse(n))
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let report = selftest::run_loggers(
+            &kinds,
+            car_options(args)?,
+            &indices,
+            args.seed,
+            args.duration_s,
+            &opts,
+            &print_case,
+        )?;
+        (report.table(), serde_json::to_value(&report)?)
+    } else {
+        if args.drive.is_some() || args.controller.is_some() {
+            return Err(
+                "--drive / --controller: the selftest gives the car only with --loggers".into(),
+            );
+        }
+        let report = selftest::run(
+            world,
+            &indices,
+            args.seed,
+            args.duration_s,
+            &opts,
+            &print_case,
+        );
+        (report.confusion_table(), serde_json::to_value(&report)?)
+    };
+    print!("{table}");
     println!("{:.1} s", started.elapsed().as_secs_f64());
     if let Some(path) = &args.json {
-        write_json(path, &serde_json::to_value(&report)?)?;
+        write_json(path, &json)?;
     }
     Ok(())
 }

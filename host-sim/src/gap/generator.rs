@@ -15,6 +15,13 @@
 //! Logs are written at 100, 200 or 1000 Hz: the column and motor angles as instants, the
 //! current as the mean over the row's interval plus sensor noise; the rows' stamps are late
 //! by 0-3 ms against the instants the samples were taken (a logger stamps on receipt).
+//!
+//! The log's timing belongs to the logger, not to the car, so each case also draws a
+//! [`Logger`] of its own, from a stream apart from the car's (the car of a seed and index is
+//! the same whichever logger writes it): which reference a row at a reference instant holds
+//! (the previous one, as host-sim and steer-can write, or already the new one), its rate,
+//! stamp jitter, rows lost as in a CAN recording, and no header lines. Every logger samples
+//! the world's own simulation at its own rate; none rewrites another's log.
 
 use super::rng;
 use super::{CurrentSamples, Record};
@@ -71,6 +78,123 @@ pub struct GenCase {
     pub skew_s: f64,
     #[serde(skip)]
     pub reference: Vec<f64>,
+    /// The logger drawn with the case, for a run that diagnoses the car as another logger
+    /// wrote it (the case's own log, [`rows_of`], is [`Logger::ours`]).
+    #[serde(skip)]
+    pub logger: Logger,
+}
+
+/// Which reference a row stamped at a reference instant holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReferenceConvention {
+    /// The reference in force over the row interval that ends at the row: at a reference
+    /// instant, still the previous sample (host-sim's and steer-can's logs).
+    PeriodEnding,
+    /// The reference that starts at the row: at a reference instant, already the sample the
+    /// ECU starts to use there.
+    PeriodStarting,
+}
+
+impl ReferenceConvention {
+    /// The name a header line `# reference: ...` gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            ReferenceConvention::PeriodEnding => "period-ending",
+            ReferenceConvention::PeriodStarting => "period-starting",
+        }
+    }
+
+    /// Its short name, `ending` or `starting`.
+    pub fn short(self) -> &'static str {
+        match self {
+            ReferenceConvention::PeriodEnding => "ending",
+            ReferenceConvention::PeriodStarting => "starting",
+        }
+    }
+}
+
+/// How a log is written from the world: the logger's part of a log's timing.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Logger {
+    pub reference: ReferenceConvention,
+    /// Rows per second (the row grid; each row's current is the mean over its own interval).
+    pub rate_hz: u32,
+    /// Stamp jitter, s: each stamp lies within +-this of the row's place on the logger's grid
+    /// (uniform), the rows kept in order as a receiver stamps frames in the order they come.
+    pub jitter_s: f64,
+    /// The chance that a row is lost (a frame a CAN recording missed).
+    pub drop_chance: f64,
+    /// Writes the header lines host-sim and steer-can write (`# drive: direct`, ...,
+    /// `# reference: ...`); a team's own logger writes none.
+    pub header: bool,
+}
+
+/// The jitter a jittery logger draws, s: +-1 ms, a receiver's stamping on a loaded host.
+pub const LOGGER_JITTER_S: f64 = 1e-3;
+/// The share of rows a lossy logger drops.
+pub const LOGGER_DROP_CHANCE: f64 = 0.01;
+
+impl Logger {
+    /// Ours: the reference of the period ending at each row, stamps on the logger's grid,
+    /// every row, the header lines.
+    pub fn ours(rate_hz: u32) -> Logger {
+        Logger {
+            reference: ReferenceConvention::PeriodEnding,
+            rate_hz,
+            jitter_s: 0.0,
+            drop_chance: 0.0,
+            header: true,
+        }
+    }
+
+    /// A team's logger for case `index` of a run seeded with `seed`: each property drawn
+    /// apart (convention, rate 100/200/1000 Hz, jitter 0 or +-1 ms, none or 1 % of rows
+    /// lost), no header lines. Its own stream: drawing it changes nothing of the car.
+    pub fn draw(seed: u64, index: usize) -> Logger {
+        let mut rng = rng::seeded(
+            seed.wrapping_mul(0x4f1b_bcdc_bfa5_3e0b)
+                ^ (index as u64).wrapping_mul(0xd1b5_4a32_d192_ed03),
+        );
+        let reference = if rng.unit() < 0.5 {
+            ReferenceConvention::PeriodEnding
+        } else {
+            ReferenceConvention::PeriodStarting
+        };
+        let rate_hz = [100, 200, 1000][(rng.next_u64() % 3) as usize];
+        let jitter_s = if rng.unit() < 0.5 {
+            0.0
+        } else {
+            LOGGER_JITTER_S
+        };
+        let drop_chance = if rng.unit() < 0.5 {
+            0.0
+        } else {
+            LOGGER_DROP_CHANCE
+        };
+        Logger {
+            reference,
+            rate_hz,
+            jitter_s,
+            drop_chance,
+            header: false,
+        }
+    }
+
+    /// A short name: `ending 100 Hz`, `starting 1000 Hz +-1 ms 1 % lost`, `... header`.
+    pub fn describe(&self) -> String {
+        let mut s = format!("{} {} Hz", self.reference.short(), self.rate_hz);
+        if self.jitter_s > 0.0 {
+            s.push_str(&format!(" +-{:.0} ms", 1e3 * self.jitter_s));
+        }
+        if self.drop_chance > 0.0 {
+            s.push_str(&format!(" {:.0} % lost", 100.0 * self.drop_chance));
+        }
+        if self.header {
+            s.push_str(" header");
+        }
+        s
+    }
 }
 
 /// Rack speed of the friction's tanh, m/s: sharp against the rack's 10-100 mm/s in a sweep,
@@ -182,6 +306,7 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
         log_rate_hz,
         skew_s,
         reference,
+        logger: Logger::draw(seed, index),
     }
 }
 
@@ -324,19 +449,29 @@ impl Actuator for RkPlant {
     }
 }
 
-/// A log as rows: `t` (the logger's stamps, s), the reference in force over each row's
-/// interval, the column angle (deg), the motor angle (rad), the interval-mean current (A).
+/// A log as rows: `t` (the logger's stamps, s), the reference the logger's convention puts
+/// in each row, the column angle (deg), the motor angle (rad), the interval-mean current (A).
 #[derive(Debug, Clone, Default)]
 pub struct Rows {
     pub t: Vec<f64>,
+    /// Each row's place on the logger's grid, s: its stamp without jitter (what a lost row
+    /// leaves a gap in).
+    pub grid_s: Vec<f64>,
     pub reference: Vec<f64>,
     pub sw_deg: Vec<f64>,
     pub motor_rad: Vec<f64>,
     pub current_a: Vec<f64>,
 }
 
-/// Run the case's world and write its log.
+/// Run the case's world and write its log as our logger does at the case's rate.
 pub fn rows_of(case: &GenCase, seed: u64) -> Rows {
+    rows_logged(case, seed, &Logger::ours(case.log_rate_hz))
+}
+
+/// Run the case's world and write its log as `logger` does: the logger samples the
+/// simulation at its own rate, the case's stamping lag (`skew_s`) is its receiver's, and
+/// the sensor noise of each row is the same draw whatever the logger's jitter and losses.
+pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
     let truth = case.truth;
     let ode = Ode::new(truth);
     let nominal = PlantParams::PAPER;
@@ -375,7 +510,13 @@ pub fn rows_of(case: &GenCase, seed: u64) -> Rows {
     let mut rng = rng::seeded(seed ^ (case.index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
     let encoder = ColumnEncoder { zero_raw: 0 };
     let h = 1.0 / CURRENT_LOOP_HZ as f64;
-    let ticks_per_row = CURRENT_LOOP_HZ as u64 / case.log_rate_hz as u64;
+    let ticks_per_row = CURRENT_LOOP_HZ as u64 / logger.rate_hz.max(1) as u64;
+    // Which reference a row holds: the one of the half row interval before its stamp
+    // (period-ending: at a reference instant, the previous sample) or after it.
+    let reference_lead = match logger.reference {
+        ReferenceConvention::PeriodEnding => -0.5,
+        ReferenceConvention::PeriodStarting => 0.5,
+    };
     let skew_ticks = (case.skew_s * CURRENT_LOOP_HZ as f64).round() as u64;
     // The reference's late arrival, in position ticks (0.5 ms).
     let delay_pos = (truth.reference_delay_s * (CURRENT_LOOP_HZ as f64)
@@ -410,8 +551,8 @@ pub fn rows_of(case: &GenCase, seed: u64) -> Rows {
             if stamp.is_multiple_of(ticks_per_row) {
                 let row_s = ticks_per_row as f64 * h;
                 let t = stamp as f64 * h;
-                // The reference the logger sent, in force over the row's stamped interval.
-                let k = (((t - 0.5 * row_s) * 100.0).floor().max(0.0) as usize)
+                // The reference the logger sent, by its convention.
+                let k = (((t + reference_lead * row_s) * 100.0).floor().max(0.0) as usize)
                     .min(case.reference.len() - 1);
                 // The column encoder sits at the pinion end of the torsion bar (delta_P of
                 // section 3.2), not at the steering wheel.
@@ -423,6 +564,7 @@ pub fn rows_of(case: &GenCase, seed: u64) -> Rows {
                 integral_at_last_row = current_integral;
                 tick_at_last_row = tick;
                 rows.t.push(t);
+                rows.grid_s.push(t);
                 rows.reference.push(case.reference[k]);
                 rows.sw_deg.push((sw.0 as f64).to_degrees());
                 rows.motor_rad
@@ -432,7 +574,76 @@ pub fn rows_of(case: &GenCase, seed: u64) -> Rows {
             }
         }
     }
+    stamp_and_lose(
+        &mut rows,
+        logger,
+        seed ^ (case.index as u64).wrapping_mul(0x2545_f491_4f6c_dd1d),
+    );
     rows
+}
+
+/// The logger's receiver: each row stamped within +-`jitter_s` of its grid place (in whole
+/// microseconds, as a log file holds them, and in order: a stamp never falls on or before
+/// the one before), then a row lost with `drop_chance`. A logger without either is left
+/// as sampled. Drawn from its own stream, apart from the sensor noise.
+fn stamp_and_lose(rows: &mut Rows, logger: &Logger, stream: u64) {
+    if logger.jitter_s <= 0.0 && logger.drop_chance <= 0.0 {
+        return;
+    }
+    let mut rng = rng::seeded(stream ^ 0x6a09_e667_f3bc_c908);
+    let jitter_us = (logger.jitter_s * 1e6).round() as i64;
+    let mut prev_us = i64::MIN;
+    let mut kept = Rows::default();
+    for k in 0..rows.t.len() {
+        let (u, lost) = (rng.range(-1.0, 1.0), rng.unit() < logger.drop_chance);
+        let grid_us = (rows.grid_s[k] * 1e6).round() as i64;
+        // In order: a frame is received after the one before it. The bound holds still: the
+        // one before is stamped at most one jitter after its own place, a row interval back.
+        let stamp_us =
+            (grid_us + (u * jitter_us as f64).round() as i64).max(prev_us.saturating_add(1));
+        prev_us = stamp_us;
+        if lost {
+            continue;
+        }
+        kept.t.push(if jitter_us > 0 {
+            stamp_us as f64 * 1e-6
+        } else {
+            rows.t[k]
+        });
+        kept.grid_s.push(rows.grid_s[k]);
+        kept.reference.push(rows.reference[k]);
+        kept.sw_deg.push(rows.sw_deg[k]);
+        kept.motor_rad.push(rows.motor_rad[k]);
+        kept.current_a.push(rows.current_a[k]);
+    }
+    *rows = kept;
+}
+
+/// The case's log as `logger` writes it, in the project's file format (what `host-sim gap`
+/// reads): our logger's with the header lines host-sim writes of this car (the direct drive,
+/// the paper controller, interval-mean current, its reference convention), a team's without.
+pub fn log_of(case: &GenCase, seed: u64, logger: &Logger) -> crate::logfmt::Log {
+    let rows = rows_logged(case, seed, logger);
+    let comments = if logger.header {
+        let mut c = super::drive::LogHeader::lines(
+            super::rig::CarDrive::Direct,
+            crate::sim::Controller::Paper,
+        );
+        c.push("current: interval-mean".into());
+        c.push(format!("reference: {}", logger.reference.name()));
+        c
+    } else {
+        Vec::new()
+    };
+    crate::logfmt::Log {
+        t: rows.t,
+        ref_sw_deg: rows.reference,
+        sw_deg: rows.sw_deg,
+        motor_rad: rows.motor_rad,
+        current_a: rows.current_a,
+        extra: Vec::new(),
+        comments,
+    }
 }
 
 /// The case's log read as the diagnosis reads a file (the paper rig's columns and grid).
@@ -474,6 +685,7 @@ impl GenCase {
             log_rate_hz,
             skew_s: 0.0,
             reference,
+            logger: Logger::ours(log_rate_hz),
         }
     }
 }

@@ -3,14 +3,19 @@
 //! in every case, logs at 100-1000 Hz with skewed stamps) with a hidden effect, none, two, or
 //! far-off parameters, diagnosed blind, and the confusion matrix of what was named against
 //! what was hidden. `draw_case` and `record_of` are the diagnosis's own model with the
-//! candidate forms, for the unit tests that need an exact effect.
+//! candidate forms, for the unit tests that need an exact effect. [`run_loggers`] diagnoses
+//! the same cars from the files the world's loggers write ([`generator::Logger`]: either
+//! reference convention, 100-1000 Hz, jitter, lost rows, no header), as `host-sim gap FILE`
+//! reads a file, and counts the verdicts that changed against our logger's.
 
-use super::generator::{self, GenCase};
+use super::drive::{CarChoice, LogHeader};
+use super::generator::{self, GenCase, Logger, ReferenceConvention};
 use super::model::Effects;
-use super::rig::Rig;
+use super::rig::{CarDrive, Rig};
 use super::rng::{self, Rng};
-use super::{EffectKind, Options, Record, diagnose};
+use super::{EffectKind, LogTiming, Options, Record, diagnose, parallel_map};
 use crate::scenario::Sweep;
+use crate::sim::Controller;
 use std::collections::BTreeMap;
 
 /// What a case hides and how its log was made.
@@ -213,6 +218,20 @@ pub struct CaseResult {
     pub ranking: Vec<super::Candidate>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub parameters: Option<super::identify::Identified>,
+    /// The logger that wrote the case's file, in a run under several loggers.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub logger: Option<LoggedBy>,
+}
+
+/// How a case's file was written and what the diagnosis read of it.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LoggedBy {
+    /// The kind asked for (`ours`, `drawn`, `starting-100-jitter-drop`, ...).
+    pub kind: String,
+    pub logger: Logger,
+    /// The car the diagnosis took (drive, controller, reference convention, timing bound).
+    pub car: Option<CarChoice>,
+    pub log_timing: LogTiming,
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -237,67 +256,305 @@ pub fn run(
     on_case: &(dyn Fn(&CaseResult) + Sync),
 ) -> SelftestReport {
     let rig = Rig::paper();
-    let threads = opts.threads.max(1);
-    let per_case = Options {
+    let per_case = single_threaded(opts);
+    let results = parallel_map(cases, opts.threads.max(1), |&i| {
+        let (case, rec) = case_of(world, seed, i, duration_s, &rig);
+        let r = diagnosed(&rig, &rec, case, &per_case, None);
+        on_case(&r);
+        r
+    });
+    SelftestReport::of(results)
+}
+
+/// The options of one case's diagnosis: the run's threads go to the cases, one each.
+fn single_threaded(opts: &Options) -> Options {
+    Options {
         threads: 1,
         progress: false,
         ..opts.clone()
-    };
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let mut results: Vec<CaseResult> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|_| {
-                s.spawn(|| {
-                    let mut out = Vec::new();
-                    loop {
-                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(&i) = cases.get(k) else {
-                            break;
-                        };
-                        let (case, rec) = case_of(world, seed, i, duration_s, &rig);
-                        let d = diagnose(&rig, &rec, None, &per_case);
-                        let mut named = d.verdict.effects.clone();
-                        named.sort();
-                        named.dedup();
-                        let r = CaseResult {
-                            correct: named == case.hidden,
-                            named,
-                            gof_before: d.baseline_gof,
-                            gof_after: d.verdict.gof_after,
-                            reason: d.verdict.reason.clone(),
-                            ranking: d.ranking,
-                            parameters: d.parameters,
-                            case,
-                        };
-                        on_case(&r);
-                        out.push(r);
-                    }
-                    out
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            // A case whose worker panicked fails the selftest rather than leaving the table.
-            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .collect()
-    });
-    results.sort_by_key(|r| r.case.index);
-    let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
-    for r in &results {
-        *confusion
-            .entry(label(&r.case.hidden))
-            .or_default()
-            .entry(label(&r.named))
-            .or_default() += 1;
     }
-    let n = results.len().max(1) as f64;
-    SelftestReport {
-        accuracy: results.iter().filter(|r| r.correct).count() as f64 / n,
-        mean_gof_before: results.iter().map(|r| r.gof_before).sum::<f64>() / n,
-        mean_gof_after: results.iter().map(|r| r.gof_after).sum::<f64>() / n,
-        confusion,
-        cases: results,
+}
+
+/// The diagnosis of one case's record, scored against what it hides.
+fn diagnosed(
+    rig: &Rig,
+    rec: &Record,
+    case: CaseInfo,
+    opts: &Options,
+    logger: Option<LoggedBy>,
+) -> CaseResult {
+    let d = diagnose(rig, rec, None, opts);
+    let mut named = d.verdict.effects.clone();
+    named.sort();
+    named.dedup();
+    CaseResult {
+        correct: named == case.hidden,
+        named,
+        gof_before: d.baseline_gof,
+        gof_after: d.verdict.gof_after,
+        reason: d.verdict.reason.clone(),
+        ranking: d.ranking,
+        parameters: d.parameters,
+        case,
+        logger,
+    }
+}
+
+/// Which logger writes a case's file in a run under several loggers.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LoggerKind {
+    /// Ours at the case's own rate (stamps on the grid, every row, the header lines): the
+    /// verdicts every other logger's are compared with.
+    Ours,
+    /// The team's logger drawn with the case ([`Logger::draw`]).
+    Drawn,
+    /// One logger for every case, without header lines.
+    Fixed(Logger),
+}
+
+impl LoggerKind {
+    /// `ours`, `drawn`, or `ending|starting-100|200|1000[-jitter][-drop]`: a team's logger
+    /// with that reference convention and rate, stamps +-1 ms if `jitter`, 1 % of rows lost
+    /// if `drop`, no header lines.
+    pub fn parse(name: &str) -> Result<LoggerKind, String> {
+        let name = name.trim();
+        match name {
+            "ours" => return Ok(LoggerKind::Ours),
+            "drawn" => return Ok(LoggerKind::Drawn),
+            _ => {}
+        }
+        let bad = || {
+            format!(
+                "logger {name:?}: expected `ours`, `drawn` or ending|starting-100|200|1000[-jitter][-drop] \
+                 (e.g. starting-100-jitter-drop)"
+            )
+        };
+        let mut parts = name.split('-');
+        let reference = match parts.next() {
+            Some("ending") => ReferenceConvention::PeriodEnding,
+            Some("starting") => ReferenceConvention::PeriodStarting,
+            _ => return Err(bad()),
+        };
+        let rate_hz = match parts.next() {
+            Some("100") => 100,
+            Some("200") => 200,
+            Some("1000") => 1000,
+            _ => return Err(bad()),
+        };
+        let mut logger = Logger {
+            reference,
+            rate_hz,
+            jitter_s: 0.0,
+            drop_chance: 0.0,
+            header: false,
+        };
+        for p in parts {
+            match p {
+                "jitter" if logger.jitter_s == 0.0 => logger.jitter_s = generator::LOGGER_JITTER_S,
+                "drop" if logger.drop_chance == 0.0 => {
+                    logger.drop_chance = generator::LOGGER_DROP_CHANCE
+                }
+                _ => return Err(bad()),
+            }
+        }
+        Ok(LoggerKind::Fixed(logger))
+    }
+
+    /// The name it was given by.
+    pub fn name(&self) -> String {
+        match self {
+            LoggerKind::Ours => "ours".into(),
+            LoggerKind::Drawn => "drawn".into(),
+            LoggerKind::Fixed(l) => {
+                let mut s = format!("{}-{}", l.reference.short(), l.rate_hz);
+                if l.jitter_s > 0.0 {
+                    s.push_str("-jitter");
+                }
+                if l.drop_chance > 0.0 {
+                    s.push_str("-drop");
+                }
+                s
+            }
+        }
+    }
+
+    fn logger_for(&self, case: &GenCase) -> Logger {
+        match self {
+            LoggerKind::Ours => Logger::ours(case.log_rate_hz),
+            LoggerKind::Drawn => case.logger,
+            LoggerKind::Fixed(l) => *l,
+        }
+    }
+}
+
+/// One logger's verdicts on the run's cars.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LoggerRun {
+    pub kind: String,
+    /// Its cases, confusion matrix and accuracy.
+    pub report: SelftestReport,
+    /// The cases whose named effects differ from those named on our logger's file.
+    pub changed_vs_ours: Vec<usize>,
+}
+
+/// The same cars diagnosed from the files of several loggers.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LoggersReport {
+    /// Ours first.
+    pub loggers: Vec<LoggerRun>,
+}
+
+/// The independent world's cases `cases`, each written by every logger of `kinds` (ours
+/// always, first) into a file and diagnosed as `host-sim gap FILE` diagnoses it: the file
+/// read by the rig's reader, the car (drive, controller) given in `car` as `--drive` and
+/// `--controller` give it, else from the file's header lines, else fitted, and so the
+/// reference convention ([`super::drive::choose_for_log`]).
+pub fn run_loggers(
+    kinds: &[LoggerKind],
+    car: (Option<CarDrive>, Option<Controller>),
+    cases: &[usize],
+    seed: u64,
+    duration_s: f64,
+    opts: &Options,
+    on_case: &(dyn Fn(&CaseResult) + Sync),
+) -> Result<LoggersReport, String> {
+    let kinds: Vec<LoggerKind> = std::iter::once(LoggerKind::Ours)
+        .chain(kinds.iter().cloned())
+        .fold(Vec::new(), |mut v, k| {
+            if !v.contains(&k) {
+                v.push(k);
+            }
+            v
+        });
+    let rig = Rig::paper();
+    let per_case = single_threaded(opts);
+    let jobs: Vec<(usize, usize)> = cases
+        .iter()
+        .flat_map(|&i| (0..kinds.len()).map(move |k| (i, k)))
+        .collect();
+    // The files live only while their case is diagnosed, in a directory of this process.
+    let dir = std::env::temp_dir().join(format!("host-sim-gap-loggers-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let results = parallel_map(&jobs, opts.threads.max(1), |&(i, k)| {
+        let case = generator::draw(seed, i, duration_s);
+        let logger = kinds[k].logger_for(&case);
+        let path = dir.join(format!("case{i}-logger{k}.csv"));
+        let loaded = generator::log_of(&case, seed, &logger)
+            .save(&path)
+            .map_err(|e| e.to_string())
+            .and_then(|()| rig.load_log(&path).map_err(|e| e.to_string()))
+            .and_then(|l| {
+                LogHeader::parse(&l.comments)
+                    .map(|h| (l, h))
+                    .map_err(|e| format!("{}: {e}", path.display()))
+            });
+        let _ = std::fs::remove_file(&path);
+        let (loaded, header) = loaded?;
+        let (car_rig, rec, car) = super::drive::choose_for_log(
+            &rig,
+            &loaded.record,
+            &header,
+            loaded.timing,
+            car.0,
+            car.1,
+            1,
+        );
+        let info = CaseInfo {
+            index: case.index,
+            scenario: case.scenario.clone(),
+            hidden: case.hidden.clone(),
+            truth: Some(case),
+        };
+        let by = LoggedBy {
+            kind: kinds[k].name(),
+            logger,
+            car,
+            log_timing: loaded.timing,
+        };
+        let r = diagnosed(&car_rig, &rec, info, &per_case, Some(by));
+        on_case(&r);
+        Ok::<_, String>((k, r))
+    });
+    let _ = std::fs::remove_dir(&dir);
+    let mut per_kind: Vec<Vec<CaseResult>> = vec![Vec::new(); kinds.len()];
+    for r in results {
+        let (k, r) = r?;
+        per_kind[k].push(r);
+    }
+    let ours: BTreeMap<usize, Vec<String>> = per_kind[0]
+        .iter()
+        .map(|r| (r.case.index, r.named.clone()))
+        .collect();
+    let loggers = kinds
+        .iter()
+        .zip(per_kind)
+        .map(|(kind, results)| LoggerRun {
+            kind: kind.name(),
+            changed_vs_ours: results
+                .iter()
+                .filter(|r| ours.get(&r.case.index) != Some(&r.named))
+                .map(|r| r.case.index)
+                .collect(),
+            report: SelftestReport::of(results),
+        })
+        .collect();
+    Ok(LoggersReport { loggers })
+}
+
+impl LoggersReport {
+    /// Per logger: how many verdicts are right, how many changed against ours, and its
+    /// confusion matrix.
+    pub fn table(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        for l in &self.loggers {
+            let n = l.report.cases.len();
+            let right = l.report.cases.iter().filter(|r| r.correct).count();
+            let _ = writeln!(
+                s,
+                "logger {}: {right} of {n} right, {} changed against ours{}",
+                l.kind,
+                l.changed_vs_ours.len(),
+                if l.changed_vs_ours.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        " (cases {})",
+                        l.changed_vs_ours
+                            .iter()
+                            .map(|i| i.to_string())
+                            .collect::<Vec<_>>()
+                            .join(",")
+                    )
+                }
+            );
+            s.push_str(&l.report.confusion_table());
+            s.push('\n');
+        }
+        s
+    }
+}
+
+impl SelftestReport {
+    /// The report of these results: sorted by case, the confusion matrix and the means.
+    pub fn of(mut results: Vec<CaseResult>) -> SelftestReport {
+        results.sort_by_key(|r| r.case.index);
+        let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+        for r in &results {
+            *confusion
+                .entry(label(&r.case.hidden))
+                .or_default()
+                .entry(label(&r.named))
+                .or_default() += 1;
+        }
+        let n = results.len().max(1) as f64;
+        SelftestReport {
+            accuracy: results.iter().filter(|r| r.correct).count() as f64 / n,
+            mean_gof_before: results.iter().map(|r| r.gof_before).sum::<f64>() / n,
+            mean_gof_after: results.iter().map(|r| r.gof_after).sum::<f64>() / n,
+            confusion,
+            cases: results,
+        }
     }
 }
 
