@@ -352,3 +352,76 @@ fn a_late_reference_is_a_delay_whichever_logger_wrote_it() {
     assert_eq!(ours.0, vec!["delay".to_string()], "ours");
     assert_eq!(theirs.0, vec!["delay".to_string()], "theirs");
 }
+
+/// A 1 kHz logger whose stamps jitter by +-1 ms, its rows in the order they came: the rows'
+/// spacing, the stamps' spread and the rows lost are read near what they are (1 ms; 0.58 ms
+/// RMS, read within a factor of two, for at that jitter a lost row and a late stamp look
+/// alike; about 1 %), not as a faster grid with thousands of rows missing and 8 ms of
+/// jitter, which made the delay's bound (three times the jitter) tens of milliseconds. Held:
+/// a bound under half the 10 ms a delay must pass.
+#[test]
+fn a_thousand_hertz_log_with_a_millisecond_of_jitter_has_its_timing_read_as_it_is() {
+    use ReferenceConvention::PeriodStarting;
+    let case = GenCase::nominal(sweep(12.0), 1000);
+    for (jitter, drop) in [(true, true), (true, false)] {
+        let logger = team(PeriodStarting, 1000, jitter, drop);
+        let rows = rows_logged(&case, 4, &logger);
+        let timing = LogTiming::of(&rows.t);
+        println!("{}: {timing:?}", logger.describe());
+        assert!(
+            (timing.row_dt_s * 1e3 - 1.0).abs() < 0.02,
+            "{}: rows {:.3} ms apart",
+            logger.describe(),
+            timing.row_dt_s * 1e3
+        );
+        // Uniform over +-1 ms: 0.58 ms RMS.
+        assert!(
+            timing.jitter_s > 0.3e-3 && timing.jitter_s < 1.5e-3,
+            "{}: jitter {:.2} ms",
+            logger.describe(),
+            timing.jitter_s * 1e3
+        );
+        assert!(
+            timing.missing_rows < rows.t.len() / 25,
+            "{}: {} of {} rows missing",
+            logger.describe(),
+            timing.missing_rows,
+            rows.t.len()
+        );
+    }
+}
+
+/// A 200 Hz logger that puts the new reference sample at the reference instant: the row in
+/// the middle of each 10 ms step holds that step's sample in either convention, so the
+/// record's reference is our logger's, step for step (a row stamped a rounding below the
+/// middle is still the middle's).
+#[test]
+fn a_period_starting_log_at_200_hz_reads_each_steps_own_reference() {
+    use ReferenceConvention::PeriodStarting;
+    let case = GenCase::nominal(sweep(12.0), 200);
+    let read = |logger: &Logger| {
+        let rows = rows_logged(&case, 4, logger);
+        host_sim::gap::Record::from_samples(
+            &rows.t,
+            &rows.reference,
+            &rows.sw_deg,
+            &rows.current_a,
+            None,
+            0.01,
+            host_sim::gap::CurrentSamples::IntervalMean,
+        )
+    };
+    let ours = read(&Logger::ours(200));
+    let starting = read(&team(PeriodStarting, 200, false, false));
+    assert_eq!(ours.reference.len(), starting.reference.len());
+    let differ: Vec<usize> = (0..ours.reference.len())
+        .filter(|&k| ours.reference[k] != starting.reference[k])
+        .collect();
+    assert!(
+        differ.is_empty(),
+        "{} of {} steps read another sample, first at {:?}",
+        differ.len(),
+        ours.reference.len(),
+        differ.first()
+    );
+}

@@ -95,6 +95,39 @@ impl LogTiming {
             place += (((w[1] - w[0]) / median_gap).round() as u64).max(1);
             places.push(place);
         }
+        let by_gaps = LogTiming::on_places(t, &places, median_gap);
+        if by_gaps.is_regular() {
+            return (by_gaps, places);
+        }
+        // Jitter of the order of the spacing (a 1 kHz logger stamping +-1 ms, its rows in the
+        // order they came): the gaps no longer tell a lost row from a late stamp, and placing
+        // each row by its gap piles the errors up (a faster grid, thousands of rows missing).
+        // Each row by its stamp against the spacing over ten rows (the median: a lost row in
+        // a tenth of them moves it not at all, a stamp's jitter by a tenth), then, which keeps
+        // every error within a row's jitter; taken when it leaves the stamps closer to a grid.
+        let k = 10.min(t.len() - 1);
+        let mut spans: Vec<f64> = t.windows(k + 1).map(|w| (w[k] - w[0]) / k as f64).collect();
+        spans.sort_by(|a, b| a.total_cmp(b));
+        let spacing = spans[spans.len() / 2].max(1e-9);
+        let mut by_stamp = Vec::with_capacity(t.len());
+        let mut last: Option<u64> = None;
+        for &tj in t {
+            let at = ((tj - t[0]) / spacing).round().max(0.0) as u64;
+            let at = last.map_or(at, |l| at.max(l + 1));
+            by_stamp.push(at);
+            last = Some(at);
+        }
+        let by_stamps = LogTiming::on_places(t, &by_stamp, spacing);
+        if by_stamps.jitter_s / by_stamps.row_dt_s < by_gaps.jitter_s / by_gaps.row_dt_s {
+            (by_stamps, by_stamp)
+        } else {
+            (by_gaps, places)
+        }
+    }
+
+    /// The grid through stamps `t` at rows `places`: the least-squares line, the robust
+    /// spread about it, the rows the places skip. `spacing` where the line has no slope.
+    fn on_places(t: &[f64], places: &[u64], spacing: f64) -> LogTiming {
         // t = a + b * place by least squares.
         let n = t.len() as f64;
         let mx = places.iter().map(|&p| p as f64).sum::<f64>() / n;
@@ -105,12 +138,8 @@ impl LogTiming {
             sxy += dx * (tj - my);
             sxx += dx * dx;
         }
-        let b = if sxx > 0.0 { sxy / sxx } else { median_gap };
-        let b = if b.is_finite() && b > 0.0 {
-            b
-        } else {
-            median_gap
-        };
+        let b = if sxx > 0.0 { sxy / sxx } else { spacing };
+        let b = if b.is_finite() && b > 0.0 { b } else { spacing };
         let a = my - b * mx;
         let mut offsets: Vec<f64> = places
             .iter()
@@ -121,17 +150,14 @@ impl LogTiming {
         let median = offsets[offsets.len() / 2];
         let mut dev: Vec<f64> = offsets.iter().map(|o| (o - median).abs()).collect();
         dev.sort_by(|x, y| x.total_cmp(y));
-        let missing_rows = (place + 1).saturating_sub(t.len() as u64) as usize;
-        (
-            LogTiming {
-                row_dt_s: b,
-                grid_origin_s: a + median - b,
-                jitter_s: 1.4826 * dev[dev.len() / 2],
-                missing_rows,
-                rows: t.len(),
-            },
-            places,
-        )
+        let last = places.last().copied().unwrap_or(0);
+        LogTiming {
+            row_dt_s: b,
+            grid_origin_s: a + median - b,
+            jitter_s: 1.4826 * dev[dev.len() / 2],
+            missing_rows: (last + 1).saturating_sub(t.len() as u64) as usize,
+            rows: t.len(),
+        }
     }
 
     /// The stamps are a regular grid with jitter (not an irregular sampling): the jitter is
@@ -199,7 +225,11 @@ impl Record {
             .map(|k| {
                 // The row whose interval holds the middle of the step.
                 let mid = origin + (k as f64 + 0.5) * dt;
-                let j = t.partition_point(|v| *v < mid).min(t.len() - 1);
+                // A row stamped a rounding below the middle is the middle's (200 Hz rows
+                // sit on it).
+                let j = t
+                    .partition_point(|v| *v < mid - 1e-6 * row_dt)
+                    .min(t.len() - 1);
                 // Rows missing before row j: its value is the reference of its own interval
                 // only; over the missing ones, the cubic through the neighbours' (each at its
                 // interval's middle). The controller's acceleration feedforward acts on the
