@@ -5,6 +5,7 @@
 
 use super::super::sdo::{self, ServerRequest};
 use super::*;
+use crate::canopen::NodeId;
 
 fn node() -> NodeId {
     NodeId::new(1).unwrap()

@@ -4,6 +4,7 @@
 //! requests, and its best-effort "disable voltage" after a failure.
 
 use super::*;
+use crate::canopen::NodeId;
 
 fn node() -> NodeId {
     NodeId::new(1).unwrap()
