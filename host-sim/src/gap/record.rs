@@ -221,6 +221,34 @@ impl Record {
         // A millionth of a step for the rounding of binary fractions of 0.01 s.
         let n = (((last - origin) / dt + 1e-6).floor() as usize).max(1);
         let end = |k: usize| origin + (k + 1) as f64 * dt;
+        // The row stamped at `at`, within a quarter of a row spacing.
+        let row_at = |at: f64| {
+            let j = t.partition_point(|v| *v < at - 0.25 * row_dt);
+            (j < t.len() && (t[j] - at).abs() < 0.25 * row_dt).then_some(j)
+        };
+        // With more than one row per step, which step a row on a step's boundary holds: ours
+        // hold the step that ends there (the row equals the one before it), a logger that
+        // takes the new sample at once the step that starts there (equals the one after).
+        // Only on a regular grid (the rows at their places): a log whose stamps jitter by
+        // as much as its spacing has no row that sits on a boundary.
+        let several_rows = timing.is_regular() && row_dt < 0.75 * dt;
+        let period_starting = several_rows && {
+            let (mut ending, mut starting) = (0usize, 0usize);
+            for k in 0..n {
+                if let Some(j) = row_at(end(k))
+                    && j > 0
+                    && j + 1 < t.len()
+                {
+                    let (before, after) = (reference[j - 1], reference[j + 1]);
+                    match (reference[j] == before, reference[j] == after) {
+                        (true, false) => ending += 1,
+                        (false, true) => starting += 1,
+                        _ => {}
+                    }
+                }
+            }
+            starting > ending
+        };
         let reference = (0..n)
             .map(|k| {
                 // The row whose interval holds the middle of the step.
@@ -235,7 +263,16 @@ impl Record {
                 // interval's middle). The controller's acceleration feedforward acts on the
                 // reference's second difference, so a straight line across a lost row of a
                 // sine would be a current spike the car never had.
-                if j > 0 && t[j] - t[j - 1] > 1.5 * row_dt && mid < t[j] - row_dt {
+                let missing = j > 0 && t[j] - t[j - 1] > 1.5 * row_dt && mid < t[j] - row_dt;
+                // Several rows a step, none on its middle (lost, or rows off the 5 ms
+                // points): the row on the step's boundary that holds it, if kept.
+                let boundary = if period_starting { end(k) - dt } else { end(k) };
+                if several_rows
+                    && row_at(mid).is_none()
+                    && let Some(b) = row_at(boundary)
+                {
+                    reference[b]
+                } else if missing {
                     let lo = j.saturating_sub(2);
                     let hi = (j + 1).min(t.len() - 1);
                     let at = |i: usize| t[i] - 0.5 * row_dt;
