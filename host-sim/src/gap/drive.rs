@@ -236,12 +236,8 @@ pub fn shifted_reference(rec: &Record, rows: usize) -> Record {
     if rows == 0 || rec.is_empty() {
         return rec.clone();
     }
-    let n = rec.len();
-    let reference = (0..n)
-        .map(|k| rec.reference[k.saturating_sub(rows)])
-        .collect();
     Record {
-        reference,
+        reference: super::model::held_later(&rec.reference, rows),
         ..rec.clone()
     }
 }

@@ -98,7 +98,7 @@ pub struct SimOut {
 }
 
 /// The reference `rows` samples later, the first sample held before it.
-fn held_later(reference: &[f64], rows: usize) -> Vec<f64> {
+pub(crate) fn held_later(reference: &[f64], rows: usize) -> Vec<f64> {
     (0..reference.len())
         .map(|k| reference[k.saturating_sub(rows)])
         .collect()
