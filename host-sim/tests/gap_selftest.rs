@@ -77,7 +77,7 @@ fn the_independent_worlds_first_50_cases() {
 /// --case 0,9 --loggers starting-100-jitter-drop --drive direct --controller paper` runs
 /// them: the same car gets the same verdict, and the team's convention is found from the log.
 /// The car is given, as a team that knows its drive gives it: with the drive fitted, the late
-/// reference's log (case 9) goes to the EPOS4 car, whose SYNC phase takes up part of the
+/// reference's log goes to the EPOS4 car, whose SYNC phase takes up part of the
 /// delay (nominal GoF 71.7 % against the direct car's 65.0 %), and is called `parameters`,
 /// a defect still open.
 #[test]
