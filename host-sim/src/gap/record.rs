@@ -267,7 +267,21 @@ impl Record {
                 // Several rows a step, none on its middle (lost, or rows off the 5 ms
                 // points): the row on the step's boundary that holds it, if kept.
                 let boundary = if period_starting { end(k) - dt } else { end(k) };
+                // Many rows a step (1 kHz): the row nearest the middle, if it lies well inside
+                // the step. The grid's boundaries need not sit on the ECU's periods (its
+                // origin comes from the stamps, the periods from the car), so a row on a
+                // boundary may hold either neighbour; a row a few ms from the middle holds
+                // the step's own sample for any offset under half a step less a row.
+                let inside = 0.5 * dt - 0.75 * row_dt;
+                let near_mid = (j.saturating_sub(1)..=j)
+                    .filter(|&i| (t[i] - mid).abs() <= inside)
+                    .min_by(|&a, &b| (t[a] - mid).abs().total_cmp(&(t[b] - mid).abs()));
                 if several_rows
+                    && row_at(mid).is_none()
+                    && let Some(i) = near_mid
+                {
+                    reference[i]
+                } else if several_rows
                     && row_at(mid).is_none()
                     && let Some(b) = row_at(boundary)
                 {
