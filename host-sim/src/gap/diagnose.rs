@@ -3,14 +3,14 @@
 
 use super::diagnosis::{
     Candidate, Diagnosis, MAX_FIT_S, MIN_IMPROVEMENT, MIN_PAIR_IMPROVEMENT,
-    MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, Options, PARAMETER_ITERATIONS,
-    PARAMETER_TOLERANCE, PARAMETERS_COST_SHARE, UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict,
-    VerdictKind,
+    MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, OFFSET_MIN_SHARE, OFFSET_SIGNIFICANCE,
+    Options, PARAMETER_ITERATIONS, PARAMETER_TOLERANCE, PARAMETERS_COST_SHARE,
+    UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict, VerdictKind,
 };
 use super::finding::{self, BestSingle, Finding, Shortfall};
 use super::model::Effects;
 use super::rig::{Rig, RigModel};
-use super::score::{cost, repeatability, simulate};
+use super::score::{cost, effort_offset, repeatability, simulate};
 use super::search::{
     FitOut, LOG_LAG_MAX_S, Progress, best_with_log_lag, fit_effects, fit_window, make_candidate,
     pair_on_refitted_table, parallel_map,
@@ -26,6 +26,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let vscorer = validation.map(|v| (v, Scorer::new(rig, v)));
     let fit0 = scorer.fit(rec, &sim0);
     let repeat = repeatability(rig, rec, &scorer, &sim0);
+    let offset = effort_offset(rec, &sim0, scorer.skip());
     // A long log is fitted on the window where the nominal residual is largest (the figures
     // are still given on the whole log): the fits then cost the same for any log length.
     let frec_owned = fit_window(rig, rec, &scorer, &sim0, MAX_FIT_S);
@@ -614,6 +615,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         noise_floor_cost: floor,
         noise: scorer.noise(),
         repeatability: repeat,
+        effort_offset: offset,
         verdict,
         ranking,
         where_,
@@ -657,9 +659,22 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // What the best explanation leaves: the nominal model, or the table refitted within its
     // tolerance (a car a few per cent off the table is no gap).
     let left = tolerant.as_ref().map_or(cost0, |(_, c)| c.min(cost0));
-    let unexplained = verdict_candidate.is_none()
+    let far_above_floor = verdict_candidate.is_none()
         && left > UNEXPLAINED_RATIO * floor
         && fit0.gof < UNEXPLAINED_BELOW_GOF;
+    // A constant left in the effort is no noise and no car the table describes, whatever the
+    // GoF: a log near the nominal one with it is not `none`.
+    let offset_left = verdict_candidate.is_none()
+        && offset.significance() > OFFSET_SIGNIFICANCE
+        && offset.mean.abs() > OFFSET_MIN_SHARE * offset.effort_rms;
+    if offset_left {
+        findings.push(Finding::EffortOffset {
+            mean: offset.mean,
+            standard_error: offset.standard_error,
+            share_pct: 100.0 * offset.mean.abs() / offset.effort_rms.max(1e-12),
+        });
+    }
+    let unexplained = far_above_floor || offset_left;
     if unexplained {
         findings.push(Finding::TryElse);
     }

@@ -5,6 +5,7 @@ use super::effects::{apply_all, specs_of};
 use super::fit::FitOptions;
 use super::model::Effects;
 use super::rig::Rig;
+use super::score::Offset;
 use super::{EffectKind, Fit, Noise, identify, locate};
 use std::collections::BTreeMap;
 
@@ -84,6 +85,8 @@ pub struct Diagnosis {
     /// drive's Hall edges) changes the phase of its chatter on any disturbance, so its own
     /// GoF falls below 100 % by what no model can follow sample for sample.
     pub repeatability: Fit,
+    /// The constant part of the nominal model's effort residual ([`super::score::effort_offset`]).
+    pub effort_offset: Offset,
     pub verdict: Verdict,
     pub ranking: Vec<Candidate>,
     #[serde(rename = "where")]
@@ -122,6 +125,15 @@ pub const UNEXPLAINED_RATIO: f64 = 5.0;
 pub const UNEXPLAINED_BELOW_GOF: f64 = 0.9;
 /// LM iterations of each Table 4 refit (`parameters`): each costs a simulation per parameter
 /// and two more, and a log may be refitted from several starts.
+/// A constant in the effort's residual ([`super::score::effort_offset`]) is no noise when its
+/// intercept stands this many standard errors from zero... (effect-free cars of either drive
+/// and controller, sweeps and tracks: at most 0.7; a 0.3 A offset added to their current: 21
+/// or more)
+pub const OFFSET_SIGNIFICANCE: f64 = 6.0;
+/// ...and is at least this share of the logged effort's RMS: a gap worth a team's look, not a
+/// rounding of the drive's current (effect-free cars: at most 0.1 %; a 0.3 A offset: 2.4-3.4 %
+/// of sweeps of 9-12 A RMS).
+pub const OFFSET_MIN_SHARE: f64 = 0.01;
 pub const PARAMETER_ITERATIONS: usize = 6;
 /// The refit is the verdict when its cost is below this share of the best effect
 /// verdict's (or of the nominal cost), besides removing what an effect must remove...
@@ -196,6 +208,15 @@ impl Diagnosis {
             100.0 * r.gof,
             100.0 * r.gof_output,
             100.0 * r.gof_effort
+        );
+        let o = &self.effort_offset;
+        let _ = writeln!(
+            s,
+            "effort offset: {:+.3} (standard error {:.3}; {:.1} % of the effort's RMS {:.3}), in the effort's unit",
+            o.mean,
+            o.standard_error,
+            100.0 * o.mean.abs() / o.effort_rms.max(1e-12),
+            o.effort_rms
         );
         let _ = writeln!(s, "\nwhere:");
         s.push_str(&self.where_.summary());

@@ -150,6 +150,15 @@ pub enum Finding {
     RefitWorse(Shortfall),
     /// The named effect, refused by the GoF.
     EffectWorse { effect: String, why: Shortfall },
+    /// The effort's residual keeps a constant part that no effect and no Table 4 parameter
+    /// makes (a current sensor's offset, a logger's zero): the log is not the nominal car.
+    EffortOffset {
+        /// The intercept, the effort's unit.
+        mean: f64,
+        standard_error: f64,
+        /// Of the logged effort's RMS, %.
+        share_pct: f64,
+    },
     /// Nothing explains a log far above its floor: what to try.
     TryElse,
 }
@@ -347,6 +356,17 @@ impl fmt::Display for Finding {
                 )
             }
             Finding::EffectWorse { effect, why } => write!(f, "{effect} {why}: not named"),
+            Finding::EffortOffset {
+                mean,
+                standard_error,
+                share_pct,
+            } => write!(
+                f,
+                "the effort's residual keeps a constant {mean:+.3} ({:.0} standard errors, \
+                 {share_pct:.1} % of the effort's RMS) that no candidate effect and no Table 4 \
+                 parameter makes: a current sensor's offset, or a logger's zero",
+                mean.abs() / standard_error.max(1e-12)
+            ),
             Finding::TryElse => write!(
                 f,
                 "try `--refit-linear` (Table 4 off), other candidate effects (`--effects`), or \

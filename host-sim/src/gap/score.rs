@@ -191,6 +191,75 @@ impl Scorer {
     }
 }
 
+/// How many contiguous blocks [`effort_offset`] cuts the residual into: enough that their means
+/// scatter estimates the standard error of the whole mean, few enough that each block holds
+/// several cycles of a sweep or a track's turns, so a zero-mean residual gives block means of
+/// either sign.
+pub const OFFSET_BLOCKS: usize = 16;
+
+/// A constant part of the effort's residual (log minus model): what a current sensor's offset
+/// leaves, and what none of the effects or Table 4's parameters make. Each of those is odd in
+/// the motion, so a sweep or a track averages it out, but for a gain (the torque constant, a
+/// transmission ratio off the table), whose residual follows the current: a track that turns
+/// one way more than the other leaves it a mean. So the offset is the intercept of the residual
+/// regressed on the model's effort, not the residual's plain mean.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct Offset {
+    /// The intercept, in the effort's unit (A on the paper rig).
+    pub mean: f64,
+    /// Its standard error, from the scatter of the intercept over [`OFFSET_BLOCKS`]
+    /// contiguous blocks (the residual is far from white: a block's mean carries its
+    /// correlation).
+    pub standard_error: f64,
+    /// The residual's RMS about zero, in the effort's unit.
+    pub residual_rms: f64,
+    /// The logged effort's RMS about zero, in its unit.
+    pub effort_rms: f64,
+}
+
+impl Offset {
+    /// The intercept over its standard error.
+    pub fn significance(&self) -> f64 {
+        self.mean.abs() / self.standard_error.max(1e-12)
+    }
+}
+
+/// The effort's [`Offset`] of `sim` against `rec`, from `skip` on.
+pub fn effort_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
+    let n = rec.len().min(sim.effort.len());
+    let s = skip.min(n);
+    let model = &sim.effort[s..n];
+    let r: Vec<f64> = (s..n).map(|k| rec.effort[k] - sim.effort[k]).collect();
+    let len = r.len() / OFFSET_BLOCKS;
+    if len < 2 {
+        return Offset::default();
+    }
+    let m = r.len() as f64;
+    let model_mean = model.iter().sum::<f64>() / m;
+    let r_mean = r.iter().sum::<f64>() / m;
+    let (sxy, sxx) = model.iter().zip(&r).fold((0.0, 0.0), |(sxy, sxx), (x, y)| {
+        let dx = x - model_mean;
+        (sxy + dx * (y - r_mean), sxx + dx * dx)
+    });
+    let gain = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+    let intercepts: Vec<f64> = r
+        .chunks_exact(len)
+        .zip(model.chunks_exact(len))
+        .take(OFFSET_BLOCKS)
+        .map(|(rb, mb)| rb.iter().zip(mb).map(|(y, x)| y - gain * x).sum::<f64>() / len as f64)
+        .collect();
+    let k = intercepts.len() as f64;
+    let mean = intercepts.iter().sum::<f64>() / k;
+    let var = intercepts.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / (k - 1.0);
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / m).sqrt();
+    Offset {
+        mean,
+        standard_error: (var / k).sqrt(),
+        residual_rms: rms(&r),
+        effort_rms: rms(&rec.effort[s..n]),
+    }
+}
+
 /// Combined GoF of the output and the effort: `1 - sqrt(((1-go)^2 + (1-ge)^2) / 2)`.
 pub fn combined_gof(go: f64, ge: f64) -> f64 {
     1.0 - (((1.0 - go).powi(2) + (1.0 - ge).powi(2)) / 2.0).sqrt()
@@ -220,4 +289,62 @@ pub fn repeatability(rig: &Rig, rec: &Record, scorer: &Scorer, sim0: &SimOut) ->
     as_log.output = sim0.output.clone();
     as_log.effort = sim0.effort.clone();
     scorer.fit(&as_log, &again)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record_and_model(effort: impl Fn(f64) -> (f64, f64)) -> (Record, SimOut) {
+        let n = 4000;
+        let (logged, model): (Vec<f64>, Vec<f64>) = (0..n).map(|k| effort(k as f64 * 1e-3)).unzip();
+        let rec = Record {
+            dt: 1e-3,
+            reference: vec![0.0; n],
+            output: vec![0.0; n],
+            effort: logged,
+            ..Record::default()
+        };
+        let sim = SimOut {
+            output: vec![0.0; n],
+            effort: model,
+            motor: vec![],
+        };
+        (rec, sim)
+    }
+
+    #[test]
+    fn an_offset_is_found_beside_a_gain_error_on_a_current_with_a_mean() {
+        // A track that turns one way more: the current has a mean of 2 A, and the car's
+        // torque constant is 10 % off, so the residual's plain mean is 0.2 A besides the
+        // sensor's 0.3 A.
+        let (rec, sim) = record_and_model(|t| {
+            let i = 2.0 + 5.0 * (2.0 * std::f64::consts::PI * 1.3 * t).sin();
+            (1.1 * i + 0.3, i)
+        });
+        let o = effort_offset(&rec, &sim, 0);
+        assert!((o.mean - 0.3).abs() < 1e-9, "intercept {}", o.mean);
+        assert!(o.significance() > 100.0, "{o:?}");
+    }
+
+    #[test]
+    fn a_residual_without_a_constant_is_no_offset() {
+        // Chatter and a gain error, no constant: the intercept scatters around zero.
+        let (rec, sim) = record_and_model(|t| {
+            let i = 5.0 * (2.0 * std::f64::consts::PI * 0.7 * t).sin();
+            let chatter = 0.5 * (2.0 * std::f64::consts::PI * 37.0 * t + 3.0 * t * t).sin();
+            (0.9 * i + chatter, i)
+        });
+        let o = effort_offset(&rec, &sim, 0);
+        assert!(o.significance() < 3.0, "{o:?}");
+        assert!(o.mean.abs() < 0.01 * o.effort_rms, "{o:?}");
+    }
+
+    #[test]
+    fn a_log_too_short_for_its_blocks_has_no_offset() {
+        let (mut rec, mut sim) = record_and_model(|_| (1.0, 0.0));
+        rec.effort.truncate(2 * OFFSET_BLOCKS - 1);
+        sim.effort.truncate(2 * OFFSET_BLOCKS - 1);
+        assert_eq!(effort_offset(&rec, &sim, 0), Offset::default());
+    }
 }

@@ -27,6 +27,16 @@ fn decoder() -> Decoder {
 
 /// The campaign's log, saved and loaded back as `gap` reads it; the car's figures.
 fn diagnosed(car: SimCar, profile: Profile) -> (host_sim::gap::Diagnosis, drive::CarChoice) {
+    diagnosed_as_logged(car, profile, |_| {})
+}
+
+/// [`diagnosed`], with the log changed by `edit` before it is saved (what a sensor or a
+/// logger does to the car's signals).
+fn diagnosed_as_logged(
+    car: SimCar,
+    profile: Profile,
+    edit: impl FnOnce(&mut host_io::logfmt::Log),
+) -> (host_sim::gap::Diagnosis, drive::CarChoice) {
     let mut sim = SimEcu::new(car);
     let dec = decoder();
     let ready = campaign::ready_check(&mut sim, &dec).unwrap();
@@ -38,7 +48,8 @@ fn diagnosed(car: SimCar, profile: Profile) -> (host_sim::gap::Diagnosis, drive:
     let run = c.run(&mut sim, &dec, &ready, |_| {}).unwrap();
     assert_eq!(run.aborted, None);
     drop(sim);
-    let built = run.log(&dec).unwrap();
+    let mut built = run.log(&dec).unwrap();
+    edit(&mut built.log);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("car.csv.gz");
     campaign::save_log(&built.log, &path).unwrap();
@@ -137,6 +148,42 @@ fn the_epos4_car_under_the_ecu_controller_on_a_sweep_is_none() {
         100.0 * d.baseline_gof,
         100.0 * r.gof
     );
+}
+
+/// A current sensor that reads 0.3 A high (the drive's, or the logger's zero) is no effect of
+/// the catalogue and no Table 4 parameter: the log is `unexplained`, with the constant named,
+/// never `none` (its GoF stays near the nominal car's, above the bar that calls a residual
+/// unexplained) and never an effect. The same car without it stays `none`
+/// (`the_default_epos4_car_on_a_sweep_is_none_against_its_own_chain`).
+#[test]
+fn a_current_that_reads_high_is_unexplained_with_its_offset_named() {
+    for controller in [ControllerKind::Paper, ControllerKind::Ecu] {
+        let (d, _) = diagnosed_as_logged(
+            epos4(controller),
+            profile::sweep(Sweep::PAPER).unwrap(),
+            |log| {
+                for a in &mut log.current_a {
+                    *a += 0.3;
+                }
+            },
+        );
+        assert_eq!(
+            d.verdict.kind,
+            host_sim::gap::VerdictKind::Unexplained,
+            "{controller:?}: {}",
+            d.verdict.reason
+        );
+        assert!(
+            d.verdict.reason.contains("a current sensor's offset"),
+            "{}",
+            d.verdict.reason
+        );
+        assert!(
+            (d.effort_offset.mean - 0.3).abs() < 0.03,
+            "offset {:.3} A",
+            d.effort_offset.mean
+        );
+    }
 }
 
 /// One car of the chain selftest: what it hides, as `--plant-effects` takes it, and the
