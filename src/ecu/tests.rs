@@ -697,3 +697,126 @@ fn every_record_and_its_age_reach_the_bus_in_one_round_oldest_first() {
     assert!(held[..5].iter().all(|r| r.acknowledged));
     assert!(!held[5].acknowledged && held[5].age_s == 3);
 }
+
+/// The origin checks on their own (direct drive, Hall counts, origin at count 0): the
+/// window's median and its agreement bound at an enable, and the running check's rest, its
+/// mean effort, its time and its bound.
+mod origin_checks {
+    use super::*;
+    use crate::faults::Fault;
+
+    /// One column-encoder count is two Hall counts through the paper's gears: the candidates
+    /// may stray from their median by that plus one (the Hall count's own quantisation).
+    const BOUND: i32 = 3;
+
+    /// An ECU with these origin candidates, 2 ms apart, judged 2 ms after the last (all in
+    /// the 16 ms window).
+    fn judged(origins: &[i32]) -> (Option<i32>, bool) {
+        let mut ecu = Ecu::paper().unwrap();
+        for (k, &o) in (0u64..).zip(origins) {
+            let _ = ecu.origin_candidates.push_back((k * 2 * MS, o));
+        }
+        let refused = ecu
+            .origin_from_window(origins.len() as u64 * 2 * MS)
+            .is_err();
+        (ecu.motor_origin_counts(), refused)
+    }
+
+    #[test]
+    fn the_origin_is_the_median_of_the_window() {
+        assert_eq!(judged(&[5, 6, 5, 6, 6, 5, 6, 6]), (Some(6), false));
+        assert_eq!(judged(&[9, 8, 8]), (Some(8), false));
+    }
+
+    /// A candidate exactly the bound from the median, on either side, agrees; one more
+    /// count refuses the enable.
+    #[test]
+    fn candidates_within_the_bound_of_the_median_agree_on_either_side() {
+        assert_eq!(judged(&[10 - BOUND, 10, 10, 10]), (Some(10), false));
+        assert_eq!(judged(&[10 - BOUND - 1, 10, 10, 10]), (None, true));
+        assert_eq!(judged(&[10, 10, 10 + BOUND]), (Some(10), false));
+        assert_eq!(judged(&[10, 10, 10 + BOUND + 1]), (None, true));
+    }
+
+    /// Whether the running check latched `Origin` with the motor at `hall` (wheel deg 0 at
+    /// count 0) and the column at `column` deg.
+    fn rest(ecu: &mut Ecu, t: u64, column: f32, hall: i32, effort: f32) -> bool {
+        ecu.hall_count = hall;
+        ecu.check_origin_at_rest(t, SteeringDeg(column), Amps(effort))
+            .is_some_and(|o| o.faults.contains(Fault::Origin))
+    }
+
+    fn at_origin_0() -> Ecu {
+        let mut ecu = Ecu::paper().unwrap();
+        ecu.set_origin(Some(0));
+        ecu
+    }
+
+    /// The first sample at which the check latches, samples every 2 ms up to 300 ms.
+    fn latched_at(
+        column: impl Fn(u64) -> f32,
+        hall: impl Fn(u64) -> i32,
+        effort: f32,
+    ) -> Option<u64> {
+        let mut ecu = at_origin_0();
+        (0..=150u64)
+            .map(|k| k * 2 * MS)
+            .find(|&t| rest(&mut ecu, t, column(t), hall(t), effort))
+    }
+
+    /// At rest with 1.9 A (within the 2 A mean) and the column 2.6 deg from the motor, the
+    /// fault latches 100 ms after the rest began, not before; 2.5 deg apart is within.
+    #[test]
+    fn a_rest_latches_after_100_ms_only_beyond_2_5_deg() {
+        assert_eq!(latched_at(|_| 2.6, |_| 0, 1.9), Some(100 * MS));
+        assert_eq!(latched_at(|_| -2.6, |_| 0, -1.9), Some(100 * MS));
+        assert_eq!(latched_at(|_| 2.5, |_| 0, 1.9), None);
+        assert_eq!(latched_at(|_| 2.6, |_| 0, 2.1), None, "not quiet");
+    }
+
+    /// A rest needs both angles still: a motor dithering 0.3 deg (6 Hall counts) under a
+    /// still column, or the reverse, is no rest.
+    #[test]
+    fn a_rest_needs_both_the_column_and_the_motor_still() {
+        let dither = |t: u64| (t / (2 * MS)) % 2 == 1;
+        let hall = |t: u64| if dither(t) { 6 } else { 0 };
+        assert_eq!(latched_at(|_| 4.0, hall, 0.0), None);
+        let column = |t: u64| if dither(t) { 4.3 } else { 4.0 };
+        assert_eq!(latched_at(column, |_| 0, 0.0), None);
+        assert_eq!(
+            latched_at(|_| 4.0, |_| 6, 0.0),
+            Some(100 * MS),
+            "the motor still"
+        );
+    }
+
+    /// The mean effort is over every sample of the rest, the one that began it included: a
+    /// 100 A sample that began the rest and 50 of -1.9 A after it average 0.1 A.
+    #[test]
+    fn the_rests_mean_effort_counts_the_sample_that_began_it() {
+        let mut ecu = at_origin_0();
+        assert!(!rest(&mut ecu, 0, 4.0, 0, 0.0));
+        // The column moved 0.5 deg: the rest begins again here.
+        assert!(!rest(&mut ecu, 2 * MS, 4.5, 0, 100.0));
+        let latched = (2..=51u64)
+            .map(|k| k * 2 * MS)
+            .find(|&t| rest(&mut ecu, t, 4.5, 0, -1.9));
+        assert_eq!(latched, Some(102 * MS));
+    }
+}
+
+/// In EPOS4 mode the rate limit spans the last SYNC interval, but at most one reference
+/// period: 400 deg/s over 10 ms after a 30 ms gap between SYNCs.
+#[test]
+fn the_epos4_rate_limit_spans_at_most_one_reference_period() {
+    let link = Epos4Config::paper(crate::canopen::NodeId::new(1).unwrap());
+    let build = EcuBuild::new(ControllerKind::Paper, DriveChoice::Epos4(link));
+    let mut ecu = Ecu::build(build, 0).unwrap();
+    let d = ecu.drive.epos4_mut().unwrap();
+    d.synced(0, Some(SteeringDeg(1.0)));
+    d.synced(30 * MS, Some(SteeringDeg(1.0)));
+    for (target, limited) in [(20.0, 5.0), (-20.0, -3.0), (3.0, 3.0)] {
+        let got = ecu.rate_limited(SteeringDeg(target)).0;
+        assert!((got - limited).abs() < 1e-4, "{target} deg -> {got} deg");
+    }
+}

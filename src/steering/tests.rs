@@ -971,6 +971,50 @@ mod drive_and_bus_faults {
     }
 }
 
+/// The two ways `Origin` latches, and the detail each records: the two ranges never overlap,
+/// so a read-out tells a refused enable from a wrong origin found at rest.
+mod origin_faults {
+    use super::*;
+
+    /// The detail of the first record after `event` on a fresh machine, and whether the
+    /// cause was left active (it never is: each enable judges the origin afresh).
+    fn first_detail(event: impl FnOnce(&mut SteeringStateMachine) -> Output) -> (i32, bool) {
+        let mut sm = SteeringStateMachine::default();
+        let out = event(&mut sm);
+        assert_eq!(out.faults, FaultSet::from(Fault::Origin));
+        assert_eq!(out.demand, DriveDemand::Disabled);
+        let record = sm.fault_log().get(0).copied();
+        assert_eq!(record.map(|r| r.fault), Some(Fault::Origin));
+        let cause_gone = clear_in_off(&mut sm, 2 * MS).is_ok();
+        (record.map_or(i32::MIN, |r| r.detail), cause_gone)
+    }
+
+    /// A refused enable records the samples' spread in centi-degrees, from 0 up to one below
+    /// `ORIGIN_RESTING_DETAIL` however wide the spread.
+    #[test]
+    fn a_refused_enable_records_its_spread_below_the_resting_range() {
+        let spread = |deg: f32| first_detail(|sm| sm.on_origin_disagreement(MS, SteeringDeg(deg)));
+        assert_eq!(spread(0.5), (50, true));
+        assert_eq!(spread(12.25), (1_225, true));
+        assert_eq!(spread(20_000.0), (ORIGIN_RESTING_DETAIL - 1, true));
+        assert_eq!(spread(f32::INFINITY), (999_999, true));
+        assert_eq!(spread(-3.0), (0, true));
+    }
+
+    /// A wrong origin found at rest records its difference in centi-degrees moved
+    /// `ORIGIN_RESTING_DETAIL` away from 0 with its sign (a difference of 0 on the positive
+    /// side), saturating at twice that.
+    #[test]
+    fn a_wrong_origin_at_rest_records_its_signed_difference_beyond_the_resting_detail() {
+        let off = |deg: f32| first_detail(|sm| sm.on_origin_off(MS, SteeringDeg(deg)));
+        assert_eq!(off(4.25), (1_000_425, true));
+        assert_eq!(off(-3.5), (-1_000_350, true));
+        assert_eq!(off(0.0), (1_000_000, true));
+        assert_eq!(off(1.0e6), (2_000_000, true));
+        assert_eq!(off(-1.0e6), (-2_000_000, true));
+    }
+}
+
 /// Checked configuration values, state codes and the machine's accessors.
 mod configuration_and_read_out {
     use super::*;
