@@ -10,10 +10,14 @@
 //! - [`cia402`]: controlword / statusword and the drive state machine as seen by a master.
 //! - [`epos4`]: the EPOS4 object dictionary entries used here (checked against maxon's EDS),
 //!   unit conversions, and [`epos4::Epos4Link`], the bring-up and cyclic exchange.
+//! - `epos4_model` (tests and the `epos4-model` feature only): the drive's side of the same
+//!   protocol, the EPOS4 the tests run the link against.
 
 pub mod cia402;
 pub mod emcy;
 pub mod epos4;
+#[cfg(any(test, feature = "epos4-model"))]
+pub mod epos4_model;
 pub mod nmt;
 pub mod pdo;
 pub mod sdo;

@@ -1,19 +1,19 @@
-//! EPOS4 mode against a fake drive: the bring-up, the power stage following the demand,
-//! the link's faults and their recovery, the current and the target the drive is given. The
-//! library's other tests reach this mode only through host-sim.
+//! EPOS4 mode against the EPOS4 model (`canopen::epos4_model`, the drive host-sim's simulated
+//! car runs too, here with a motor that stands unless a test moves it): the bring-up, the
+//! power stage following the demand, the link's faults and their recovery, the current and
+//! the target the drive is given. The library's other tests reach this mode only through
+//! host-sim.
 
 use super::tests::Vehicle;
 use super::*;
-use crate::canopen::cia402::{self, State};
+use crate::canopen::NodeId;
+use crate::canopen::cia402::State;
 use crate::canopen::epos4::Phase;
 use crate::canopen::epos4::{Epos4Config, od};
-use crate::canopen::nmt::{self, NmtCommand, NmtState};
-use crate::canopen::sdo::{self, ServerRequest, Width};
-use crate::canopen::{NodeId, ObjectAddress, cob_id, function};
+use crate::canopen::epos4_model::{Epos4Model, Motor};
 use crate::controller::SteeringController;
 use crate::faults::Fault;
 use crate::sensors::{HALL_COUNTS_PER_REV, hall_from_motor, motor_from_hall};
-use std::collections::HashMap;
 
 const MS: u64 = 1000;
 
@@ -21,117 +21,52 @@ fn node() -> NodeId {
     NodeId::new(1).unwrap()
 }
 
-/// A minimal EPOS4 on the other end of the link: an object dictionary that reads back
-/// what was written, the CiA 402 state driven by the controlword, NMT start, a heartbeat
-/// and TPDO1 (statusword, position) and TPDO2 (current, mA) on each SYNC. The motor stands
-/// at `position_inc` (the drive's own count from its power-up) unless the test moves it.
-struct FakeEpos4 {
-    od: HashMap<ObjectAddress, u32>,
-    state: State,
-    operational: bool,
+/// The motor behind the EPOS4 model: it stands at `position_inc` (the drive's own count from
+/// its power-up) unless the test moves it, and the drive reports `current_ma`.
+#[derive(Debug)]
+struct StillMotor {
     position_inc: i32,
     current_ma: i32,
-    /// The targets RPDO1 brought in Operation enabled (the ones the drive follows).
+    /// The targets the drive took in Operation enabled (the ones it follows).
     targets: Vec<i32>,
-    /// Frames for the ECU, delivered at its next drive call.
-    answers: Vec<Frame>,
     /// The motor goes to each target at once.
     follows: bool,
 }
 
-impl FakeEpos4 {
-    fn new(position_inc: i32) -> Self {
-        FakeEpos4 {
-            od: HashMap::new(),
-            state: State::SwitchOnDisabled,
-            operational: false,
-            position_inc,
-            current_ma: 0,
-            targets: Vec::new(),
-            answers: Vec::new(),
-            follows: false,
+impl Motor for StillMotor {
+    fn tick(&mut self, _running: bool) {}
+
+    fn enable(&mut self, _gains: &EposGains) {}
+
+    fn target(&mut self, inc: i32) {
+        self.targets.push(inc);
+        if self.follows {
+            self.position_inc = inc;
         }
     }
 
-    fn statusword(&self) -> u16 {
-        match self.state {
-            State::SwitchOnDisabled => 0x0040,
-            State::ReadyToSwitchOn => 0x0021,
-            State::SwitchedOn => 0x0023,
-            State::OperationEnabled => 0x0027,
-            _ => 0x0008,
-        }
+    fn position_inc(&self) -> i32 {
+        self.position_inc
     }
 
-    fn on_controlword(&mut self, cw: u16) {
-        use cia402::Command;
-        self.state = match (self.state, cw) {
-            (_, cw) if cw == Command::DisableVoltage.controlword() => State::SwitchOnDisabled,
-            (_, cw) if cw == Command::FaultReset.controlword() => State::SwitchOnDisabled,
-            (_, cw) if cw == Command::Shutdown.controlword() => State::ReadyToSwitchOn,
-            (State::ReadyToSwitchOn | State::OperationEnabled, 0x0007) => State::SwitchedOn,
-            (State::SwitchedOn, 0x000F) => State::OperationEnabled,
-            (state, _) => state,
-        };
+    fn current_averaged_ma(&self) -> i32 {
+        self.current_ma
     }
 
-    fn on_frame(&mut self, f: &Frame) -> Vec<Frame> {
-        let n = node();
-        let mut out = Vec::new();
-        if let Some((NmtCommand::Start, target)) = nmt::parse_command(f)
-            && target.includes(n)
-        {
-            self.operational = true;
-            out.extend(nmt::heartbeat_frame(n, NmtState::Operational));
-        } else if nmt::is_sync(f) && self.operational {
-            let mut d = [0u8; 6];
-            d[..2].copy_from_slice(&self.statusword().to_le_bytes());
-            d[2..].copy_from_slice(&self.position_inc.to_le_bytes());
-            out.extend(Frame::new(cob_id(function::TPDO1, n), &d));
-            out.extend(Frame::new(
-                cob_id(function::TPDO2, n),
-                &self.current_ma.to_le_bytes(),
-            ));
-            out.extend(nmt::heartbeat_frame(n, NmtState::Operational));
-        } else if f.id() == cob_id(function::RPDO1, n) {
-            if let Ok(bytes) = <[u8; 4]>::try_from(f.data())
-                && self.state == State::OperationEnabled
-            {
-                let target = i32::from_le_bytes(bytes);
-                self.targets.push(target);
-                if self.follows {
-                    self.position_inc = target;
-                }
-            }
-        } else if let Some(request) = sdo::parse_request(f, n) {
-            match request {
-                ServerRequest::Download { object, value, .. } => {
-                    if object == od::CONTROLWORD {
-                        self.on_controlword(value as u16);
-                    }
-                    self.od.insert(object, value);
-                    out.extend(sdo::download_response_frame(n, object));
-                }
-                ServerRequest::Upload { object } => {
-                    let value = match object {
-                        o if o == od::STATUSWORD => u32::from(self.statusword()),
-                        o if o == od::POSITION_ACTUAL => self.position_inc as u32,
-                        o => self.od.get(&o).copied().unwrap_or(0),
-                    };
-                    out.extend(sdo::upload_response_frame(n, object, value, Width::U32));
-                }
-                ServerRequest::Unsupported { .. } => {}
-            }
-        }
-        out
+    fn current_actual_ma(&self) -> i32 {
+        self.current_ma
     }
 }
 
-/// The ECU in EPOS4 mode, the fake drive on the other end of its link and the
-/// vehicle computer: the set-up every test of this file starts from.
+/// The ECU in EPOS4 mode, the EPOS4 model on the other end of its link (its motor standing
+/// unless a test moves it) and the vehicle computer: the set-up every test of this file
+/// starts from.
 struct Bench {
     ecu: Ecu,
-    drive: FakeEpos4,
+    drive: Epos4Model,
+    motor: StillMotor,
+    /// Frames for the ECU, delivered at its next drive call.
+    answers: Vec<Frame>,
     vehicle: Vehicle,
     /// What the link sent when it started (at 0).
     started: Vec<Frame>,
@@ -149,19 +84,27 @@ impl Bench {
 
     /// [`Bench::new`] with `controller` and the link's `config`.
     fn with(controller: ControllerKind, config: Epos4Config, position_inc: i32) -> Bench {
-        let mut ecu = Ecu::build(EcuBuild::new(controller, DriveChoice::Epos4(config)), 0).unwrap();
-        let mut drive = FakeEpos4::new(position_inc);
-        let started = ecu.drive_start(0).to_vec();
-        for f in &started {
-            let answers = drive.on_frame(f);
-            drive.answers.extend(answers);
-        }
-        Bench {
+        let ecu = Ecu::build(EcuBuild::new(controller, DriveChoice::Epos4(config)), 0).unwrap();
+        let mut b = Bench {
             ecu,
-            drive,
+            drive: Epos4Model::new(node()),
+            motor: StillMotor {
+                position_inc,
+                current_ma: 0,
+                targets: Vec::new(),
+                follows: false,
+            },
+            answers: Vec::new(),
             vehicle: Vehicle::new(),
-            started,
+            started: Vec::new(),
+        };
+        // The drive boots first (its boot-up goes to the ECU's first drive call).
+        b.advance(0);
+        b.started = b.ecu.drive_start(0).to_vec();
+        for f in b.started.clone() {
+            b.send_to_drive(&f);
         }
+        b
     }
 
     /// Tracking 0 deg in AS Driving at the returned time (400 ms), the drive at 500.
@@ -174,19 +117,31 @@ impl Bench {
         (b, t)
     }
 
-    /// One millisecond of the drive task: the drive's answers to what the ECU sent in the
-    /// previous one (a bus round trip later) go to the ECU, then the ECU polls; everything the
-    /// ECU sends goes to the drive. The frames the ECU sent, in order.
+    /// The drive runs to `t`; what it sends (heartbeats) waits for the ECU's next drive call.
+    fn advance(&mut self, t: u64) {
+        let answers = &mut self.answers;
+        self.drive.advance(t, &mut self.motor, |f| answers.push(f));
+    }
+
+    /// `f` to the drive; its answers wait for the ECU's next drive call.
+    fn send_to_drive(&mut self, f: &Frame) {
+        let answers = self.drive.on_frame(f, &mut self.motor);
+        self.answers.extend(answers);
+    }
+
+    /// One millisecond of the drive task: the drive runs to `t`, its answers to what the ECU
+    /// sent in the previous one (a bus round trip later) go to the ECU, then the ECU polls;
+    /// everything the ECU sends goes to the drive. The frames the ECU sent, in order.
     fn step(&mut self, t: u64) -> Vec<Frame> {
-        let answers = std::mem::take(&mut self.drive.answers);
+        self.advance(t);
+        let answers = std::mem::take(&mut self.answers);
         let mut sent = Vec::new();
         for answer in &answers {
             sent.extend(self.ecu.on_drive_frame(t, answer));
         }
         sent.extend(self.ecu.drive_poll(t));
         for f in &sent {
-            let answers = self.drive.on_frame(f);
-            self.drive.answers.extend(answers);
+            self.send_to_drive(f);
         }
         sent
     }
@@ -229,21 +184,21 @@ fn the_ecu_brings_the_epos4_up_and_steers_it() {
     assert_eq!(b.ecu.output().state, EcuState::Idle);
     assert_eq!(b.ecu.motor_origin_counts(), Some(500));
     let _ = b.run(200 * MS, 400 * MS, AsState::Driving, 0.0, 0.0);
-    assert_eq!(b.drive.state, State::OperationEnabled);
+    assert_eq!(b.drive.cia402_state(), State::OperationEnabled);
     assert_eq!(b.ecu.output().state, EcuState::Tracking);
     assert!(
         b.ecu.output().faults.is_empty(),
         "{:?}",
         b.ecu.output().faults
     );
-    assert_eq!(b.drive.targets.last(), Some(&500));
+    assert_eq!(b.motor.targets.last(), Some(&500));
     // 10 deg at the wheel, reached through the enable ramp.
     let _ = b.run(400 * MS, 600 * MS, AsState::Driving, 10.0, 0.0);
     let scale = b.ecu.link().unwrap().scale();
     let want = scale
         .inc_from_motor(Gearing::PAPER.motor_from_steering(SteeringDeg(10.0).into()))
         .unwrap();
-    assert_eq!(b.drive.targets.last(), Some(&(500 + want)));
+    assert_eq!(b.motor.targets.last(), Some(&(500 + want)));
     assert_eq!(b.ecu.pending_overflow(), 0);
 }
 
@@ -274,7 +229,7 @@ fn a_disable_decided_by_a_tick_goes_out_first_at_the_next_drive_poll() {
     };
     let sent = b.step(disabled_at);
     assert!(sent.first().is_some_and(is_disable), "{sent:?}");
-    assert_eq!(b.drive.state, State::SwitchOnDisabled);
+    assert_eq!(b.drive.cia402_state(), State::SwitchOnDisabled);
     assert!(b.ecu.output().faults.contains(Fault::ReferenceTimeout));
 }
 
@@ -284,7 +239,7 @@ fn a_disable_decided_by_a_tick_goes_out_first_at_the_next_drive_poll() {
 #[test]
 fn the_drives_current_feeds_the_over_current_check_and_the_frames() {
     let (mut b, t0) = Bench::tracking();
-    b.drive.current_ma = 5_000;
+    b.motor.current_ma = 5_000;
     let _ = b.run(t0, t0 + 20 * MS, AsState::Driving, 0.0, 0.0);
     let protocol = ProtocolConfig::default();
     let status = protocol.decode_status(&b.ecu.status_frame()).unwrap();
@@ -295,7 +250,7 @@ fn the_drives_current_feeds_the_over_current_check_and_the_frames() {
         "{:?}",
         motor.current_mean
     );
-    b.drive.current_ma = 30_000;
+    b.motor.current_ma = 30_000;
     let t1 = t0 + 20 * MS;
     let mut latched_at = None;
     for k in 0..40 {
@@ -306,7 +261,7 @@ fn the_drives_current_feeds_the_over_current_check_and_the_frames() {
         }
     }
     assert!(latched_at.is_some_and(|at| at <= 20 * MS), "{latched_at:?}");
-    assert_eq!(b.drive.state, State::SwitchOnDisabled);
+    assert_eq!(b.drive.cia402_state(), State::SwitchOnDisabled);
 }
 
 /// An EMCY from the drive latches `EposFault` with its code. The failed link is not
@@ -371,7 +326,7 @@ fn an_epos4_enable_ramps_the_target_from_the_column() {
     let _ = b.run(0, 200 * MS, AsState::Off, f32::NAN, 0.0);
     // ... which asks for 30 deg from its first frame, in AS Driving, on. The motor follows
     // each target and the column the motor (a stiff belt).
-    b.drive.follows = true;
+    b.motor.follows = true;
     let mut t = 200 * MS;
     while t < 900 * MS {
         if t.is_multiple_of(10 * MS) {
@@ -390,15 +345,15 @@ fn an_epos4_enable_ramps_the_target_from_the_column() {
     );
     // The ramp's speed for a 10 ms cycle, one increment of rounding.
     let per_cycle = inc_at(&b.ecu, ENABLE_RAMP_DPS * 0.01) + 1;
-    let steps: Vec<i32> = b.drive.targets.windows(2).map(|w| w[1] - w[0]).collect();
+    let steps: Vec<i32> = b.motor.targets.windows(2).map(|w| w[1] - w[0]).collect();
     assert!(
-        b.drive.targets.first() == Some(&500),
+        b.motor.targets.first() == Some(&500),
         "{:?}",
-        b.drive.targets
+        b.motor.targets
     );
     assert!(steps.iter().all(|s| s.abs() <= per_cycle), "{steps:?}");
     // 30 deg at the ramp's speed and acceleration: there after 0.5 s of the 0.7 s.
-    assert_eq!(b.drive.targets.last(), Some(&(500 + inc_at(&b.ecu, 30.0))));
+    assert_eq!(b.motor.targets.last(), Some(&(500 + inc_at(&b.ecu, 30.0))));
 }
 
 /// The origin comes from the column: a drive that powered up at 500 increments with the
@@ -415,7 +370,7 @@ fn the_epos4_origin_is_taken_from_the_column() {
     assert!((wheel.0 - 5.0).abs() <= resolution, "{wheel:?}");
     let _ = b.run(200 * MS, 400 * MS, AsState::Driving, 5.0, 5.0);
     assert_eq!(b.ecu.output().state, EcuState::Tracking);
-    assert_eq!(b.drive.targets.last(), Some(&500));
+    assert_eq!(b.motor.targets.last(), Some(&500));
 }
 
 /// Direct mode: the origin is the Hall count nearest to the column's angle through the
@@ -522,12 +477,12 @@ fn ecu_mode_runs_its_cascade_direct_and_its_feedforward_on_the_epos4() {
     let mut b = Bench::with(ControllerKind::Ecu, config, 500);
     let _ = b.run(0, 400 * MS, AsState::Driving, 0.0, 0.0);
     assert_eq!(b.ecu.output().state, EcuState::Tracking);
-    let written = b.drive.od.get(&od::POSITION_FF_VELOCITY).copied();
+    let written = b.drive.object(od::POSITION_FF_VELOCITY);
     assert_eq!(
         written,
         Some((gains.ff_velocity_ma_s_per_rad * 1000.0).round() as u32)
     );
-    assert_eq!(b.drive.targets.last(), Some(&500));
+    assert_eq!(b.motor.targets.last(), Some(&500));
 }
 
 /// A frame whose angle breaks the rate rule is dropped; its AS state counts only when it
@@ -670,8 +625,9 @@ fn a_drive_fault_clears_only_once_the_link_is_back_up() {
             let _ = b.ecu.on_encoder(t, SteeringDeg(0.0));
             let _ = b.vehicle.send(&mut b.ecu, t, AsState::Off, 0.0);
         }
+        b.advance(t);
         let mut sent = Vec::new();
-        for answer in std::mem::take(&mut b.drive.answers) {
+        for answer in std::mem::take(&mut b.answers) {
             sent.extend(b.ecu.on_drive_frame(t, &answer));
             if up(&b.ecu) {
                 break 'up;
@@ -682,8 +638,7 @@ fn a_drive_fault_clears_only_once_the_link_is_back_up() {
             break;
         }
         for f in &sent {
-            let answers = b.drive.on_frame(f);
-            b.drive.answers.extend(answers);
+            b.send_to_drive(f);
         }
     }
     let f = b.vehicle.frame(AsState::Off, 0.0, true);
@@ -697,8 +652,8 @@ fn a_drive_fault_clears_only_once_the_link_is_back_up() {
 #[test]
 fn after_a_gap_the_epos4_target_moves_at_the_rate_limit() {
     let (mut b, t) = Bench::tracking();
-    b.drive.follows = true;
-    let before = b.drive.targets.len();
+    b.motor.follows = true;
+    let before = b.motor.targets.len();
     // Silence, then 48 deg, on time again.
     let _ = b.run(t, t + 120 * MS, AsState::Driving, f32::NAN, 0.0);
     let start = t + 120 * MS;
@@ -719,10 +674,10 @@ fn after_a_gap_the_epos4_target_moves_at_the_rate_limit() {
         b.ecu.output().faults
     );
     let per_cycle = inc_at(&b.ecu, 4.0) + 1;
-    let steps: Vec<i32> = b.drive.targets[before..]
+    let steps: Vec<i32> = b.motor.targets[before..]
         .windows(2)
         .map(|w| w[1] - w[0])
         .collect();
     assert!(steps.iter().all(|s| s.abs() <= per_cycle), "{steps:?}");
-    assert_eq!(b.drive.targets.last(), Some(&(500 + inc_at(&b.ecu, 48.0))));
+    assert_eq!(b.motor.targets.last(), Some(&(500 + inc_at(&b.ecu, 48.0))));
 }
