@@ -106,6 +106,17 @@ pub struct Tried {
     pub gof: f64,
 }
 
+/// The chosen car run with its reference late, on the head of the log
+/// ([`SYNC_SEARCH_S`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct LateComparison {
+    /// The delay that fits best, s.
+    pub delay_s: f64,
+    /// The car's GoF on the head of the log, nominal and with that delay.
+    pub gof_head: f64,
+    pub gof_head_late: f64,
+}
+
 /// The car the diagnosis runs, and how it was chosen.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct CarChoice {
@@ -119,6 +130,10 @@ pub struct CarChoice {
     pub reference_shift_rows: Option<usize>,
     /// A delay this log's timing can explain, s: `delay` is named only beyond it.
     pub timing_bound_s: f64,
+    /// Where a late reference lifted a car's fit, the cars were compared with it: the chosen
+    /// car's figures. The diagnosis still starts from the nominal model (the delay is for its
+    /// candidates to find).
+    pub compared_late: Option<LateComparison>,
     /// The best of each car tried (one entry when the car was given), best first.
     pub tried: Vec<Tried>,
 }
@@ -153,6 +168,16 @@ impl CarChoice {
                  header does not say)"
             )),
             None => {}
+        }
+        if let Some(l) = &self.compared_late {
+            line.push_str(&format!(
+                "; the cars compared with the reference late (it lifts this car's first {:.0} s \
+                 from {:.1} % to {:.1} % at {:.1} ms)",
+                SYNC_SEARCH_S,
+                100.0 * l.gof_head,
+                100.0 * l.gof_head_late,
+                1e3 * l.delay_s
+            ));
         }
         line.push_str(&format!(
             "; a delay is named only beyond {:.1} ms (what the timing of the log can explain)",
@@ -204,8 +229,8 @@ const SYNC_FINE_STEP_S: f64 = 1.0 / steering_ecu::paper_mode::CURRENT_LOOP_HZ as
 const SYNC_FINE_STEPS: i32 = 10;
 /// The phase is searched on at most this much of the log, s (it is one number for the log).
 const SYNC_SEARCH_S: f64 = 10.0;
-/// A car whose best coarse phase leaves the log this far (GoF, combined) below the best car's
-/// is not refined: a phase moves the GoF by less.
+/// An EPOS4 car whose best coarse phase leaves the log this far (GoF, combined) below the best
+/// car's is not refined: a phase moves the GoF by less.
 const PRUNE_GOF: f64 = 0.15;
 
 fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, sync: f64) -> Rig {
@@ -216,6 +241,51 @@ fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, sync: f64) -> Ri
         m.epos4.sync_after_push_s = sync;
     }
     r
+}
+
+/// Reference delays each car is run with before the cars are compared, s: every 10 ms to
+/// 80 ms (the delay candidate's range), then 5 and 2.5 ms either side of the best.
+const LATE_COARSE_S: [f64; 8] = [0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07, 0.08];
+const LATE_REFINE_S: [f64; 2] = [0.005, 0.0025];
+/// A late reference shows in a log when it lifts a car's GoF on the head of the log by more
+/// than this (combined GoF): effect-free cars of either drive gain under a point from any
+/// delay; a reference 20 ms late costs the nominal model 10 points or more.
+const LATE_MARGIN_GOF: f64 = 0.03;
+
+/// The best reference delay for the car of `rig` on `rec`, and its GoF.
+fn best_late(rig: &Rig, rec: &Record) -> (f64, f64) {
+    let gof_at = |d: f64| {
+        let fx = Effects {
+            delay_s: d,
+            ..Effects::nominal()
+        };
+        let fit = Scorer::new(rig, rec).fit(rec, &simulate(rig, rec, &fx));
+        if fit.gof.is_finite() {
+            fit.gof
+        } else {
+            f64::NEG_INFINITY
+        }
+    };
+    let mut best =
+        LATE_COARSE_S
+            .iter()
+            .map(|&d| (d, gof_at(d)))
+            .fold(
+                (0.0, f64::NEG_INFINITY),
+                |b, x| if x.1 > b.1 { x } else { b },
+            );
+    for step in LATE_REFINE_S {
+        let centre = best.0;
+        for d in [centre - step, centre + step] {
+            if d > 0.0 {
+                let g = gof_at(d);
+                if g > best.1 {
+                    best = (d, g);
+                }
+            }
+        }
+    }
+    best
 }
 
 fn nominal_fit(rig: &Rig, rec: &Record) -> Fit {
@@ -345,7 +415,9 @@ pub fn choose(
                 else {
                     continue;
                 };
-                if best.gof < best_coarse - PRUNE_GOF {
+                // Only an EPOS4 car is pruned (its phase's refinement is what costs): a
+                // direct-drive car far below is still compared with its reference late.
+                if best.sync_after_push_s.is_some() && best.gof < best_coarse - PRUNE_GOF {
                     continue;
                 }
                 let best = match best.sync_after_push_s {
@@ -381,11 +453,42 @@ pub fn choose(
         );
         Tried { gof: fit.gof, ..*t }
     });
-    let mut tried = whole;
-    tried.sort_by(|a, b| b.gof.total_cmp(&a.gof));
+    // A reference that reaches the ECU late looks, to a car's nominal model, much like the
+    // EPOS4's latch at its SYNC and its interpolation over the period: a direct-drive car 40 ms
+    // late is better fitted by the EPOS4's nominal model than by its own, and the diagnosis
+    // then runs the wrong car and calls the log `parameters`. So each car is also run with
+    // its reference late, on the head of the log; where that lifts any car by more than
+    // LATE_MARGIN_GOF, the log has a late reference and the cars are compared with it.
+    let late: Vec<(f64, f64)> = parallel_map(&best_of_car, threads, |t| {
+        best_late(
+            &with_car(
+                rig,
+                t.drive,
+                t.controller,
+                t.sync_after_push_s.unwrap_or(0.0),
+            ),
+            &shorts[index_of(t.reference_shift_rows)],
+        )
+    });
+    let late_shows = best_of_car
+        .iter()
+        .zip(&late)
+        .any(|(t, &(_, gof))| gof - t.gof > LATE_MARGIN_GOF);
+    let mut order: Vec<usize> = (0..whole.len()).collect();
+    let key = |i: usize| if late_shows { late[i].1 } else { whole[i].gof };
+    order.sort_by(|&a, &b| key(b).total_cmp(&key(a)));
+    let tried: Vec<Tried> = order.iter().map(|&i| whole[i]).collect();
     let Some(best) = tried.first().copied() else {
         return (rig.clone(), rec.clone(), None);
     };
+    let compared_late = late_shows.then(|| {
+        let i = order[0];
+        LateComparison {
+            delay_s: late[i].0,
+            gof_head: best_of_car[i].gof,
+            gof_head_late: late[i].1,
+        }
+    });
     let fitted_convention = shifts.len() > 1;
     // What the log's timing can explain: three times its stamps' jitter, and one row more when
     // its reference convention is fitted rather than stated (a late reference and a logger
@@ -399,6 +502,7 @@ pub fn choose(
         sync_after_push_s: best.sync_after_push_s,
         reference_shift_rows: fitted_convention.then_some(best.reference_shift_rows),
         timing_bound_s,
+        compared_late,
         tried,
     };
     let mut chosen = with_car(
