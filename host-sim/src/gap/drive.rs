@@ -440,17 +440,17 @@ pub fn choose(
             }
         }
     }
+    let rig_of = |t: &Tried| {
+        with_car(
+            rig,
+            t.drive,
+            t.controller,
+            t.sync_after_push_s.unwrap_or(0.0),
+        )
+    };
     // The cars compared on the whole log.
     let whole = parallel_map(&best_of_car, threads, |t| {
-        let fit = nominal_fit(
-            &with_car(
-                rig,
-                t.drive,
-                t.controller,
-                t.sync_after_push_s.unwrap_or(0.0),
-            ),
-            &records[index_of(t.reference_shift_rows)],
-        );
+        let fit = nominal_fit(&rig_of(t), &records[index_of(t.reference_shift_rows)]);
         Tried { gof: fit.gof, ..*t }
     });
     // A reference that reaches the ECU late looks, to a car's nominal model, much like the
@@ -460,15 +460,7 @@ pub fn choose(
     // its reference late, on the head of the log; where that lifts any car by more than
     // LATE_MARGIN_GOF, the log has a late reference and the cars are compared with it.
     let late: Vec<(f64, f64)> = parallel_map(&best_of_car, threads, |t| {
-        best_late(
-            &with_car(
-                rig,
-                t.drive,
-                t.controller,
-                t.sync_after_push_s.unwrap_or(0.0),
-            ),
-            &shorts[index_of(t.reference_shift_rows)],
-        )
+        best_late(&rig_of(t), &shorts[index_of(t.reference_shift_rows)])
     });
     let late_shows = best_of_car
         .iter()
