@@ -549,9 +549,6 @@ impl Epos4Link {
         self.target_inc
     }
 
-    /// Leave `Failed`: drive faults (EMCY, statusword fault, left Operation enabled) go back to
-    /// the CiA 402 walk with a fault reset; anything else restarts the whole bring-up.
-    /// Returns no frames (and does nothing) when the link has not failed.
     /// Whether the power stage is wanted on. Off is acted on at once: from Enabling or Cyclic
     /// the "disable voltage" controlword goes out in the returned frames; when the link has
     /// failed, one best-effort "disable voltage" is sent (nothing confirms it). On is acted on
@@ -606,6 +603,9 @@ impl Epos4Link {
         self.target_inc = self.feedback.position_inc;
     }
 
+    /// Leave `Failed`: drive faults (EMCY, statusword fault, left Operation enabled) go back to
+    /// the CiA 402 walk with a fault reset; anything else restarts the whole bring-up.
+    /// Returns no frames (and does nothing) when the link has not failed.
     pub fn request_fault_reset(&mut self, now_us: u64) -> Outbox {
         let mut out = Outbox::new();
         let Phase::Failed(error) = self.phase else {
