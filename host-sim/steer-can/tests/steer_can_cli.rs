@@ -637,3 +637,35 @@ fn a_current_sense_fault_is_for_the_direct_drive_car() {
     ]);
     assert!(stdout(&o).contains("over-current"), "{}", stdout(&o));
 }
+
+/// A bad `--plant-effects` value on the simulated car: the list quoted once, the reason naming
+/// the key and the value apart, with what the key takes (host-sim's parser, shared).
+#[test]
+fn a_bad_plant_effect_is_named_once_with_what_it_takes() {
+    for (list, item, reason) in [
+        (
+            "coulomb_n=200,backlash_deg=nan",
+            "backlash_deg=nan",
+            "backlash_deg takes a finite number >= 0",
+        ),
+        (
+            "reference_delay_ms=300",
+            "reference_delay_ms=300",
+            "reference_delay_ms takes a number of ms within 0..=200, not `300`",
+        ),
+    ] {
+        let o = steer_can(&[
+            "--iface",
+            "sim",
+            "--plant-effects",
+            list,
+            "monitor",
+            "--duration-s",
+            "0.1",
+        ]);
+        assert!(!o.status.success());
+        let err = stderr(&o);
+        assert_eq!(err.matches(item).count(), 1, "{err}");
+        assert!(err.contains(reason), "{err}");
+    }
+}
