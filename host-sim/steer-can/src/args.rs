@@ -194,7 +194,7 @@ pub enum Command {
     },
     /// Record the bus to a candump file (can-utils `-l` format).
     Record {
-        /// The candump file to write.
+        /// The candump file to write (a missing directory is created).
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
         /// Stop after this long, s (default: until Ctrl-C).

@@ -311,6 +311,20 @@ pub fn format_line(epoch_s: f64, iface: &str, stamped: &Stamped) -> String {
     )
 }
 
+/// Creates `path` to write a candump log into, and its missing parent directories first, as
+/// the log's save does (`convert --out`, `campaign --out`). Returns the file and the directory
+/// created, if one was.
+pub fn create(path: &Path) -> std::io::Result<(std::fs::File, Option<std::path::PathBuf>)> {
+    let missing = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty() && !d.exists())
+        .map(Path::to_path_buf);
+    if let Some(dir) = &missing {
+        std::fs::create_dir_all(dir)?;
+    }
+    Ok((std::fs::File::create(path)?, missing))
+}
+
 /// Writes frames as a candump log.
 #[derive(Debug)]
 pub struct Writer<W: Write> {
@@ -352,7 +366,7 @@ pub fn save(
         context: format!("cannot write candump file {}", path.display()),
         source,
     };
-    let file = std::fs::File::create(path).map_err(io)?;
+    let (file, _) = create(path).map_err(io)?;
     let mut w = Writer::new(std::io::BufWriter::new(file), epoch_s, iface);
     for f in frames {
         w.write(f).map_err(io)?;

@@ -449,22 +449,29 @@ fn campaign_without_confirmation_sends_nothing() {
     assert!(!log.exists());
 }
 
+/// `steer-can record` on the simulated car into `file` for `duration_s`, which must succeed.
+fn record_on_sim(file: &Path, duration_s: &str) -> Output {
+    let out = file.to_str().unwrap();
+    let o = steer_can(&[
+        "--iface",
+        "sim",
+        "record",
+        "--out",
+        out,
+        "--duration-s",
+        duration_s,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    o
+}
+
 /// `record` on the simulated car records what the vehicle side sends too (a simulated vehicle
 /// computer steers while it listens), so the README's `record` then `convert` gives a log.
 #[test]
 fn record_on_sim_holds_the_vehicle_frames_and_converts_to_a_log() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("bus.candump");
-    let o = steer_can(&[
-        "--iface",
-        "sim",
-        "record",
-        "--out",
-        file.to_str().unwrap(),
-        "--duration-s",
-        "3",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    record_on_sim(&file, "3");
     let text = std::fs::read_to_string(&file).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     assert!(lines[0].starts_with("(1700000000.000"), "{}", lines[0]);
@@ -668,4 +675,46 @@ fn a_bad_plant_effect_is_named_once_with_what_it_takes() {
         assert_eq!(err.matches(item).count(), 1, "{err}");
         assert!(err.contains(reason), "{err}");
     }
+}
+
+/// `record --out` and `campaign --out` create a missing directory, as `convert --out` does, and
+/// say where the file went.
+#[test]
+fn record_and_campaign_create_a_missing_output_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("day1/bus/bus.candump");
+    let o = record_on_sim(&file, "0.5");
+    assert!(std::fs::metadata(&file).unwrap().len() > 0);
+    let said = stdout(&o);
+    assert!(
+        said.contains(&format!(
+            "created directory {}",
+            dir.path().join("day1/bus").display()
+        )),
+        "{said}"
+    );
+    assert!(
+        said.contains(&format!("frames written to {}", file.display())),
+        "{said}"
+    );
+
+    let profile = dir.path().join("hold.csv");
+    let rows: String = (0..=120)
+        .map(|k| format!("{},0\n", f64::from(k) * 0.01))
+        .collect();
+    std::fs::write(&profile, format!("t,ref_sw_deg\n{rows}")).unwrap();
+    let log = dir.path().join("day2/track.csv.gz");
+    let (csv, out) = (profile.to_str().unwrap(), log.to_str().unwrap());
+    let o = steer_can(&[
+        "--iface", "sim", "campaign", "track", "--csv", csv, "--yes", "--out", out,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(log.exists());
+    let recording = dir.path().join("day2/track.csv.gz.candump");
+    assert!(recording.exists());
+    assert!(
+        stdout(&o).contains(&format!("recording written to {}", recording.display())),
+        "{}",
+        stdout(&o)
+    );
 }
