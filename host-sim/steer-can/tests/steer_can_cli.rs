@@ -520,6 +520,36 @@ fn candump_fixture_converts_exactly() {
     assert!(said.contains("1 invalid frames"), "{said}");
 }
 
+/// The fixture reads as the current firmware: each motor frame (0x102) carries, in
+/// `MOT_RefCounter`, the counter of the last reference frame (0x100) before it that passed the
+/// CRC, 0 before the first; the firmware before that field wrote 0 throughout.
+#[test]
+fn candump_fixtures_motor_frames_carry_the_last_reference_counter() {
+    use steer_can::decode::{Decoded, Decoder};
+    use steering_ecu::canopen::NodeId;
+    use steering_ecu::canopen::epos4::PositionScale;
+    let dec = Decoder::new(NodeId::new(1).unwrap(), PositionScale::new(84).unwrap());
+    let file = steer_can::candump::read(&fixture("bringup_ramp.candump")).unwrap();
+    let (mut last, mut motors) = (0, 0);
+    for f in &file.frames {
+        match dec.decode(&f.frame) {
+            Decoded::Reference(Ok(r)) => last = r.counter.raw(),
+            Decoded::Motor(Ok(m)) => {
+                assert_eq!(
+                    m.reference_counter.raw(),
+                    last,
+                    "motor frame at {} us",
+                    f.t_us
+                );
+                motors += 1;
+            }
+            _ => {}
+        }
+    }
+    assert!(motors >= 10, "{motors} motor frames");
+    assert_ne!(last, 0, "the references count up from 1");
+}
+
 #[test]
 fn malformed_candump_is_refused_with_the_line_number() {
     let dir = tempfile::tempdir().unwrap();
