@@ -74,8 +74,14 @@ impl std::fmt::Display for EffectsError {
                     .collect::<Vec<_>>()
                     .join(", ")
             ),
+            // The caller's message quotes the whole list (clap does): name the key and the
+            // value apart, once each, with what the key takes.
             EffectsError::BadValue { key, value } => {
-                write!(f, "{key}={value}: the size must be a finite number >= 0")
+                let what = PlantEffects::KEYS
+                    .iter()
+                    .find(|(k, _)| k == key)
+                    .map_or(String::new(), |(_, what)| format!(" ({what})"));
+                write!(f, "{key} takes a finite number >= 0{what}, not `{value}`")
             }
             EffectsError::TireIncomplete => write!(
                 f,
@@ -170,6 +176,9 @@ impl PlantEffects {
                 .split_once('=')
                 .ok_or_else(|| EffectsError::Syntax(item.to_string()))?;
             let (key, value) = (key.trim(), value.trim());
+            if !PlantEffects::KEYS.iter().any(|(k, _)| *k == key) {
+                return Err(EffectsError::UnknownKey(key.to_string()));
+            }
             let v: f64 = value
                 .parse()
                 .ok()
@@ -675,6 +684,19 @@ mod tests {
             let err = PlantEffects::parse(list).unwrap_err().to_string();
             assert!(err.contains(want), "{list}: {err}");
         }
+        // A bad value: the key and the value named apart, once each, with what the key takes
+        // (the caller quotes the list itself, so the item again would say it twice).
+        let err = PlantEffects::parse("backlash_deg=nan")
+            .unwrap_err()
+            .to_string();
+        assert!(!err.contains("backlash_deg=nan"), "{err}");
+        assert_eq!(err.matches("backlash_deg").count(), 1, "{err}");
+        for part in ["`nan`", "finite number >= 0", "deg at the wheel"] {
+            assert!(err.contains(part), "{part}: {err}");
+        }
+        // An unknown key is named as unknown, whatever its value.
+        let err = PlantEffects::parse("backlash=nan").unwrap_err().to_string();
+        assert!(err.contains("unknown effect `backlash`"), "{err}");
         let fx = PlantEffects::parse(" backlash_deg=1.5 , coulomb_n=200 ").unwrap();
         assert_eq!(fx.belt_play_deg, 1.5);
         assert_eq!(fx.rack_coulomb_n, 200.0);

@@ -108,13 +108,19 @@ impl std::str::FromStr for CarEffects {
         for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
             match item.split_once('=') {
                 Some((k, v)) if k.trim() == "reference_delay_ms" => {
+                    // The caller quotes the whole list: the key and the value apart, once.
                     let ms: f64 = v
                         .trim()
                         .parse()
-                        .map_err(|_| format!("reference_delay_ms={v}: not a number"))?;
-                    if !(0.0..=200.0).contains(&ms) {
-                        return Err(format!("reference_delay_ms={v}: must be within 0..=200"));
-                    }
+                        .ok()
+                        .filter(|ms| (0.0..=200.0).contains(ms))
+                        .ok_or_else(|| {
+                            format!(
+                                "reference_delay_ms takes a number of ms within 0..=200, not \
+                                 `{}`",
+                                v.trim()
+                            )
+                        })?;
                     delay = ms * 1e-3;
                 }
                 _ => rest.push(item),

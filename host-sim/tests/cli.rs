@@ -185,4 +185,15 @@ fn bad_input_is_a_clear_error_not_a_panic() {
     let out = host_sim(&["step", "--log-rate-hz", "300"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("does not divide"));
+
+    // A bad `--plant-effects` value: clap quotes the list, the reason names the key and the
+    // value once more each, not the whole item again.
+    let out = host_sim(&["step", "--plant-effects", "coulomb_n=200,backlash_deg=nan"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.matches("backlash_deg=nan").count(), 1, "{err}");
+    assert!(
+        err.contains("backlash_deg takes a finite number >= 0") && err.contains("not `nan`"),
+        "{err}"
+    );
 }

@@ -496,14 +496,14 @@ impl Ecu {
         &self.e2e
     }
 
-    /// Clear requests (rising edges of the reference frame's bit) the state machine refused,
-    /// saturating.
     /// The stack's high-water mark for the diagnostic frame; the firmware measures it now and
     /// then ([`crate::stack`]), host builds never do.
     pub fn set_stack_usage(&mut self, usage: crate::stack::StackUsage) {
         self.stack = Some(usage);
     }
 
+    /// Clear requests (rising edges of the reference frame's bit) the state machine refused,
+    /// saturating.
     pub fn clear_refusals(&self) -> u16 {
         self.clear_refusals
     }

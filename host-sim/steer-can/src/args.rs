@@ -194,7 +194,7 @@ pub enum Command {
     },
     /// Record the bus to a candump file (can-utils `-l` format).
     Record {
-        /// The candump file to write.
+        /// The candump file to write (a missing directory is created).
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
         /// Stop after this long, s (default: until Ctrl-C).
@@ -220,7 +220,9 @@ pub enum Command {
     },
     /// Convert a candump log to the project's log format (for `host-sim gap`).
     Convert {
-        /// The candump file (`candump -l` or `steer-can record`).
+        /// The candump file (`candump -l` or `steer-can record`), at most 10000000 frames
+        /// (held in memory; over 20 min of a full 1 Mbit/s bus): a longer one is refused,
+        /// its parts (`split -l 10000000`) convert one by one.
         candump: PathBuf,
         /// The log to write (`.csv` or `.csv.gz`).
         #[arg(long, value_name = "LOG")]

@@ -44,6 +44,12 @@ pub struct CandumpFile {
 /// whole.
 pub const MAX_LINE_BYTES: usize = 4096;
 
+/// The most frames a candump file may hold for `convert`, which keeps them all in memory (tens
+/// of bytes each, and the log built from them): over 20 min of a full 1 Mbit/s bus (about
+/// 7,700 frames/s), hours of the car's bus. A longer recording is refused at the frame past
+/// it, not read on; its parts (`split -l 10000000 FILE`) convert one by one.
+pub const MAX_FRAMES: usize = 10_000_000;
+
 /// How far a frame may be stamped before the one read just before it and still be kept (at the
 /// later time). One socket's stamps never go back, but a file merged from two captures can
 /// jitter by a little; a frame a second back is out of place, and clamping it would move it
@@ -216,6 +222,16 @@ pub fn read(path: &Path) -> Result<CandumpFile, BringupError> {
 
 /// As [`read`], from any reader; `path` names it in errors.
 pub fn read_from(reader: impl BufRead, path: &Path) -> Result<CandumpFile, BringupError> {
+    read_at_most(reader, path, MAX_FRAMES)
+}
+
+/// As [`read_from`], refusing a file with more than `max_frames` frames (skipped lines do not
+/// count) at the first frame past them.
+fn read_at_most(
+    reader: impl BufRead,
+    path: &Path,
+    max_frames: usize,
+) -> Result<CandumpFile, BringupError> {
     let mut out = CandumpFile::default();
     let mut first: Option<f64> = None;
     let mut latest_s = f64::NEG_INFINITY;
@@ -265,6 +281,13 @@ pub fn read_from(reader: impl BufRead, path: &Path) -> Result<CandumpFile, Bring
                     out.first_dropped_line.get_or_insert(line_no);
                     continue;
                 }
+                if out.frames.len() == max_frames {
+                    return Err(err(format!(
+                        "more than {max_frames} frames, the most convert holds in memory; \
+                         nothing past this line was read (convert the file in parts: \
+                         `split -l {max_frames}`)"
+                    )));
+                }
                 latest_s = latest_s.max(t_s);
                 let t0 = *first.get_or_insert(t_s);
                 let rel = t_s - t0;
@@ -311,6 +334,20 @@ pub fn format_line(epoch_s: f64, iface: &str, stamped: &Stamped) -> String {
     )
 }
 
+/// Creates `path` to write a candump log into, and its missing parent directories first, as
+/// the log's save does (`convert --out`, `campaign --out`). Returns the file and the directory
+/// created, if one was.
+pub fn create(path: &Path) -> std::io::Result<(std::fs::File, Option<std::path::PathBuf>)> {
+    let missing = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty() && !d.exists())
+        .map(Path::to_path_buf);
+    if let Some(dir) = &missing {
+        std::fs::create_dir_all(dir)?;
+    }
+    Ok((std::fs::File::create(path)?, missing))
+}
+
 /// Writes frames as a candump log.
 #[derive(Debug)]
 pub struct Writer<W: Write> {
@@ -352,7 +389,7 @@ pub fn save(
         context: format!("cannot write candump file {}", path.display()),
         source,
     };
-    let file = std::fs::File::create(path).map_err(io)?;
+    let (file, _) = create(path).map_err(io)?;
     let mut w = Writer::new(std::io::BufWriter::new(file), epoch_s, iface);
     for f in frames {
         w.write(f).map_err(io)?;
@@ -383,6 +420,30 @@ mod tests {
             .map(|s| format_line(f.epoch_s, "can0", s))
             .collect();
         assert_eq!(back.join("\n") + "\n", text);
+    }
+
+    /// A file with more frames than the bound is refused at the first frame past it, naming
+    /// the bound; one at the bound reads whole, and skipped lines do not count.
+    #[test]
+    fn a_candump_over_the_frame_bound_is_refused_at_the_line_past_it() {
+        let mut text = String::from("(1700000000.000000) can0 12345678#00\n");
+        for k in 0..1001u32 {
+            text += &format!("(1700000000.{:06}) can0 101#{:02X}\n", k * 10, k % 256);
+        }
+        let read = |max| read_at_most(std::io::Cursor::new(&text), Path::new("big.log"), max);
+        let whole = read(1001).unwrap();
+        assert_eq!((whole.frames.len(), whole.skipped), (1001, 1));
+        match read(1000) {
+            Err(e @ BringupError::Candump { line: 1002, .. }) => {
+                let said = e.to_string();
+                assert!(
+                    said.starts_with("big.log:1002: more than 1000 frames"),
+                    "{said}"
+                );
+                assert!(said.contains("split -l 1000"), "{said}");
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

@@ -311,7 +311,10 @@ fn record(
         context: format!("cannot write {}", out.display()),
         source,
     };
-    let file = std::fs::File::create(out).map_err(io)?;
+    let (file, created) = candump::create(out).map_err(io)?;
+    if let Some(dir) = &created {
+        say!("created directory {}", dir.display());
+    }
     let mut w = candump::Writer::new(
         std::io::BufWriter::new(file),
         t.epoch_s(),

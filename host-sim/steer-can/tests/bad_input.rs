@@ -207,3 +207,14 @@ fn the_laptop_build_says_it_has_no_simulated_car_and_how_to_get_one() {
         assert!(!socket.exists(), "{args:?} served a socket");
     }
 }
+
+/// `convert --help` states the most frames it reads, the number the reader enforces.
+#[test]
+fn convert_help_states_its_frame_bound() {
+    let o = steer_can(&["convert", "--help"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let bound = steer_can::candump::MAX_FRAMES.to_string();
+    let help = stdout(&o).split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(help.contains(&format!("at most {bound} frames")), "{help}");
+    assert!(help.contains(&format!("split -l {bound}")), "{help}");
+}
