@@ -1,6 +1,7 @@
 //! host-sim: the paper's steering actuator (plant of eqs. 1-8) under the firmware's own control
 //! core, with the scenarios, the analysis and the pictures around it.
 pub mod analysis;
+pub mod car;
 pub mod effect_plant;
 pub mod epos4_sim;
 pub mod firmware_fixture;

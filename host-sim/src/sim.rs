@@ -33,27 +33,7 @@ const COLUMN_SAMPLE_TICKS: u64 =
 /// Extra log columns a simulated run writes after the five required ones.
 pub const SIM_EXTRA_COLUMNS: [&str; 3] = ["current_setpoint_a", "voltage_v", "setpoint_motor_rad"];
 
-/// Which steering controller closes the loop.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    clap::ValueEnum,
-    serde::Serialize,
-    serde::Deserialize,
-)]
-#[serde(rename_all = "lowercase")]
-pub enum Controller {
-    /// The paper's EPOS4 cascade on the motor angle (Table 3), bit-exact with the firmware.
-    #[default]
-    Paper,
-    /// The ECU's own controller (`steering_ecu::ecu_mode`): inverse belt model, model
-    /// feedforward, Hall-timed speed, slow column integral. Always Hall feedback.
-    Ecu,
-}
+pub use crate::car::Controller;
 
 /// Everything a closed-loop run depends on besides the reference.
 #[derive(Debug, Clone)]
@@ -273,8 +253,7 @@ pub fn run_on<A: Actuator>(
         None => Log::default(),
     };
     // What the car is, for `gap`: this loop is the direct drive (the cascade on Hall counts).
-    log.comments =
-        crate::gap::drive::LogHeader::lines(crate::gap::rig::CarDrive::Direct, cfg.controller);
+    log.comments = crate::car::header_lines(crate::car::CarDrive::Direct, cfg.controller);
     log.comments.push("current: interval-mean".into());
     log.comments.push("reference: period-ending".into());
     let mut summary = RunSummary::default();

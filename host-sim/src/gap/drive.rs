@@ -57,27 +57,11 @@ impl LogHeader {
 
     /// The header lines of a log of this car (for the writers).
     pub fn lines(drive: CarDrive, controller: Controller) -> Vec<String> {
-        vec![
-            format!("drive: {}", drive.name()),
-            format!("controller: {}", controller_name(controller)),
-        ]
+        crate::car::header_lines(drive, controller)
     }
 }
 
-pub fn controller_name(c: Controller) -> &'static str {
-    match c {
-        Controller::Paper => "paper",
-        Controller::Ecu => "ecu",
-    }
-}
-
-pub fn controller_from_name(name: &str) -> Option<Controller> {
-    match name.trim().to_ascii_lowercase().as_str() {
-        "paper" => Some(Controller::Paper),
-        "ecu" => Some(Controller::Ecu),
-        _ => None,
-    }
-}
+pub use crate::car::{controller_from_name, controller_name};
 
 /// How the car was chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]

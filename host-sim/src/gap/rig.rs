@@ -82,34 +82,7 @@ pub struct LoadedLog {
     pub timing: super::LogTiming,
 }
 
-/// The car's drive, as the firmware's `drive-epos4` / `drive-direct` builds have it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum CarDrive {
-    /// The ECU's own bridge: the cascade on Hall counts at 2 kHz / 20 kHz, as `sim::run`.
-    #[default]
-    Direct,
-    /// A maxon EPOS4: the ECU's CSP target each SYNC, the drive's interpolation and loops on
-    /// its own motor angle, its position and current as its TPDOs report them.
-    Epos4,
-}
-
-impl CarDrive {
-    pub fn name(self) -> &'static str {
-        match self {
-            CarDrive::Direct => "direct",
-            CarDrive::Epos4 => "epos4",
-        }
-    }
-
-    pub fn from_name(name: &str) -> Option<CarDrive> {
-        match name.trim().to_ascii_lowercase().as_str() {
-            "direct" => Some(CarDrive::Direct),
-            "epos4" => Some(CarDrive::Epos4),
-            _ => None,
-        }
-    }
-}
+pub use crate::car::CarDrive;
 
 /// Which current an EPOS4's TPDO carries (the link's `current_object`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
