@@ -395,6 +395,42 @@ fn a_late_reference_in_a_log_without_a_header_is_a_delay_of_the_direct_drive() {
     assert_eq!(effects, vec!["delay".to_string()]);
 }
 
+/// The same without a delay, at 100 Hz, by a logger that writes the reference starting at each
+/// row, the car not given: one row of the reference column is the other convention, and a
+/// delay scan fits the wrong one 10 ms late as well as the right one, so a late reference
+/// picks the drive and the controller only, and the convention stays the nominal model's
+/// (taken with the cars, the effect-free car was called `parameters`, its reference a row
+/// early).
+#[test]
+fn a_late_reference_does_not_choose_a_logs_reference_convention() {
+    let case = GenCase::nominal(sweep(10.0), 100);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("theirs.csv");
+    log_of(
+        &case,
+        5,
+        &team(ReferenceConvention::PeriodStarting, 100, true, true),
+    )
+    .save(&path)
+    .unwrap();
+    let (effects, kind, choice) = verdict_on_car(&path, None, None);
+    assert_eq!(
+        kind,
+        VerdictKind::None,
+        "{effects:?}: {}",
+        choice.describe()
+    );
+    assert_eq!(choice.drive, CarDrive::Direct, "{}", choice.describe());
+    assert_eq!(
+        choice.reference_shift_rows,
+        Some(1),
+        "{}",
+        choice.describe()
+    );
+    // Nor is the other convention a late reference.
+    assert_eq!(choice.compared_late, None, "{}", choice.describe());
+}
+
 /// A 1 kHz logger whose stamps jitter by +-1 ms, its rows in the order they came: the rows'
 /// spacing, the stamps' spread and the rows lost are read near what they are (1 ms; 0.58 ms
 /// RMS, read within a factor of two, for at that jitter a lost row and a late stamp look

@@ -231,9 +231,9 @@ fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, sync: f64) -> Ri
 /// 80 ms (the delay candidate's range), then 5 and 2.5 ms either side of the best.
 const LATE_COARSE_S: [f64; 8] = [0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07, 0.08];
 const LATE_REFINE_S: [f64; 2] = [0.005, 0.0025];
-/// A late reference shows in a log when it lifts a car's GoF on the head of the log by more
-/// than this (combined GoF): effect-free cars of either drive gain under a point from any
-/// delay; a reference 20 ms late costs the nominal model 10 points or more.
+/// A late reference shows in a log when a car with it fits the head of the log better than any
+/// car's nominal model by more than this (combined GoF): effect-free cars of either drive gain
+/// nothing from a delay; a reference 20 ms late costs the nominal model 10 points or more.
 const LATE_MARGIN_GOF: f64 = 0.03;
 
 /// The best reference delay for the car of `rig` on `rec`, and its GoF.
@@ -441,18 +441,40 @@ pub fn choose(
     // EPOS4's latch at its SYNC and its interpolation over the period: a direct-drive car 40 ms
     // late is better fitted by the EPOS4's nominal model than by its own, and the diagnosis
     // then runs the wrong car and calls the log `parameters`. So each car is also run with
-    // its reference late, on the head of the log; where that lifts any car by more than
-    // LATE_MARGIN_GOF, the log has a late reference and the cars are compared with it.
+    // its reference late, on the head of the log; where a car with it beats every nominal
+    // fit by more than LATE_MARGIN_GOF, the log has a late reference and the cars are
+    // compared with it.
     let late: Vec<(f64, f64)> = parallel_map(&best_of_car, threads, |t| {
         best_late(&rig_of(t), &shorts[index_of(t.reference_shift_rows)])
     });
-    let late_shows = best_of_car
+    // Shown when it fits the log better than every car's nominal model on either convention
+    // (at the reference rate a reference one row late is the other convention, no late
+    // reference; and a car far off the log gains from anything).
+    let best_nominal = best_of_car
         .iter()
-        .zip(&late)
-        .any(|(t, &(_, gof))| gof - t.gof > LATE_MARGIN_GOF);
+        .map(|t| t.gof)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let late_shows = late
+        .iter()
+        .any(|&(_, gof)| gof - best_nominal > LATE_MARGIN_GOF);
     let mut order: Vec<usize> = (0..whole.len()).collect();
     let key = |i: usize| if late_shows { late[i].1 } else { whole[i].gof };
     order.sort_by(|&a, &b| key(b).total_cmp(&key(a)));
+    // The late reference picks the drive and the controller only. At the reference rate a
+    // reference one row late is the other convention, and a delay scan fits either: the
+    // convention (and an EPOS4's phase) of that car is the one its nominal model fits best.
+    if let Some(&lead) = order.first() {
+        let same_car = |i: usize| {
+            whole[i].drive == whole[lead].drive && whole[i].controller == whole[lead].controller
+        };
+        if let Some(pos) = (0..order.len())
+            .filter(|&p| same_car(order[p]))
+            .max_by(|&a, &b| whole[order[a]].gof.total_cmp(&whole[order[b]].gof))
+        {
+            let pick = order.remove(pos);
+            order.insert(0, pick);
+        }
+    }
     let tried: Vec<Tried> = order.iter().map(|&i| whole[i]).collect();
     let Some(best) = tried.first().copied() else {
         return (rig.clone(), rec.clone(), None);
