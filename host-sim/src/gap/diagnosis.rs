@@ -85,7 +85,7 @@ pub struct Diagnosis {
     /// drive's Hall edges) changes the phase of its chatter on any disturbance, so its own
     /// GoF falls below 100 % by what no model can follow sample for sample.
     pub repeatability: Fit,
-    /// The constant part of the nominal model's effort residual ([`super::score::effort_offset`]).
+    /// The constant part of the nominal model's effort residual (`score::effort_offset`).
     pub effort_offset: Offset,
     pub verdict: Verdict,
     pub ranking: Vec<Candidate>,
@@ -125,7 +125,7 @@ pub const UNEXPLAINED_RATIO: f64 = 5.0;
 pub const UNEXPLAINED_BELOW_GOF: f64 = 0.9;
 /// LM iterations of each Table 4 refit (`parameters`): each costs a simulation per parameter
 /// and two more, and a log may be refitted from several starts.
-/// A constant in the effort's residual ([`super::score::effort_offset`]) is no noise when its
+/// A constant in the effort's residual (`score::effort_offset`) is no noise when its
 /// intercept stands this many standard errors from zero... (effect-free cars of either drive
 /// and controller, sweeps and tracks: at most 0.7; a 0.3 A offset added to their current: 21
 /// or more)

@@ -91,7 +91,7 @@ pub struct Tried {
 }
 
 /// The chosen car run with its reference late, on the head of the log
-/// ([`SYNC_SEARCH_S`]).
+/// (its first 10 s).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct LateComparison {
     /// The delay that fits best, s.
