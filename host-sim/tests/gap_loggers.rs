@@ -392,6 +392,14 @@ fn a_late_reference_in_a_log_without_a_header_is_a_delay_of_the_direct_drive() {
         choice.describe()
     );
     assert!(choice.compared_late.is_some(), "{}", choice.describe());
+    // The report says why the car with the lower nominal GoF was taken.
+    assert!(
+        choice
+            .describe()
+            .contains("ranked with the reference late, not by these"),
+        "{}",
+        choice.describe()
+    );
     assert_eq!(effects, vec!["delay".to_string()]);
 }
 

@@ -192,8 +192,14 @@ impl CarChoice {
         if let Some(best) = self.tried.first()
             && !others.is_empty()
         {
+            // Ranked with the reference late, the chosen car's nominal GoF may be the lower.
             line.push_str(&format!(
-                "; nominal GoF {:.1} % against {}",
+                "; {}nominal GoF {:.1} % against {}",
+                if self.compared_late.is_some() {
+                    "ranked with the reference late, not by these: "
+                } else {
+                    ""
+                },
                 100.0 * best.gof,
                 others.join(", ")
             ));
