@@ -322,6 +322,18 @@ fn verdict_on_car(
     (d.verdict.effects.clone(), d.verdict.kind, choice)
 }
 
+/// The verdict on the case as `logger` writes it, the car fitted as `host-sim gap FILE` fits
+/// a log whose header does not name it.
+fn verdict_car_fitted(
+    case: &GenCase,
+    logger: &Logger,
+) -> (Vec<String>, VerdictKind, drive::CarChoice) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("theirs.csv");
+    log_of(case, 5, logger).save(&path).unwrap();
+    verdict_on_car(&path, None, None)
+}
+
 /// The case written by our logger and by a team's (the reference that starts at each row,
 /// stamps +-1 ms, 1 % of rows lost, no header), both at 100 Hz, and diagnosed.
 fn both_loggers(case: &GenCase) -> [(Vec<String>, VerdictKind, drive::CarChoice); 2] {
@@ -374,16 +386,10 @@ fn a_late_reference_in_a_log_without_a_header_is_a_delay_of_the_direct_drive() {
     let mut case = GenCase::nominal(sweep(12.0), 1000);
     case.truth.reference_delay_s = 0.025;
     case.hidden = vec!["delay".into()];
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("theirs.csv");
-    log_of(
+    let (effects, _, choice) = verdict_car_fitted(
         &case,
-        5,
         &team(ReferenceConvention::PeriodEnding, 1000, true, false),
-    )
-    .save(&path)
-    .unwrap();
-    let (effects, _, choice) = verdict_on_car(&path, None, None);
+    );
     assert_eq!(choice.drive, CarDrive::Direct, "{}", choice.describe());
     assert_eq!(
         choice.controller,
@@ -412,16 +418,10 @@ fn a_late_reference_in_a_log_without_a_header_is_a_delay_of_the_direct_drive() {
 #[test]
 fn a_late_reference_does_not_choose_a_logs_reference_convention() {
     let case = GenCase::nominal(sweep(10.0), 100);
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("theirs.csv");
-    log_of(
+    let (effects, kind, choice) = verdict_car_fitted(
         &case,
-        5,
         &team(ReferenceConvention::PeriodStarting, 100, true, true),
-    )
-    .save(&path)
-    .unwrap();
-    let (effects, kind, choice) = verdict_on_car(&path, None, None);
+    );
     assert_eq!(
         kind,
         VerdictKind::None,

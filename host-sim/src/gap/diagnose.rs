@@ -666,12 +666,12 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // GoF: a log near the nominal one with it is not `none`.
     let offset_left = verdict_candidate.is_none()
         && offset.significance() > OFFSET_SIGNIFICANCE
-        && offset.mean.abs() > OFFSET_MIN_SHARE * offset.effort_rms;
+        && offset.share_of_effort() > OFFSET_MIN_SHARE;
     if offset_left {
         findings.push(Finding::EffortOffset {
             mean: offset.mean,
             standard_error: offset.standard_error,
-            share_pct: 100.0 * offset.mean.abs() / offset.effort_rms.max(1e-12),
+            share_pct: 100.0 * offset.share_of_effort(),
         });
     }
     let unexplained = far_above_floor || offset_left;

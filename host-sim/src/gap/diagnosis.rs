@@ -215,7 +215,7 @@ impl Diagnosis {
             "effort offset: {:+.3} (standard error {:.3}; {:.1} % of the effort's RMS {:.3}), in the effort's unit",
             o.mean,
             o.standard_error,
-            100.0 * o.mean.abs() / o.effort_rms.max(1e-12),
+            100.0 * o.share_of_effort(),
             o.effort_rms
         );
         let _ = writeln!(s, "\nwhere:");

@@ -249,12 +249,7 @@ fn best_late(rig: &Rig, rec: &Record) -> (f64, f64) {
             delay_s: d,
             ..Effects::nominal()
         };
-        let fit = Scorer::new(rig, rec).fit(rec, &simulate(rig, rec, &fx));
-        if fit.gof.is_finite() {
-            fit.gof
-        } else {
-            f64::NEG_INFINITY
-        }
+        fit_with(rig, rec, &fx).gof
     };
     let mut best =
         LATE_COARSE_S
@@ -278,8 +273,10 @@ fn best_late(rig: &Rig, rec: &Record) -> (f64, f64) {
     best
 }
 
-fn nominal_fit(rig: &Rig, rec: &Record) -> Fit {
-    let sim = simulate(rig, rec, &Effects::nominal());
+/// The fit of the car of `rig` with `fx` on `rec`; a GoF that is not finite (a run that blew
+/// up) ranks last.
+fn fit_with(rig: &Rig, rec: &Record, fx: &Effects) -> Fit {
+    let sim = simulate(rig, rec, fx);
     let fit = Scorer::new(rig, rec).fit(rec, &sim);
     Fit {
         gof: if fit.gof.is_finite() {
@@ -289,6 +286,10 @@ fn nominal_fit(rig: &Rig, rec: &Record) -> Fit {
         },
         ..fit
     }
+}
+
+fn nominal_fit(rig: &Rig, rec: &Record) -> Fit {
+    fit_with(rig, rec, &Effects::nominal())
 }
 
 /// The record with its reference column moved `rows` later (the first sample held).
@@ -450,9 +451,17 @@ pub fn choose(
     // its reference late, on the head of the log; where a car with it beats every nominal
     // fit by more than LATE_MARGIN_GOF, the log has a late reference and the cars are
     // compared with it.
-    let late: Vec<(f64, f64)> = parallel_map(&best_of_car, threads, |t| {
-        best_late(&rig_of(t), &shorts[index_of(t.reference_shift_rows)])
-    });
+    // With one car left (drive and controller given) there is nothing for it to rank.
+    let several_cars = best_of_car
+        .iter()
+        .any(|t| (t.drive, t.controller) != (best_of_car[0].drive, best_of_car[0].controller));
+    let late: Vec<(f64, f64)> = if several_cars {
+        parallel_map(&best_of_car, threads, |t| {
+            best_late(&rig_of(t), &shorts[index_of(t.reference_shift_rows)])
+        })
+    } else {
+        Vec::new()
+    };
     // Shown when it fits the log better than every car's nominal model on either convention
     // (at the reference rate a reference one row late is the other convention, no late
     // reference; and a car far off the log gains from anything).

@@ -279,18 +279,15 @@ impl Record {
                 // boundary may hold either neighbour; a row a few ms from the middle holds
                 // the step's own sample for any offset under half a step less a row.
                 let inside = 0.5 * dt - 0.75 * row_dt;
-                let near_mid = (j.saturating_sub(1)..=j)
-                    .filter(|&i| (t[i] - mid).abs() <= inside)
-                    .min_by(|&a, &b| (t[a] - mid).abs().total_cmp(&(t[b] - mid).abs()));
-                if several_rows
-                    && row_at(mid).is_none()
-                    && let Some(i) = near_mid
-                {
+                let near_mid = || {
+                    (j.saturating_sub(1)..=j)
+                        .filter(|&i| (t[i] - mid).abs() <= inside)
+                        .min_by(|&a, &b| (t[a] - mid).abs().total_cmp(&(t[b] - mid).abs()))
+                };
+                let mid_lost = several_rows && row_at(mid).is_none();
+                if mid_lost && let Some(i) = near_mid() {
                     reference[i]
-                } else if several_rows
-                    && row_at(mid).is_none()
-                    && let Some(b) = row_at(boundary)
-                {
+                } else if mid_lost && let Some(b) = row_at(boundary) {
                     reference[b]
                 } else if missing {
                     let lo = j.saturating_sub(2);

@@ -222,6 +222,11 @@ impl Offset {
     pub fn significance(&self) -> f64 {
         self.mean.abs() / self.standard_error.max(1e-12)
     }
+
+    /// The intercept's size as a share of the logged effort's RMS, a fraction.
+    pub fn share_of_effort(&self) -> f64 {
+        self.mean.abs() / self.effort_rms.max(1e-12)
+    }
 }
 
 /// The effort's [`Offset`] of `sim` against `rec`, from `skip` on.
