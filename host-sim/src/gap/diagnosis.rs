@@ -87,6 +87,11 @@ pub struct Diagnosis {
     pub repeatability: Fit,
     /// The constant part of the nominal model's effort residual (`score::effort_offset`).
     pub effort_offset: Offset,
+    /// What the log says by itself of play in the belt and Coulomb friction at the rack
+    /// (`gap::signature`), on the paper rig with a motor column; the candidates it rules out
+    /// are named in the verdict's reason.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub signature: Option<super::signature::Signature>,
     pub verdict: Verdict,
     pub ranking: Vec<Candidate>,
     #[serde(rename = "where")]
@@ -218,6 +223,22 @@ impl Diagnosis {
             100.0 * o.share_of_effort(),
             o.effort_rms
         );
+        if let Some(b) = &self.signature {
+            let _ = writeln!(
+                s,
+                "torque balance (the log alone): play in the belt {:.2} +- {:.2} deg, Coulomb force at the rack {:.0} +- {:.0} N, belt stiffness {:.3} Nm/rad; {}",
+                b.belt_play_deg,
+                b.belt_play_se_deg,
+                b.rack_coulomb_n,
+                b.rack_coulomb_se_n,
+                b.belt_stiffness_nm_rad,
+                if b.holds {
+                    "holds, so it rules candidates out and in"
+                } else {
+                    "does not hold on this log (a belt off Table 4's by more than 25 %, or a negative reading: the current is not read at the angles' instants), so it is not used"
+                }
+            );
+        }
         let _ = writeln!(s, "\nwhere:");
         s.push_str(&self.where_.summary());
         // Ranked by what the fits minimise, the cost (each signal's residual over its noise),

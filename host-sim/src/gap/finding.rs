@@ -159,6 +159,32 @@ pub enum Finding {
         /// Of the logged effort's RMS, %.
         share_pct: f64,
     },
+    /// The log's own torque balance (`gap::signature`) shows less of what these candidates
+    /// model than half the smallest size any of them is named at: they are not fitted, so
+    /// none of them can stand in for another effect.
+    RuledOutByLog {
+        effects: Vec<String>,
+        /// What the balance reads, e.g. `play in the belt`.
+        reading: &'static str,
+        value: f64,
+        standard_error: f64,
+        unit: &'static str,
+        /// Half the smallest size named, in `unit`.
+        limit: f64,
+    },
+    /// The log's own torque balance shows more than the smallest named of what the single
+    /// effect named does not make: the best pair that adds it is named.
+    DemandedByLog {
+        pair: String,
+        reading: &'static str,
+        value: f64,
+        standard_error: f64,
+        unit: &'static str,
+        /// The single effect the pair replaces, and how much more the pair leaves, % (negative:
+        /// less).
+        single: String,
+        more_pct: f64,
+    },
     /// Nothing explains a log far above its floor: what to try.
     TryElse,
 }
@@ -366,6 +392,36 @@ impl fmt::Display for Finding {
                  {share_pct:.1} % of the effort's RMS) that no candidate effect and no Table 4 \
                  parameter makes: a current sensor's offset, or a logger's zero",
                 mean.abs() / standard_error.max(1e-12)
+            ),
+            Finding::RuledOutByLog {
+                effects,
+                reading,
+                value,
+                standard_error,
+                unit,
+                limit,
+            } => write!(
+                f,
+                "the log's torque balance shows {value:.2} +- {standard_error:.2} {unit} of \
+                 {reading}, under half the smallest named ({limit:.2} {unit}) by three standard \
+                 errors: {} not fitted",
+                effects.join(", ")
+            ),
+            Finding::DemandedByLog {
+                pair,
+                reading,
+                value,
+                standard_error,
+                unit,
+                single,
+                more_pct,
+            } => write!(
+                f,
+                "the log's torque balance shows {value:.2} +- {standard_error:.2} {unit} of \
+                 {reading}, which {single} does not make: {pair} named (it leaves {:.0} % {} \
+                 than {single} alone, within what a second effect must remove)",
+                more_pct.abs(),
+                if *more_pct >= 0.0 { "more" } else { "less" }
             ),
             Finding::TryElse => write!(
                 f,

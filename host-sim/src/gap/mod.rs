@@ -35,6 +35,7 @@ pub mod rng;
 mod score;
 mod search;
 pub mod selftest;
+pub mod signature;
 
 pub use diagnose::diagnose;
 pub use diagnosis::{Candidate, Diagnosis, Options, Verdict, VerdictKind};
