@@ -136,3 +136,28 @@ fn friction_alone_is_not_explained_by_play_the_balance_rules_out() {
     let s = d.signature.expect("the paper rig with a motor column");
     assert!(s.holds && s.rack_coulomb_n > 250.0, "{s:?}");
 }
+
+#[test]
+fn on_an_epos4_car_the_balance_is_reported_and_not_used() {
+    // The EPOS4's current is one sample per SYNC, which the balance cannot place against the
+    // angles: every candidate is fitted whatever the balance reads.
+    let case = car(0.0, 400.0);
+    let rec = generator::record_of(&case, 1);
+    let mut rig = Rig::paper();
+    if let host_sim::gap::rig::RigModel::Paper(m) = &mut rig.model {
+        m.drive = host_sim::gap::rig::CarDrive::Epos4;
+    }
+    let d = diagnose(&rig, &rec, None, &default_options());
+    let s = d.signature.expect("reported");
+    assert!(!s.holds, "{s:?}");
+    assert!(
+        !d.verdict.reason.contains("torque balance"),
+        "{}",
+        d.verdict.reason
+    );
+    assert!(
+        EffectKind::PAPER
+            .iter()
+            .all(|k| d.ranking.iter().any(|c| c.kinds == [*k]))
+    );
+}

@@ -235,7 +235,7 @@ impl Diagnosis {
                 if b.holds {
                     "holds, so it rules candidates out and in"
                 } else {
-                    "does not hold on this log (a belt off Table 4's by more than 25 %, or a negative reading: the current is not read at the angles' instants), so it is not used"
+                    "not used on this log (an EPOS4 car, whose current is one sample per SYNC; or a belt off Table 4's by more than 25 %, or a negative reading: the current is not read at the angles' instants)"
                 }
             );
         }

@@ -70,7 +70,8 @@ pub struct Signature {
     /// (play and friction cannot be). A log whose current is not the interval mean the angles'
     /// rates are taken against (the EPOS4's TPDO sample reads the belt 35 % stiff and a
     /// friction of -430 N) or whose motor is not the table's fails it; only a balance that
-    /// holds rules a candidate out or in.
+    /// holds rules a candidate out or in. The diagnosis also holds it false on an EPOS4 car,
+    /// whose current is one sample per SYNC.
     pub holds: bool,
 }
 
