@@ -58,9 +58,18 @@ fn belt_play_shows_in_the_column_angle() {
 /// Case `index` of the independent world (seed 1), diagnosed as `host-sim gap selftest --case
 /// INDEX` diagnoses it.
 fn selftest_case(index: usize) -> host_sim::gap::selftest::CaseResult {
+    selftest_case_with(index, true)
+}
+
+/// [`selftest_case`], with the log's torque balance used or not. Off, the diagnosis runs as it
+/// does where the balance does not hold (an EPOS4 car): the rules tested below are those that
+/// decide there. On these cars the balance rules the play out and the verdicts stay right
+/// (`host-sim gap selftest --case 14,30,75,151`).
+fn selftest_case_with(index: usize, torque_balance: bool) -> host_sim::gap::selftest::CaseResult {
     use host_sim::gap::selftest;
     let mut opts = selftest::default_options();
     opts.threads = 2;
+    opts.torque_balance = torque_balance;
     let mut report = selftest::run(
         selftest::World::Independent,
         &[index],
@@ -74,7 +83,23 @@ fn selftest_case(index: usize) -> host_sim::gap::selftest::CaseResult {
 
 /// [`selftest_case`] for a case whose hidden effects are `hidden`, checked to be named so.
 fn named_right(index: usize, hidden: &[&str]) -> host_sim::gap::selftest::CaseResult {
-    let case = selftest_case(index);
+    named_right_with(index, hidden, true)
+}
+
+/// [`named_right`] with the torque balance off ([`selftest_case_with`]).
+fn named_right_without_balance(
+    index: usize,
+    hidden: &[&str],
+) -> host_sim::gap::selftest::CaseResult {
+    named_right_with(index, hidden, false)
+}
+
+fn named_right_with(
+    index: usize,
+    hidden: &[&str],
+    torque_balance: bool,
+) -> host_sim::gap::selftest::CaseResult {
+    let case = selftest_case_with(index, torque_balance);
     assert_eq!(case.case.hidden, hidden);
     assert_eq!(case.named, case.case.hidden, "{}", case.reason);
     case
@@ -97,7 +122,7 @@ fn play_in_the_belt_beside_rack_friction_is_named_on_a_sweep() {
 /// runs it.
 #[test]
 fn a_late_clock_is_not_named_as_a_second_effect() {
-    let case = named_right(30, &["tire_ground"]);
+    let case = named_right_without_balance(30, &["tire_ground"]);
     assert!(case.reason.contains("stamps"), "{}", case.reason);
 }
 
@@ -116,7 +141,7 @@ fn a_delay_under_one_reference_period_is_not_named() {
 /// The pairs grown from the runner-up (the delay) find the tyre beside it.
 #[test]
 fn a_pair_is_also_grown_from_the_runner_up() {
-    let case = named_right(14, &["delay", "tire_ground"]);
+    let case = named_right_without_balance(14, &["delay", "tire_ground"]);
     assert!(case.reason.starts_with("backlash"), "{}", case.reason);
 }
 
@@ -139,7 +164,7 @@ fn play_and_rack_friction_that_share_the_work_are_both_named_on_a_track() {
 /// both, and the rack friction beside the delay explains the log.
 #[test]
 fn a_pair_is_grown_from_every_place_of_the_runner_up_family() {
-    let case = named_right(75, &["coulomb_friction", "delay"]);
+    let case = named_right_without_balance(75, &["coulomb_friction", "delay"]);
     assert!(case.reason.starts_with("backlash"), "{}", case.reason);
 }
 
@@ -149,7 +174,7 @@ fn a_pair_is_grown_from_every_place_of_the_runner_up_family() {
 /// 125 N, both under their minimum size, removed more. What is left is then no effect.
 #[test]
 fn a_second_effect_that_one_below_its_minimum_outdoes_is_not_named() {
-    let case = named_right(151, &["delay"]);
+    let case = named_right_without_balance(151, &["delay"]);
     assert!(
         case.reason.contains("below its minimum size"),
         "{}",

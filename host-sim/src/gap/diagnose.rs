@@ -36,7 +36,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // -90 N of friction on cars with none. There it is reported and not used.
     let signature = match &rig.model {
         RigModel::Paper(m) => signature::signature(&m.plant, rec).map(|mut s| {
-            s.holds &= m.drive == CarDrive::Direct;
+            s.holds &= m.drive == CarDrive::Direct && opts.torque_balance;
             s
         }),
         _ => None,

@@ -157,6 +157,10 @@ pub struct Options {
     pub fit: FitOptions,
     pub threads: usize,
     pub progress: bool,
+    /// Use the log's own torque balance (`gap::signature`) where it holds: on by default. Off,
+    /// the diagnosis runs as it does where the balance does not hold (an EPOS4 car), which is
+    /// how the tests of the other rules see those rules at work.
+    pub torque_balance: bool,
 }
 
 impl Default for Options {
@@ -166,6 +170,7 @@ impl Default for Options {
             fit: FitOptions::default(),
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             progress: false,
+            torque_balance: true,
         }
     }
 }
