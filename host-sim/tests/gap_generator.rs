@@ -55,13 +55,8 @@ fn belt_play_shows_in_the_column_angle() {
     assert!(b.rms_output > 3.0 * a.rms_output, "{a:?} {b:?}");
 }
 
-/// Case `index` of the independent world (seed 1), diagnosed as `host-sim gap selftest --case
-/// INDEX` diagnoses it.
-fn selftest_case(index: usize) -> host_sim::gap::selftest::CaseResult {
-    selftest_case_with(index, true)
-}
-
-/// [`selftest_case`], with the log's torque balance used or not. Off, the diagnosis runs as it
+/// The diagnosis of a case of the independent world (seed 1), as `gap selftest --case` runs
+/// it, with the log's torque balance used or not. Off, the diagnosis runs as it
 /// does where the balance does not hold (an EPOS4 car): the rules tested below are those that
 /// decide there. On these cars the balance rules the play out and the verdicts stay right
 /// (`host-sim gap selftest --case 14,30,75,151`).
@@ -81,7 +76,7 @@ fn selftest_case_with(index: usize, torque_balance: bool) -> host_sim::gap::self
     report.cases.remove(0)
 }
 
-/// [`selftest_case`] for a case whose hidden effects are `hidden`, checked to be named so.
+/// [`selftest_case_with`] (the balance used) for a case whose hidden effects are `hidden`, checked to be named so.
 fn named_right(index: usize, hidden: &[&str]) -> host_sim::gap::selftest::CaseResult {
     named_right_with(index, hidden, true)
 }
