@@ -58,8 +58,8 @@ fn belt_play_shows_in_the_column_angle() {
 /// The diagnosis of a case of the independent world (seed 1), as `gap selftest --case` runs
 /// it, with the log's torque balance used or not. Off, the diagnosis runs as it
 /// does where the balance does not hold (an EPOS4 car): the rules tested below are those that
-/// decide there. On these cars the balance rules the play out and the verdicts stay right
-/// (`host-sim gap selftest --case 14,30,75,151`).
+/// decide there. On the cars below the balance rules the play out and the verdicts stay right
+/// with it as well.
 fn selftest_case_with(index: usize, torque_balance: bool) -> host_sim::gap::selftest::CaseResult {
     use host_sim::gap::selftest;
     let mut opts = selftest::default_options();

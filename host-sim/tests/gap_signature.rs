@@ -98,9 +98,10 @@ fn a_current_read_at_other_instants_than_the_angles_does_not_hold() {
 
 #[test]
 fn play_beside_rack_friction_is_named_with_it_when_the_balance_shows_the_force() {
-    // The independent world's car 37 of seed 1 (play 1.61 deg, rack friction 388 N, a 10 deg
-    // sweep at 200 Hz): the play alone removes 97 % of the nominal cost, the pair only 8 % of
-    // what it leaves, so the pair rules named the play alone. The balance reads 330 +- 16 N.
+    // A car of the independent world (seed 1, the index below; play 1.61 deg, rack friction
+    // 388 N, a 10 deg sweep at 200 Hz): the play alone removes 97 % of the nominal cost, the
+    // pair only 8 % of what it leaves, so the pair rules named the play alone. The balance
+    // reads 330 +- 16 N.
     let case = generator::draw(1, 37, 12.0);
     assert_eq!(case.hidden, ["backlash", "coulomb_friction"]);
     let rec = generator::record_of(&case, 1);
@@ -116,8 +117,9 @@ fn play_beside_rack_friction_is_named_with_it_when_the_balance_shows_the_force()
 
 #[test]
 fn friction_alone_is_not_explained_by_play_the_balance_rules_out() {
-    // Car 19 of seed 1: rack friction 321 N alone. The balance shows no play: neither play
-    // candidate is fitted, so neither can stand in for the friction.
+    // A car of the independent world (seed 1, the index below): rack friction 321 N alone.
+    // The balance shows no play: neither play candidate is fitted, so neither can stand in
+    // for the friction.
     let case = generator::draw(1, 19, 12.0);
     assert_eq!(case.hidden, ["coulomb_friction"]);
     let rec = generator::record_of(&case, 1);

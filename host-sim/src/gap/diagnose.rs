@@ -7,6 +7,7 @@ use super::diagnosis::{
     Options, PARAMETER_ITERATIONS, PARAMETER_TOLERANCE, PARAMETERS_COST_SHARE,
     UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict, VerdictKind,
 };
+use super::effects::first_param_at;
 use super::finding::{self, BestSingle, Finding, Shortfall};
 use super::model::Effects;
 use super::rig::{CarDrive, Rig, RigModel};
@@ -398,12 +399,8 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             // nothing and at a few mm/s (the cost is rugged in it; from nothing LM keeps it
             // there), and the better fit counts.
             let starts: Vec<Vec<f64>> = if kinds.contains(&EffectKind::RackFriction) {
-                let creep = 1 + kinds
-                    .iter()
-                    .position(|k| *k == EffectKind::RackFriction)
-                    .map_or(0, |p| {
-                        kinds[..p].iter().map(|k| k.specs(rig).len()).sum::<usize>()
-                    });
+                let creep =
+                    first_param_at(rig, &kinds, EffectKind::RackFriction).map_or(1, |at| at + 1);
                 [0.0, 0.5, 1.0, 2.0]
                     .iter()
                     .map(|c| {
@@ -429,20 +426,11 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             // The pair counts when the effect named alone keeps its minimum size, the one the
             // balance shows comes out at half its own or more, and the pair leaves no more than
             // a second effect must remove to be named (the fits cannot tell it from the single
-            // then, and the balance, which no model form enters, can). Case 37 of the
-            // independent world: play and friction at 1.63 deg and 182 N from the balance's
-            // reading leave 12 % more than the play alone at 2.37 deg.
+            // then, and the balance, which no model form enters, can). An independent log with
+            // play and rack friction: the two at 1.63 deg and 182 N from the balance's reading
+            // leave 12 % more than the play alone at 2.37 deg.
             let first = |c: &Candidate, kind: EffectKind| -> Option<f64> {
-                let at: usize = c
-                    .kinds
-                    .iter()
-                    .take_while(|k| **k != kind)
-                    .map(|k| k.specs(rig).len())
-                    .sum();
-                c.kinds
-                    .contains(&kind)
-                    .then(|| c.values.get(at).copied())
-                    .flatten()
+                c.values.get(first_param_at(rig, &c.kinds, kind)?).copied()
             };
             let single = chosen.kinds[0];
             let pair = pair_fits
@@ -934,7 +922,7 @@ fn rule_out(
         if also && kept.contains(&kind) && Signature::below(value, standard_error, limit) {
             kept.retain(|k| *k != kind);
             findings.push(Finding::RuledOutByLog {
-                effects: vec![kind.name().to_string()],
+                effect: kind.name().to_string(),
                 reading,
                 value,
                 standard_error,

@@ -238,9 +238,12 @@ impl Diagnosis {
                 b.rack_coulomb_se_n,
                 b.belt_stiffness_nm_rad,
                 if b.holds {
-                    "holds, so it rules candidates out and in"
+                    "holds, so it rules candidates out and in".to_string()
                 } else {
-                    "not used on this log (an EPOS4 car, whose current is one sample per SYNC; or a belt off Table 4's by more than 25 %, or a negative reading: the current is not read at the angles' instants)"
+                    format!(
+                        "not used on this log (an EPOS4 car, whose current is one sample per SYNC; or a belt off Table 4's by more than {:.0} %, or a negative reading: the current is not read at the angles' instants)",
+                        100.0 * super::signature::STIFFNESS_TOLERANCE
+                    )
                 }
             );
         }

@@ -289,6 +289,13 @@ pub(super) fn specs_of(
     (specs, lens)
 }
 
+/// Where `kind`'s first parameter sits among the stacked parameters of `kinds` (as
+/// [`specs_of`] stacks them); `None` if `kinds` does not hold it.
+pub(super) fn first_param_at(rig: &Rig, kinds: &[EffectKind], kind: EffectKind) -> Option<usize> {
+    let p = kinds.iter().position(|k| *k == kind)?;
+    Some(kinds[..p].iter().map(|k| k.specs(rig).len()).sum())
+}
+
 /// Write the values `p` of `kinds` (each `lens` long, as [`specs_of`] counts) into `fx`.
 pub(super) fn apply_all(kinds: &[EffectKind], lens: &[usize], p: &[f64], fx: &mut Effects) {
     let mut i = 0;

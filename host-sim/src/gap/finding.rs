@@ -159,11 +159,11 @@ pub enum Finding {
         /// Of the logged effort's RMS, %.
         share_pct: f64,
     },
-    /// The log's own torque balance (`gap::signature`) shows less of what these candidates
-    /// model than half the smallest size any of them is named at: they are not fitted, so
-    /// none of them can stand in for another effect.
+    /// The log's own torque balance (`gap::signature`) shows less of what this candidate
+    /// models than half the smallest size it is named at: it is not fitted, so it cannot
+    /// stand in for another effect.
     RuledOutByLog {
-        effects: Vec<String>,
+        effect: String,
         /// What the balance reads, e.g. `play in the belt`.
         reading: &'static str,
         value: f64,
@@ -394,7 +394,7 @@ impl fmt::Display for Finding {
                 mean.abs() / standard_error.max(1e-12)
             ),
             Finding::RuledOutByLog {
-                effects,
+                effect,
                 reading,
                 value,
                 standard_error,
@@ -404,8 +404,7 @@ impl fmt::Display for Finding {
                 f,
                 "the log's torque balance shows {value:.2} +- {standard_error:.2} {unit} of \
                  {reading}, under half the smallest named ({limit:.2} {unit}) by three standard \
-                 errors: {} not fitted",
-                effects.join(", ")
+                 errors: {effect} not fitted"
             ),
             Finding::DemandedByLog {
                 pair,
