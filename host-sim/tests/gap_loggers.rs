@@ -8,13 +8,16 @@
 //! silent. The verdict must not depend on the logger.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
+#[path = "support/gap_file.rs"]
+mod gap_file;
+
 use host_sim::gap::drive;
 use host_sim::gap::generator::{
-    self, GenCase, LOGGER_DROP_CHANCE, LOGGER_JITTER_S, Logger, ReferenceConvention, Rows, log_of,
-    rows_logged,
+    self, GenCase, LOGGER_DROP_CHANCE, LOGGER_JITTER_S, LoggedCar, Logger, ReferenceConvention,
+    Rows, log_of, rows_logged,
 };
 use host_sim::gap::rig::{CarDrive, Rig};
-use host_sim::gap::{EffectKind, LogTiming, Options, VerdictKind, diagnose};
+use host_sim::gap::{LogTiming, VerdictKind};
 use host_sim::sim::Controller;
 use std::path::Path;
 
@@ -35,6 +38,7 @@ fn team(reference: ReferenceConvention, rate_hz: u32, jitter: bool, drop: bool) 
         jitter_s: if jitter { LOGGER_JITTER_S } else { 0.0 },
         drop_chance: if drop { LOGGER_DROP_CHANCE } else { 0.0 },
         header: false,
+        car: LoggedCar::Direct,
     }
 }
 
@@ -262,6 +266,9 @@ fn logger_kinds_are_named_as_they_are_given() {
         "starting-100-jitter-drop",
         "ending-1000",
         "ending-200-drop",
+        "epos4-convert",
+        "epos4-status",
+        "epos4-status-jitter-drop",
     ] {
         assert_eq!(LoggerKind::parse(name).unwrap().name(), name);
     }
@@ -276,6 +283,9 @@ fn logger_kinds_are_named_as_they_are_given() {
         "ending-150",
         "starting-100-late",
         "ending-100-drop-drop",
+        "epos4",
+        "epos4-100",
+        "epos4-convert-jitter",
     ] {
         assert!(LoggerKind::parse(bad).is_err(), "{bad:?}");
     }
@@ -294,31 +304,7 @@ fn verdict_on_car(
     drive: Option<CarDrive>,
     controller: Option<Controller>,
 ) -> (Vec<String>, VerdictKind, drive::CarChoice) {
-    let rig = Rig::paper();
-    let loaded = rig.load_log(path).unwrap();
-    let header = drive::LogHeader::parse(&loaded.comments).unwrap();
-    let (rig, rec, choice) = drive::choose_for_log(
-        &rig,
-        &loaded.record,
-        &header,
-        loaded.timing,
-        drive,
-        controller,
-        2,
-    );
-    let choice = choice.unwrap();
-    let d = diagnose(
-        &rig,
-        &rec,
-        None,
-        // The candidates `host-sim gap` fits on this rig, as the command sets them.
-        &Options {
-            effects: EffectKind::for_rig(&rig),
-            threads: 2,
-            ..Options::default()
-        },
-    );
-    println!("{}\n{}", choice.describe(), d.summary());
+    let (d, choice) = gap_file::diagnose_file(path, drive, controller);
     (d.verdict.effects.clone(), d.verdict.kind, choice)
 }
 

@@ -65,9 +65,11 @@ pub struct GapArgs {
     pub model_world: bool,
     /// selftest: diagnose each car from the files of these loggers, as `gap FILE` reads them
     /// (ours always, first): `ours`, `drawn` (a team's logger drawn with each case), or
-    /// `ending|starting-100|200|1000[-jitter][-drop]`; bare `--loggers` is `drawn`. Prints per
-    /// logger the verdicts right, those changed against ours, the confusion matrix. With
-    /// `--drive` / `--controller` the car is given, as to `gap FILE`.
+    /// `ending|starting-100|200|1000[-jitter][-drop]`; or the world's EPOS4 car (its own drive
+    /// at 25 kHz / 2.5 kHz) as `epos4-convert` (steer-can convert's rows and header) or
+    /// `epos4-status[-jitter][-drop]` (a row as each TPDO arrives, no header); bare `--loggers`
+    /// is `drawn`. Prints per logger the verdicts right, those changed against ours, the
+    /// confusion matrix. With `--drive` / `--controller` the car is given, as to `gap FILE`.
     #[arg(long, value_delimiter = ',', num_args = 0.., default_missing_value = "drawn", value_name = "LIST")]
     pub loggers: Option<Vec<String>>,
     /// The car's drive (paper rig): an EPOS4 over CANopen, or the ECU's own bridge. Default:

@@ -11,7 +11,7 @@
 //! searched on every EPOS4 log.
 
 use super::model::Effects;
-use super::rig::{CarDrive, Rig, RigModel};
+use super::rig::{CarDrive, Epos4Readout, Rig, RigModel};
 use super::{Fit, Record, Scorer, parallel_map, simulate};
 use crate::sim::Controller;
 
@@ -120,6 +120,9 @@ pub struct CarChoice {
     pub compared_late: Option<LateComparison>,
     /// The best of each car tried (one entry when the car was given), best first.
     pub tried: Vec<Tried>,
+    /// An EPOS4 car's log whose header does not say how it read the drive: the readout
+    /// fitted ([`Epos4Readout`]); `None` where the header says (`steer-can convert`'s).
+    pub readout: Option<Epos4Readout>,
 }
 
 impl CarChoice {
@@ -141,6 +144,18 @@ impl CarChoice {
             line.push_str(&format!(
                 "; SYNC {:.2} ms after each reference sample (fitted)",
                 1e3 * s
+            ));
+        }
+        if let Some(r) = &self.readout {
+            line.push_str(&format!(
+                "; the drive's samples read as {}, the column {:.2} ms old (fitted; the header \
+                 does not say)",
+                if r.current_at_row > 0.75 {
+                    "a row per SYNC (the current at the row's end)"
+                } else {
+                    "steer-can convert reads them (the current at the row's middle)"
+                },
+                1e3 * r.column_age_s
             ));
         }
         match self.reference_shift_rows {
@@ -325,6 +340,9 @@ fn head(rec: &Record, seconds: f64) -> Record {
 pub struct LogSays {
     /// The header states the reference convention (`# reference: ...`).
     pub reference_stated: bool,
+    /// The header states what the current column holds (`# current: ...`), and so how an
+    /// EPOS4 car's samples were read into the rows (`steer-can convert`'s way).
+    pub current_stated: bool,
     pub timing: super::LogTiming,
 }
 
@@ -517,6 +535,7 @@ pub fn choose(
         timing_bound_s,
         compared_late,
         tried,
+        readout: None,
     };
     let mut chosen = with_car(
         rig,
@@ -528,7 +547,115 @@ pub fn choose(
         m.timing_bound_s = timing_bound_s;
     }
     let record = records[index_of(best.reference_shift_rows)].clone();
+    let mut choice = choice;
+    if best.drive == CarDrive::Epos4 && !says.current_stated {
+        let readout;
+        (chosen, readout) = fit_readout(&chosen, &head(&record, SYNC_SEARCH_S), threads);
+        if let RigModel::Paper(m) = &chosen.model {
+            choice.sync_after_push_s = Some(m.epos4.sync_after_push_s);
+        }
+        choice.readout = Some(readout);
+        // The chosen car's figure under the readout fitted, on the whole log.
+        if let Some(t) = choice.tried.first_mut() {
+            t.gof = nominal_fit(&chosen, &record).gof;
+            t.sync_after_push_s = choice.sync_after_push_s;
+        }
+    }
     (chosen, record, Some(choice))
+}
+
+/// Column ages tried on an EPOS4 log that does not say how it read the drive, s: every
+/// millisecond up to a period and an encoder tick (a logger that holds the ECU's last status
+/// frame), then every quarter millisecond within a millisecond of the best.
+const COLUMN_AGE_COARSE_S: f64 = 1e-3;
+const COLUMN_AGE_MAX_S: f64 = 0.012;
+const COLUMN_AGE_FINE_S: f64 = 2.5e-4;
+/// Where in the row the current is read: the middle of its period (convert's interpolation)
+/// or its end (a row per TPDO, the current the drive sampled at that SYNC).
+const CURRENT_AT_ROW: [f64; 2] = [0.5, 1.0];
+
+/// The readout of an EPOS4 log whose header does not state it ([`Epos4Readout`]), fitted on
+/// `head` with the nominal model jointly with the SYNC phase (the phase was first fitted under
+/// convert's readout, and a current read at the row's end with the SYNC late in the period
+/// looks much like one read at its middle with the SYNC earlier): every millisecond of
+/// phase, each with every readout (one run of the model serves them all), then every tick
+/// near the best, then the column's age to a quarter millisecond. The column's age against
+/// the motor angle is no effect's: play, friction and a tyre act between the two but do not
+/// delay the one behind the other at every speed, and a late reference moves every signal
+/// alike.
+fn fit_readout(rig: &Rig, head: &Record, threads: usize) -> (Rig, Epos4Readout) {
+    let RigModel::Paper(model) = &rig.model else {
+        return (rig.clone(), Epos4Readout::CONVERT);
+    };
+    let ages = |from: f64, to: f64, step: f64| -> Vec<f64> {
+        let n = ((to - from) / step).round().max(0.0) as usize;
+        (0..=n)
+            .map(|i| from + i as f64 * step)
+            .filter(|a| *a >= 0.0 && *a <= COLUMN_AGE_MAX_S + 1e-9)
+            .collect()
+    };
+    let coarse: Vec<Epos4Readout> = CURRENT_AT_ROW
+        .iter()
+        .flat_map(|&c| {
+            ages(0.0, COLUMN_AGE_MAX_S, COLUMN_AGE_COARSE_S)
+                .into_iter()
+                .map(move |a| Epos4Readout {
+                    current_at_row: c,
+                    column_age_s: a,
+                })
+        })
+        .collect();
+    let scorer = Scorer::new(rig, head);
+    // The best of `readouts` with the SYNC at `sync`, and its GoF.
+    let best_at = |sync: f64, readouts: &[Epos4Readout]| -> (f64, Epos4Readout, f64) {
+        let mut m = model.clone();
+        m.epos4.sync_after_push_s = sync;
+        let samples = super::model::epos4_samples(&m, head, &Effects::nominal());
+        readouts
+            .iter()
+            .map(|&r| {
+                let g = scorer.fit(head, &samples.read(r)).gof;
+                (sync, r, if g.is_finite() { g } else { f64::NEG_INFINITY })
+            })
+            .max_by(|a, b| a.2.total_cmp(&b.2))
+            .unwrap_or((sync, Epos4Readout::CONVERT, f64::NEG_INFINITY))
+    };
+    let best_of = |found: Vec<(f64, Epos4Readout, f64)>| {
+        found
+            .into_iter()
+            .max_by(|a, b| a.2.total_cmp(&b.2))
+            .unwrap_or((
+                model.epos4.sync_after_push_s,
+                Epos4Readout::CONVERT,
+                f64::NEG_INFINITY,
+            ))
+    };
+    let (sync, _, _) = best_of(parallel_map(&SYNC_COARSE_S, threads, |&s| {
+        best_at(s, &coarse)
+    }));
+    let fine: Vec<f64> = (-SYNC_FINE_STEPS..=SYNC_FINE_STEPS)
+        .map(|j| sync + f64::from(j) * SYNC_FINE_STEP_S)
+        .filter(|x| *x > 0.0 && *x <= 0.010 + 1e-9)
+        .collect();
+    let (sync, r, _) = best_of(parallel_map(&fine, threads, |&s| best_at(s, &coarse)));
+    let ages_fine: Vec<Epos4Readout> = ages(
+        r.column_age_s - COLUMN_AGE_COARSE_S,
+        r.column_age_s + COLUMN_AGE_COARSE_S,
+        COLUMN_AGE_FINE_S,
+    )
+    .into_iter()
+    .map(|a| Epos4Readout {
+        column_age_s: a,
+        ..r
+    })
+    .collect();
+    let (sync, r, _) = best_at(sync, &ages_fine);
+    let mut chosen = rig.clone();
+    if let RigModel::Paper(m) = &mut chosen.model {
+        m.epos4.sync_after_push_s = sync;
+        m.epos4.readout = r;
+    }
+    (chosen, r)
 }
 
 /// The car for a log as `host-sim gap` takes it: a `drive` or `controller` given (the command
@@ -553,6 +680,7 @@ pub fn choose_for_log(
     };
     let says = LogSays {
         reference_stated: header.reference.is_some(),
+        current_stated: header.current.is_some(),
         timing,
     };
     choose(rig, rec, drive, controller, says, threads)

@@ -128,6 +128,24 @@ pub struct Logger {
     /// Writes the header lines host-sim and steer-can write (`# drive: direct`, ...,
     /// `# reference: ...`); a team's own logger writes none.
     pub header: bool,
+    /// Which car it logs, and how: the direct drive on the logger's grid, or the world's
+    /// EPOS4 car ([`super::generator_epos4`]) as `steer-can convert` or a team's logger of
+    /// the drive's status frames writes it.
+    pub car: LoggedCar,
+}
+
+/// The car a [`Logger`] logs, and how.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LoggedCar {
+    /// The direct drive, rows on the logger's grid at its rate.
+    #[default]
+    Direct,
+    /// The EPOS4 car, a row per reference period as `steer-can convert` builds it, with its
+    /// header lines.
+    Epos4Convert,
+    /// The EPOS4 car, a row per TPDO2 as it arrives (the drive's SYNC samples), no header.
+    Epos4StatusFrame,
 }
 
 /// The jitter a jittery logger draws, s: +-1 ms, a receiver's stamping on a loaded host.
@@ -145,6 +163,7 @@ impl Logger {
             jitter_s: 0.0,
             drop_chance: 0.0,
             header: true,
+            car: LoggedCar::Direct,
         }
     }
 
@@ -178,12 +197,17 @@ impl Logger {
             jitter_s,
             drop_chance,
             header: false,
+            car: LoggedCar::Direct,
         }
     }
 
     /// A short name: `ending 100 Hz`, `starting 1000 Hz +-1 ms 1 % lost`, `... header`.
     pub fn describe(&self) -> String {
-        let mut s = format!("{} {} Hz", self.reference.short(), self.rate_hz);
+        let mut s = match self.car {
+            LoggedCar::Direct => format!("{} {} Hz", self.reference.short(), self.rate_hz),
+            LoggedCar::Epos4Convert => "EPOS4 car, steer-can convert".into(),
+            LoggedCar::Epos4StatusFrame => "EPOS4 car, a row per TPDO".into(),
+        };
         if self.jitter_s > 0.0 {
             s.push_str(&format!(" +-{:.0} ms", 1e3 * self.jitter_s));
         }
@@ -312,12 +336,27 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
 
 /// State: winding current, motor angle and speed, nut angle and speed, column angle and
 /// speed, Dahl force at the rack.
-type State = [f64; 8];
+pub(super) type State = [f64; 8];
+
+/// The plant at rest with the column at `column_rad`, the belt unloaded.
+pub(super) fn at_rest(p: &PlantParams, column_rad: f64) -> State {
+    let th_bs = column_rad / p.screw_to_pinion();
+    [
+        0.0,
+        th_bs * p.belt_reduction,
+        0.0,
+        th_bs,
+        0.0,
+        column_rad,
+        0.0,
+        0.0,
+    ]
+}
 
 /// The ODE of the paper's plant (eqs. 1-8 with the printing errors corrected, see
 /// `plant-and-control.md`), written out term by term with the effects in place.
 #[derive(Debug, Clone)]
-struct Ode {
+pub(super) struct Ode {
     p: PlantParams,
     j_bs: f64,
     g: f64,
@@ -326,7 +365,7 @@ struct Ode {
 }
 
 impl Ode {
-    fn new(truth: Truth) -> Ode {
+    pub(super) fn new(truth: Truth) -> Ode {
         let p = truth.plant;
         let g = p.screw_to_pinion();
         Ode {
@@ -374,7 +413,7 @@ impl Ode {
         [di, w_rot, dw_rot, w_bs, dw_bs, w_sw, dw_sw, df]
     }
 
-    fn rk4(&self, x: &mut State, v: f64, h: f64) {
+    pub(super) fn rk4(&self, x: &mut State, v: f64, h: f64) {
         let add = |a: &State, b: &State, s: f64| -> State {
             let mut o = *a;
             for (o, b) in o.iter_mut().zip(b) {
@@ -434,18 +473,7 @@ impl Actuator for RkPlant {
         self.x[3] * self.ode.g
     }
     fn set_at_rest(&mut self, column_rad: f64) {
-        let p = &self.ode.p;
-        let th_bs = column_rad / p.screw_to_pinion();
-        self.x = [
-            0.0,
-            th_bs * p.belt_reduction,
-            0.0,
-            th_bs,
-            0.0,
-            column_rad,
-            0.0,
-            0.0,
-        ];
+        self.x = at_rest(&self.ode.p, column_rad);
     }
 }
 
@@ -461,6 +489,25 @@ pub struct Rows {
     pub sw_deg: Vec<f64>,
     pub motor_rad: Vec<f64>,
     pub current_a: Vec<f64>,
+}
+
+impl Rows {
+    /// One row.
+    pub(super) fn push(
+        &mut self,
+        t: f64,
+        reference: f64,
+        sw_deg: f64,
+        motor_rad: f64,
+        current_a: f64,
+    ) {
+        self.t.push(t);
+        self.grid_s.push(t);
+        self.reference.push(reference);
+        self.sw_deg.push(sw_deg);
+        self.motor_rad.push(motor_rad);
+        self.current_a.push(current_a);
+    }
 }
 
 /// Run the case's world and write its log as our logger does at the case's rate.
@@ -494,18 +541,7 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
     cascade.set_winding(nominal.ra as f32, nominal.la as f32);
     cascade.set_voltage_limit(Volts(24.0));
     let p = truth.plant;
-    let col0 = first.to_radians();
-    let th_bs0 = col0 / p.screw_to_pinion();
-    let mut x: State = [
-        0.0,
-        th_bs0 * p.belt_reduction,
-        0.0,
-        th_bs0,
-        0.0,
-        col0,
-        0.0,
-        0.0,
-    ];
+    let mut x = at_rest(&p, first.to_radians());
     cascade.reset(hall_from_motor(x[1]));
     let mut rng = rng::seeded(seed ^ (case.index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
     let encoder = ColumnEncoder { zero_raw: 0 };
@@ -586,7 +622,7 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
 /// microseconds, as a log file holds them, and in order: a stamp never falls on or before
 /// the one before), then a row lost with `drop_chance`. A logger without either is left
 /// as sampled. Drawn from its own stream, apart from the sensor noise.
-fn stamp_and_lose(rows: &mut Rows, logger: &Logger, stream: u64) {
+pub(super) fn stamp_and_lose(rows: &mut Rows, logger: &Logger, stream: u64) {
     if logger.jitter_s <= 0.0 && logger.drop_chance <= 0.0 {
         return;
     }
@@ -623,8 +659,23 @@ fn stamp_and_lose(rows: &mut Rows, logger: &Logger, stream: u64) {
 /// reads): our logger's with the header lines host-sim writes of this car (the direct drive,
 /// the paper controller, interval-mean current, its reference convention), a team's without.
 pub fn log_of(case: &GenCase, seed: u64, logger: &Logger) -> crate::logfmt::Log {
-    let rows = rows_logged(case, seed, logger);
-    let comments = if logger.header {
+    let rows = match logger.car {
+        LoggedCar::Direct => rows_logged(case, seed, logger),
+        LoggedCar::Epos4Convert | LoggedCar::Epos4StatusFrame => {
+            super::generator_epos4::rows_logged(case, seed, logger)
+        }
+    };
+    let comments = if logger.car == LoggedCar::Epos4Convert {
+        // What `steer-can convert` writes of an EPOS4 car: the bus shows the drive, not the
+        // ECU's controller.
+        vec![
+            "drive: epos4".into(),
+            "current: sync-sample".into(),
+            "reference: period-ending".into(),
+        ]
+    } else if logger.car == LoggedCar::Epos4StatusFrame {
+        Vec::new()
+    } else if logger.header {
         let mut c = super::drive::LogHeader::lines(
             super::rig::CarDrive::Direct,
             crate::sim::Controller::Paper,

@@ -25,6 +25,7 @@ mod effects;
 pub mod finding;
 pub mod fit;
 pub mod generator;
+pub mod generator_epos4;
 pub mod identify;
 pub mod locate;
 pub mod model;

@@ -225,10 +225,55 @@ impl Epos4Latch {
 ///  SYNC, `sync_after_push_s` later: the drive latches it (interpolated over one period) and
 ///                       samples its position (increments) and current for TPDO1 / TPDO2
 ///                       (a delay moves the latch: whole periods later, then the SYNC's tick)
-///  row k: column at push + 10 ms, motor angle interpolated between the SYNC samples at
-///         push + 10 ms, current interpolated between them at push + 5 ms (logbuild's reading)
+///  row k, as the log's readout (`m.epos4.readout`) reads it: convert's, the column at
+///         push + 10 ms, the motor angle interpolated between the SYNC samples at push + 10 ms,
+///         the current interpolated between them at push + 5 ms (logbuild's reading); a
+///         team's logger may read the current at the row's end and hold an older column
 /// ```
 pub fn simulate_epos4(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
+    epos4_samples(m, rec, fx).read(m.epos4.readout)
+}
+
+/// What the EPOS4 model's run gives before a log's readout reads it into rows.
+#[derive(Debug, Clone, Default)]
+pub struct Epos4Samples {
+    /// The SYNCs' instants (s from the first row's period start), the position (output units)
+    /// and the current the drive sampled there.
+    at: Vec<f64>,
+    motor: Vec<f64>,
+    current: Vec<f64>,
+    /// The column at each row's end.
+    column: Vec<f64>,
+    period: f64,
+}
+
+impl Epos4Samples {
+    /// The rows as `readout` reads them.
+    pub fn read(&self, readout: super::rig::Epos4Readout) -> SimOut {
+        if self.at.is_empty() {
+            return SimOut::default();
+        }
+        let n = self.column.len();
+        let interp = |t: f64, v: &[f64]| super::interp_at(&self.at, v, t);
+        SimOut {
+            output: delayed(&self.column, readout.column_age_s, self.period),
+            effort: (0..n)
+                .map(|k| {
+                    interp(
+                        (k as f64 + readout.current_at_row) * self.period,
+                        &self.current,
+                    )
+                })
+                .collect(),
+            motor: (0..n)
+                .map(|k| interp((k + 1) as f64 * self.period, &self.motor))
+                .collect(),
+        }
+    }
+}
+
+/// The EPOS4 model's run ([`simulate_epos4`]) before the log's readout.
+pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples {
     let p = m.plant;
     let period = 1.0 / REFERENCE_HZ as f64;
     let dt = 1.0 / CURRENT_LOOP_HZ as f64;
@@ -251,17 +296,17 @@ pub fn simulate_epos4(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
         period,
     );
     let Some(&first) = reference.first() else {
-        return SimOut::default();
+        return Epos4Samples::default();
     };
     let Ok(mut plant) = EffectPlant::new(p, fx.plant_effects(), dt) else {
-        return SimOut::default();
+        return Epos4Samples::default();
     };
     let Some(gearing) = Gearing::new(p.belt_reduction as f32, p.tau_bs as f32, p.tau_p as f32)
     else {
-        return SimOut::default();
+        return Epos4Samples::default();
     };
     let Some(scale) = PositionScale::new(HALL_COUNTS_PER_REV) else {
-        return SimOut::default();
+        return Epos4Samples::default();
     };
     plant.set_at_rest(first.to_radians());
     let mut drive = DriveLoop::new(plant);
@@ -270,7 +315,7 @@ pub fn simulate_epos4(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
         Controller::Ecu => Ecu::ecu_mode_epos4_gains(),
     };
     if drive.set_gains(&gains).is_err() {
-        return SimOut::default();
+        return Epos4Samples::default();
     }
     drive.set_voltage_limit(if fx.supply_v > 0.0 {
         fx.supply_v
@@ -358,15 +403,12 @@ pub fn simulate_epos4(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
         }
         column_rows.push(column_deg(&drive));
     }
-    let interp = |t: f64, v: &[f64]| super::interp_at(&at, v, t);
-    SimOut {
-        output: column_rows,
-        effort: (0..n)
-            .map(|k| interp((k as f64 + 0.5) * period, &current_s))
-            .collect(),
-        motor: (0..n)
-            .map(|k| interp((k + 1) as f64 * period, &motor_s))
-            .collect(),
+    Epos4Samples {
+        at,
+        motor: motor_s,
+        current: current_s,
+        column: column_rows,
+        period,
     }
 }
 

@@ -108,6 +108,10 @@ pub struct Epos4Timing {
     /// its period, s (the ECU controller's column terms take the newest sample).
     #[serde(default)]
     pub encoder_phase_s: f64,
+    /// How the log reads the drive's samples: where in each row the current is taken, and
+    /// how old the column is against the row. `steer-can convert`'s by default.
+    #[serde(default)]
+    pub readout: Epos4Readout,
 }
 
 impl Default for Epos4Timing {
@@ -116,7 +120,37 @@ impl Default for Epos4Timing {
             sync_after_push_s: 0.005,
             current: DriveCurrent::Instantaneous,
             encoder_phase_s: 0.0,
+            readout: Epos4Readout::CONVERT,
         }
+    }
+}
+
+/// How an EPOS4 car's log reads the drive's SYNC samples and the ECU's column into its rows:
+/// a logger's property, not the car's. `steer-can convert` interpolates the TPDO current to
+/// the middle of each row's period and dates the column when the ECU measured it; a team's
+/// logger that writes a row as each TPDO arrives holds the current the drive sampled at that
+/// SYNC (the row's end) and the column of the ECU's last status frame (up to a period and an
+/// encoder tick old).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Epos4Readout {
+    /// Where in the row interval the current is read, a fraction of it (0.5 the middle, 1 the
+    /// row's end).
+    pub current_at_row: f64,
+    /// How much earlier than the row's end the column was measured, s.
+    pub column_age_s: f64,
+}
+
+impl Epos4Readout {
+    /// `steer-can convert`'s (and host-sim's) reading.
+    pub const CONVERT: Epos4Readout = Epos4Readout {
+        current_at_row: 0.5,
+        column_age_s: 0.0,
+    };
+}
+
+impl Default for Epos4Readout {
+    fn default() -> Self {
+        Epos4Readout::CONVERT
     }
 }
 

@@ -9,7 +9,7 @@
 //! reads a file, and counts the verdicts that changed against our logger's.
 
 use super::drive::{CarChoice, LogHeader};
-use super::generator::{self, GenCase, Logger, ReferenceConvention};
+use super::generator::{self, GenCase, LoggedCar, Logger, ReferenceConvention};
 use super::model::Effects;
 use super::rig::{CarDrive, Rig};
 use super::rng::{self, Rng};
@@ -325,31 +325,47 @@ impl LoggerKind {
         }
         let bad = || {
             format!(
-                "logger {name:?}: expected `ours`, `drawn` or ending|starting-100|200|1000[-jitter][-drop] \
-                 (e.g. starting-100-jitter-drop)"
+                "logger {name:?}: expected `ours`, `drawn`, ending|starting-100|200|1000[-jitter][-drop] \
+                 (e.g. starting-100-jitter-drop), or the EPOS4 car's epos4-convert|status[-jitter][-drop]"
             )
         };
         let mut parts = name.split('-');
-        let reference = match parts.next() {
-            Some("ending") => ReferenceConvention::PeriodEnding,
-            Some("starting") => ReferenceConvention::PeriodStarting,
-            _ => return Err(bad()),
-        };
-        let rate_hz = match parts.next() {
-            Some("100") => 100,
-            Some("200") => 200,
-            Some("1000") => 1000,
-            _ => return Err(bad()),
-        };
-        let mut logger = Logger {
-            reference,
-            rate_hz,
-            jitter_s: 0.0,
-            drop_chance: 0.0,
-            header: false,
+        let mut logger = match parts.next() {
+            Some("epos4") => {
+                let car = match parts.next() {
+                    Some("convert") => LoggedCar::Epos4Convert,
+                    Some("status") => LoggedCar::Epos4StatusFrame,
+                    _ => return Err(bad()),
+                };
+                Logger {
+                    car,
+                    // Convert writes its header lines; a team's logger of the TPDOs none.
+                    header: car == LoggedCar::Epos4Convert,
+                    ..Logger::ours(100)
+                }
+            }
+            first => Logger {
+                reference: match first {
+                    Some("ending") => ReferenceConvention::PeriodEnding,
+                    Some("starting") => ReferenceConvention::PeriodStarting,
+                    _ => return Err(bad()),
+                },
+                rate_hz: match parts.next() {
+                    Some("100") => 100,
+                    Some("200") => 200,
+                    Some("1000") => 1000,
+                    _ => return Err(bad()),
+                },
+                jitter_s: 0.0,
+                drop_chance: 0.0,
+                header: false,
+                car: LoggedCar::Direct,
+            },
         };
         for p in parts {
             match p {
+                // Convert's rows are one per reference period, on its grid, every one.
+                _ if logger.car == LoggedCar::Epos4Convert => return Err(bad()),
                 "jitter" if logger.jitter_s == 0.0 => logger.jitter_s = generator::LOGGER_JITTER_S,
                 "drop" if logger.drop_chance == 0.0 => {
                     logger.drop_chance = generator::LOGGER_DROP_CHANCE
@@ -366,7 +382,11 @@ impl LoggerKind {
             LoggerKind::Ours => "ours".into(),
             LoggerKind::Drawn => "drawn".into(),
             LoggerKind::Fixed(l) => {
-                let mut s = format!("{}-{}", l.reference.short(), l.rate_hz);
+                let mut s = match l.car {
+                    LoggedCar::Direct => format!("{}-{}", l.reference.short(), l.rate_hz),
+                    LoggedCar::Epos4Convert => "epos4-convert".into(),
+                    LoggedCar::Epos4StatusFrame => "epos4-status".into(),
+                };
                 if l.jitter_s > 0.0 {
                     s.push_str("-jitter");
                 }

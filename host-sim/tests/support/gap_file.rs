@@ -1,0 +1,43 @@
+//! Shared by the gap tests that diagnose a log file as `host-sim gap FILE` does (host-sim's
+//! and steer-can's): the file read by the paper rig's reader, the car given as far as
+//! `drive` and `controller` say (as `--drive` and `--controller`), the rest from the header
+//! lines or fitted, and the candidates the command fits on that rig.
+#![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
+
+use host_sim::gap::drive::{self, CarChoice};
+use host_sim::gap::rig::{CarDrive, Rig};
+use host_sim::gap::{Diagnosis, EffectKind, Options, diagnose};
+use host_sim::sim::Controller;
+use std::path::Path;
+
+pub fn diagnose_file(
+    path: &Path,
+    drive: Option<CarDrive>,
+    controller: Option<Controller>,
+) -> (Diagnosis, CarChoice) {
+    let rig = Rig::paper();
+    let loaded = rig.load_log(path).unwrap();
+    let header = drive::LogHeader::parse(&loaded.comments).unwrap();
+    let (rig, rec, choice) = drive::choose_for_log(
+        &rig,
+        &loaded.record,
+        &header,
+        loaded.timing,
+        drive,
+        controller,
+        2,
+    );
+    let choice = choice.unwrap();
+    let d = diagnose(
+        &rig,
+        &rec,
+        None,
+        &Options {
+            effects: EffectKind::for_rig(&rig),
+            threads: 2,
+            ..Options::default()
+        },
+    );
+    println!("{}\n{}", choice.describe(), d.summary());
+    (d, choice)
+}
