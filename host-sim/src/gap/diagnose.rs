@@ -539,7 +539,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // the others did the work, and the car is the table's.
     let within_tolerance = parameters
         .as_ref()
-        .is_some_and(|(id, _, _)| identify::within_factor(rig, id, PARAMETER_TOLERANCE));
+        .is_some_and(|(id, _, _)| !identify::moves_the_table(rig, id, PARAMETER_TOLERANCE));
     let tolerant: Option<(Rig, f64)> = match &parameters {
         Some((_, refit, c)) if within_tolerance => Some((refit.clone(), *c)),
         Some(_) => refit_by(identify::Search {
@@ -656,7 +656,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             };
             refit_simulations += id.simulations;
             let (refit, c) = refit_cost(&id);
-            if identify::within_factor(rig, &id, PARAMETER_TOLERANCE) {
+            if !identify::moves_the_table(rig, &id, PARAMETER_TOLERANCE) {
                 c_near = c_near.min(c);
             } else if far.as_ref().is_none_or(|(_, _, kept)| c < *kept) {
                 far = Some((id, refit, c));

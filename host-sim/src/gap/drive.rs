@@ -88,6 +88,10 @@ pub struct Tried {
     pub reference_shift_rows: usize,
     /// The nominal model's GoF on the log (eq. 11, combined).
     pub gof: f64,
+    /// EPOS4 only, on a log whose header does not say how it read the drive: the readout
+    /// fitted with the phase.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub readout: Option<Epos4Readout>,
 }
 
 /// The chosen car run with its reference late, on the head of the log
@@ -403,6 +407,7 @@ pub fn choose(
                 sync_after_push_s: (d == CarDrive::Epos4).then_some(s),
                 reference_shift_rows: k,
                 gof: fit.gof,
+                readout: None,
             }
         })
     };
@@ -445,17 +450,36 @@ pub fn choose(
                     }
                     None => best,
                 };
+                // A log that does not say how it read an EPOS4 car's samples: the readout,
+                // fitted with the phase, before the cars are compared (a stale column read as
+                // convert's looks like a late reference, which the direct drive then fits).
+                let best = match best.sync_after_push_s {
+                    Some(s) if !says.current_stated => {
+                        let (fitted, readout) =
+                            fit_readout(&with_car(rig, d, c, s), &shorts[index_of(k)], threads);
+                        Tried {
+                            sync_after_push_s: Some(sync_of(&fitted)),
+                            readout: Some(readout),
+                            ..best
+                        }
+                    }
+                    _ => best,
+                };
                 best_of_car.push(best);
             }
         }
     }
     let rig_of = |t: &Tried| {
-        with_car(
+        let mut r = with_car(
             rig,
             t.drive,
             t.controller,
             t.sync_after_push_s.unwrap_or(0.0),
-        )
+        );
+        if let (Some(readout), RigModel::Paper(m)) = (t.readout, &mut r.model) {
+            m.epos4.readout = readout;
+        }
+        r
     };
     // The cars compared on the whole log.
     let whole = parallel_map(&best_of_car, threads, |t| {
@@ -535,33 +559,21 @@ pub fn choose(
         timing_bound_s,
         compared_late,
         tried,
-        readout: None,
+        readout: best.readout,
     };
-    let mut chosen = with_car(
-        rig,
-        best.drive,
-        best.controller,
-        best.sync_after_push_s.unwrap_or(0.0),
-    );
+    let mut chosen = rig_of(&best);
     if let RigModel::Paper(m) = &mut chosen.model {
         m.timing_bound_s = timing_bound_s;
     }
     let record = records[index_of(best.reference_shift_rows)].clone();
-    let mut choice = choice;
-    if best.drive == CarDrive::Epos4 && !says.current_stated {
-        let readout;
-        (chosen, readout) = fit_readout(&chosen, &head(&record, SYNC_SEARCH_S), threads);
-        if let RigModel::Paper(m) = &chosen.model {
-            choice.sync_after_push_s = Some(m.epos4.sync_after_push_s);
-        }
-        choice.readout = Some(readout);
-        // The chosen car's figure under the readout fitted, on the whole log.
-        if let Some(t) = choice.tried.first_mut() {
-            t.gof = nominal_fit(&chosen, &record).gof;
-            t.sync_after_push_s = choice.sync_after_push_s;
-        }
-    }
     (chosen, record, Some(choice))
+}
+
+fn sync_of(rig: &Rig) -> f64 {
+    match &rig.model {
+        RigModel::Paper(m) => m.epos4.sync_after_push_s,
+        _ => 0.0,
+    }
 }
 
 /// Column ages tried on an EPOS4 log that does not say how it read the drive, s: every
@@ -570,9 +582,69 @@ pub fn choose(
 const COLUMN_AGE_COARSE_S: f64 = 1e-3;
 const COLUMN_AGE_MAX_S: f64 = 0.012;
 const COLUMN_AGE_FINE_S: f64 = 2.5e-4;
+/// How far from the motor -> steering segment's reading the closed loop may move the age, s.
+const COLUMN_AGE_NEAR_SEGMENT_S: f64 = 1.5e-3;
 /// Where in the row the current is read: the middle of its period (convert's interpolation)
 /// or its end (a row per TPDO, the current the drive sampled at that SYNC).
 const CURRENT_AT_ROW: [f64; 2] = [0.5, 1.0];
+
+/// How much older the log's column is than its motor angle, s, read from the motor ->
+/// steering segment alone (the nominal chain driven by the logged motor angle,
+/// [`super::model::replay_downstream`]): where the column moves, the logged column against the
+/// replayed one as `column = replay - a w + h sgn(w) + c`. A stale column trails by `a w`;
+/// play in the belt, or the stretch a load puts in it, sits `h` to either side whatever the
+/// speed, and a sweep's or a track's speeds tell the two apart. The closed loop's fit cannot:
+/// there an effect that lags the column (play) is soaked up by the age. `None` without a
+/// motor angle or where the fit is singular; within `[0, COLUMN_AGE_MAX_S]`.
+fn column_age_from_motor(rig: &Rig, rec: &Record) -> Option<f64> {
+    let RigModel::Paper(m) = &rig.model else {
+        return None;
+    };
+    let replay = super::model::replay_downstream(m, rec, &Effects::nominal())?;
+    let n = replay.len().min(rec.output.len());
+    if n < 20 {
+        return None;
+    }
+    let w: Vec<f64> = (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+            (replay[b] - replay[a]) / ((b - a).max(1) as f64 * rec.dt)
+        })
+        .collect();
+    let mut speeds: Vec<f64> = w
+        .iter()
+        .map(|v| v.abs())
+        .filter(|v| v.is_finite())
+        .collect();
+    speeds.sort_by(f64::total_cmp);
+    let fast = 0.2 * speeds.get(speeds.len() * 9 / 10).copied()?;
+    let rows: Vec<usize> = (1..n - 1)
+        .filter(|&k| w[k].abs() > fast && rec.output[k].is_finite() && replay[k].is_finite())
+        .collect();
+    if rows.len() < 10 {
+        return None;
+    }
+    let acc: Vec<f64> = (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+            (w[b] - w[a]) / ((b - a).max(1) as f64 * rec.dt)
+        })
+        .collect();
+    let x = nalgebra::DMatrix::from_fn(rows.len(), 5, |i, j| {
+        let k = rows[i];
+        match j {
+            0 => -w[k],
+            1 => w[k].signum(),
+            2 => replay[k],
+            3 => acc[k],
+            _ => 1.0,
+        }
+    });
+    let y = nalgebra::DVector::from_fn(rows.len(), |i, _| rec.output[rows[i]] - replay[rows[i]]);
+    let coef = (x.transpose() * &x).try_inverse()? * x.transpose() * y;
+    let age = coef[0];
+    age.is_finite().then(|| age.clamp(0.0, COLUMN_AGE_MAX_S))
+}
 
 /// The readout of an EPOS4 log whose header does not state it ([`Epos4Readout`]), fitted on
 /// `head` with the nominal model jointly with the SYNC phase (the phase was first fitted under
@@ -594,15 +666,20 @@ fn fit_readout(rig: &Rig, head: &Record, threads: usize) -> (Rig, Epos4Readout) 
             .filter(|a| *a >= 0.0 && *a <= COLUMN_AGE_MAX_S + 1e-9)
             .collect()
     };
+    // The column's age from the motor -> steering segment where the log has a motor angle;
+    // else every millisecond of it in the closed loop's fit.
+    let age = column_age_from_motor(rig, head);
+    let coarse_ages = match age {
+        Some(a) => vec![a],
+        None => ages(0.0, COLUMN_AGE_MAX_S, COLUMN_AGE_COARSE_S),
+    };
     let coarse: Vec<Epos4Readout> = CURRENT_AT_ROW
         .iter()
         .flat_map(|&c| {
-            ages(0.0, COLUMN_AGE_MAX_S, COLUMN_AGE_COARSE_S)
-                .into_iter()
-                .map(move |a| Epos4Readout {
-                    current_at_row: c,
-                    column_age_s: a,
-                })
+            coarse_ages.iter().map(move |&a| Epos4Readout {
+                current_at_row: c,
+                column_age_s: a,
+            })
         })
         .collect();
     let scorer = Scorer::new(rig, head);
@@ -638,9 +715,17 @@ fn fit_readout(rig: &Rig, head: &Record, threads: usize) -> (Rig, Epos4Readout) 
         .filter(|x| *x > 0.0 && *x <= 0.010 + 1e-9)
         .collect();
     let (sync, r, _) = best_of(parallel_map(&fine, threads, |&s| best_at(s, &coarse)));
+    // The age to a quarter millisecond in the closed loop's fit, near the segment's reading
+    // (it reads a millisecond off where the load stretches the belt, and a torsion bar's
+    // damping then stands in for the difference), or near the best millisecond.
+    let window = if age.is_some() {
+        COLUMN_AGE_NEAR_SEGMENT_S
+    } else {
+        COLUMN_AGE_COARSE_S
+    };
     let ages_fine: Vec<Epos4Readout> = ages(
-        r.column_age_s - COLUMN_AGE_COARSE_S,
-        r.column_age_s + COLUMN_AGE_COARSE_S,
+        r.column_age_s - window,
+        r.column_age_s + window,
         COLUMN_AGE_FINE_S,
     )
     .into_iter()

@@ -242,10 +242,18 @@ pub struct Epos4Samples {
     at: Vec<f64>,
     motor: Vec<f64>,
     current: Vec<f64>,
-    /// The column at each row's end.
+    /// The column at each row's end, and every `column_step` from the start (the first at
+    /// one step).
     column: Vec<f64>,
+    column_fine: Vec<f64>,
+    column_step: f64,
     period: f64,
 }
+
+/// How finely the EPOS4 model keeps the column for a readout that reads it before the row's
+/// end, s: a line between samples a period apart would take 1.2 % off a 5 Hz sweep's column,
+/// which the torsion bar's damping then stood in for.
+const COLUMN_STEP_S: f64 = 1e-3;
 
 impl Epos4Samples {
     /// The rows as `readout` reads them.
@@ -255,8 +263,21 @@ impl Epos4Samples {
         }
         let n = self.column.len();
         let interp = |t: f64, v: &[f64]| super::interp_at(&self.at, v, t);
+        let output = if readout.column_age_s > 0.0 && !self.column_fine.is_empty() {
+            let at_fine: Vec<f64> = (1..=self.column_fine.len())
+                .map(|i| i as f64 * self.column_step)
+                .collect();
+            (0..n)
+                .map(|k| {
+                    let t = (k + 1) as f64 * self.period - readout.column_age_s;
+                    super::interp_at(&at_fine, &self.column_fine, t)
+                })
+                .collect()
+        } else {
+            self.column.clone()
+        };
         SimOut {
-            output: delayed(&self.column, readout.column_age_s, self.period),
+            output,
             effort: (0..n)
                 .map(|k| {
                     interp(
@@ -345,6 +366,9 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
     let mut motor_s = Vec::with_capacity(n + 1);
     let mut current_s = Vec::with_capacity(n + 1);
     let mut column_rows = Vec::with_capacity(n);
+    // The column every COLUMN_STEP_S too, for a readout that takes it before the row's end.
+    let column_every = ((COLUMN_STEP_S / dt).round() as u64).max(1);
+    let mut column_fine = Vec::with_capacity(n * (ticks_per_period / column_every) as usize + 1);
     let mut target = gearing.motor_from_steering(SteeringRad::from(SteeringDeg(first as f32)));
     let mut tick: u64 = 0;
     // The ECU's column encoder task samples every 2 ms, on its own phase; the shaper takes the
@@ -383,6 +407,9 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
         for j in 1..=ticks_per_period {
             drive.tick(true);
             tick += 1;
+            if tick.is_multiple_of(column_every) {
+                column_fine.push(column_deg(&drive));
+            }
             if tick % encoder_ticks == encoder_phase {
                 encoder_sample = column_deg(&drive);
             }
@@ -408,6 +435,8 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
         motor: motor_s,
         current: current_s,
         column: column_rows,
+        column_fine,
+        column_step: column_every as f64 * dt,
         period,
     }
 }
