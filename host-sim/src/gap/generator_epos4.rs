@@ -1,7 +1,8 @@
-//! The independent world's EPOS4 car: the world's plant ([`generator`]'s RK4 ODE with its own
-//! effects) behind a drive written here, apart from the firmware's cascade and from the
-//! simulated EPOS4 (`epos4_sim::DriveLoop`) that the diagnosis's EPOS4 model runs, and logs
-//! written from the bus traffic as `steer-can convert` or a team's own logger writes them.
+//! The independent world's EPOS4 car: the world's plant ([`super::generator`]'s RK4 ODE
+//! with its own effects) behind a drive written here, apart from the firmware's cascade and
+//! from the simulated EPOS4 (`epos4_sim::DriveLoop`) that the diagnosis's EPOS4 model runs,
+//! and logs written from the bus traffic as `steer-can convert` or a team's own logger
+//! writes them.
 //!
 //! | what               | here                                        | the diagnosis's model          |
 //! |--------------------|---------------------------------------------|--------------------------------|
