@@ -582,8 +582,6 @@ fn sync_of(rig: &Rig) -> f64 {
 const COLUMN_AGE_COARSE_S: f64 = 1e-3;
 const COLUMN_AGE_MAX_S: f64 = 0.012;
 const COLUMN_AGE_FINE_S: f64 = 2.5e-4;
-/// How far from the motor -> steering segment's reading the closed loop may move the age, s.
-const COLUMN_AGE_NEAR_SEGMENT_S: f64 = 1.5e-3;
 /// Where in the row the current is read: the middle of its period (convert's interpolation)
 /// or its end (a row per TPDO, the current the drive sampled at that SYNC).
 const CURRENT_AT_ROW: [f64; 2] = [0.5, 1.0];
@@ -647,14 +645,13 @@ fn column_age_from_motor(rig: &Rig, rec: &Record) -> Option<f64> {
 }
 
 /// The readout of an EPOS4 log whose header does not state it ([`Epos4Readout`]), fitted on
-/// `head` with the nominal model jointly with the SYNC phase (the phase was first fitted under
-/// convert's readout, and a current read at the row's end with the SYNC late in the period
-/// looks much like one read at its middle with the SYNC earlier): every millisecond of
-/// phase, each with every readout (one run of the model serves them all), then every tick
-/// near the best, then the column's age to a quarter millisecond. The column's age against
-/// the motor angle is no effect's: play, friction and a tyre act between the two but do not
-/// delay the one behind the other at every speed, and a late reference moves every signal
-/// alike.
+/// `head`: the column's age from the motor -> steering segment ([`column_age_from_motor`]),
+/// and the current's place in the row with the nominal model jointly with the SYNC phase
+/// (the phase was first fitted under convert's readout, and a current read at the row's end
+/// with the SYNC late in the period looks much like one read at its middle with the SYNC
+/// earlier): every millisecond of phase, each with both places (one run of the model serves
+/// them all), then every tick near the best. A log without a motor angle has the age fitted
+/// in the loop too, every millisecond and then every quarter near the best.
 fn fit_readout(rig: &Rig, head: &Record, threads: usize) -> (Rig, Epos4Readout) {
     let RigModel::Paper(model) = &rig.model else {
         return (rig.clone(), Epos4Readout::CONVERT);
@@ -715,17 +712,20 @@ fn fit_readout(rig: &Rig, head: &Record, threads: usize) -> (Rig, Epos4Readout) 
         .filter(|x| *x > 0.0 && *x <= 0.010 + 1e-9)
         .collect();
     let (sync, r, _) = best_of(parallel_map(&fine, threads, |&s| best_at(s, &coarse)));
-    // The age to a quarter millisecond in the closed loop's fit, near the segment's reading
-    // (it reads a millisecond off where the load stretches the belt, and a torsion bar's
-    // damping then stands in for the difference), or near the best millisecond.
-    let window = if age.is_some() {
-        COLUMN_AGE_NEAR_SEGMENT_S
-    } else {
-        COLUMN_AGE_COARSE_S
-    };
+    // The segment's reading stands: refined in the closed loop, even within 1.5 ms, the age
+    // ran to where play or a tyre lags the column (1.5 deg of play then read as a tyre).
+    // Without it, the age to a quarter millisecond near the best millisecond.
+    if age.is_some() {
+        let mut chosen = rig.clone();
+        if let RigModel::Paper(m) = &mut chosen.model {
+            m.epos4.sync_after_push_s = sync;
+            m.epos4.readout = r;
+        }
+        return (chosen, r);
+    }
     let ages_fine: Vec<Epos4Readout> = ages(
-        r.column_age_s - window,
-        r.column_age_s + window,
+        r.column_age_s - COLUMN_AGE_COARSE_S,
+        r.column_age_s + COLUMN_AGE_COARSE_S,
         COLUMN_AGE_FINE_S,
     )
     .into_iter()
