@@ -87,7 +87,8 @@ pub struct Diagnosis {
     pub repeatability: Fit,
     /// The constant part of the nominal model's effort residual (`score::effort_offset`).
     pub effort_offset: Offset,
-    /// What the log says by itself of play in the belt and Coulomb friction at the rack
+    /// What the log says of play in the belt and Coulomb friction at the rack, by itself or
+    /// against the nominal model's own balance on an EPOS4 car
     /// (`gap::signature`), on the paper rig with a motor column; the candidates it rules out
     /// are named in the verdict's reason.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -158,8 +159,8 @@ pub struct Options {
     pub threads: usize,
     pub progress: bool,
     /// Use the log's own torque balance (`gap::signature`) where it holds: on by default. Off,
-    /// the diagnosis runs as it does where the balance does not hold (an EPOS4 car), which is
-    /// how the tests of the other rules see those rules at work.
+    /// the diagnosis runs as it does where the balance does not hold, which is how the tests
+    /// of the other rules see those rules at work.
     pub torque_balance: bool,
 }
 
@@ -231,7 +232,12 @@ impl Diagnosis {
         if let Some(b) = &self.signature {
             let _ = writeln!(
                 s,
-                "torque balance (the log alone): play in the belt {:.2} +- {:.2} deg, Coulomb force at the rack {:.0} +- {:.0} N, belt stiffness {:.3} Nm/rad; {}",
+                "torque balance ({}): play in the belt {:.2} +- {:.2} deg, Coulomb force at the rack {:.0} +- {:.0} N, belt stiffness {:.3} Nm/rad; {}",
+                if b.against_model {
+                    "the log's less the nominal model's on the same readout"
+                } else {
+                    "the log alone"
+                },
                 b.belt_play_deg,
                 b.belt_play_se_deg,
                 b.rack_coulomb_n,
@@ -241,7 +247,7 @@ impl Diagnosis {
                     "holds, so it rules candidates out and in".to_string()
                 } else {
                     format!(
-                        "not used on this log (an EPOS4 car, whose current is one sample per SYNC; or a belt off Table 4's by more than {:.0} %, or a negative reading: the current is not read at the angles' instants)",
+                        "not used on this log (a belt off Table 4's by more than {:.0} %, or a negative reading: the current is not read at the angles' instants, or the balance was turned off)",
                         100.0 * super::signature::STIFFNESS_TOLERANCE
                     )
                 }

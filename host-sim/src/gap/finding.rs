@@ -109,6 +109,34 @@ pub enum Finding {
         gain_pct: f64,
         gain: f64,
     },
+    /// The pair removes enough on the fit's window but leaves the whole log's GoF below the
+    /// single's (fractions).
+    PairLowersGof {
+        pair: String,
+        gain_pct: f64,
+        best: String,
+        pair_gof: f64,
+        best_gof: f64,
+    },
+    /// The log's torque balance shows what the single named does not make, but no pair with
+    /// it fits as the pair rule of [`Finding::DemandedByLog`] asks: the single stands alone.
+    DemandedNotFitted {
+        reading: &'static str,
+        value: f64,
+        standard_error: f64,
+        unit: &'static str,
+        single: String,
+    },
+    /// The best single was a tyre, the torque balance shows a Coulomb force at the rack and
+    /// the rack friction's GoF on the whole log is no lower: the friction is the best instead.
+    BalanceShowsFriction {
+        tyre: String,
+        tyre_gof: f64,
+        friction: String,
+        friction_gof: f64,
+        reading: f64,
+        standard_error: f64,
+    },
     /// Table 4 refitted freely left the tolerance; what it moved and left, and the bounded refit.
     RefitFree {
         moved: Vec<String>,
@@ -313,6 +341,47 @@ impl fmt::Display for Finding {
             } => write!(
                 f,
                 "the best pair {pair} removes only {gain_pct:.0} % of what was left ({gain:.0})"
+            ),
+            Finding::PairLowersGof {
+                pair,
+                gain_pct,
+                best,
+                pair_gof,
+                best_gof,
+            } => write!(
+                f,
+                "the pair {pair} removes {gain_pct:.0} % of what {best} leaves on the fit's \
+                 window but leaves the log's GoF at {:.1} %, below {best}'s {:.1} %: not named",
+                100.0 * pair_gof,
+                100.0 * best_gof
+            ),
+            Finding::DemandedNotFitted {
+                reading,
+                value,
+                standard_error,
+                unit,
+                single,
+            } => write!(
+                f,
+                "the log's torque balance shows {value:.2} +- {standard_error:.2} {unit} of \
+                 {reading}, but no pair of {single} with it fits the log as well as {single} \
+                 alone: {single} stands alone"
+            ),
+            Finding::BalanceShowsFriction {
+                tyre,
+                tyre_gof,
+                friction,
+                friction_gof,
+                reading,
+                standard_error,
+            } => write!(
+                f,
+                "{tyre} left the least on the fit's window, but the log's torque balance shows \
+                 {reading:.0} +- {standard_error:.0} N of Coulomb force at the rack and \
+                 {friction} leaves the log's GoF at {:.1} % (the tyre {:.1} %): {friction} \
+                 is the best single",
+                100.0 * friction_gof,
+                100.0 * tyre_gof
             ),
             Finding::RefitFree {
                 moved,

@@ -97,6 +97,19 @@ pub struct SimOut {
     pub motor: Vec<f64>,
 }
 
+impl SimOut {
+    /// `rec` with this simulation's columns in place of the log's: the model's run written as
+    /// the log is (its grid, its reference, its readout).
+    pub fn as_log(&self, rec: &Record) -> Record {
+        Record {
+            output: self.output.clone(),
+            effort: self.effort.clone(),
+            motor: (!self.motor.is_empty()).then(|| self.motor.clone()),
+            ..rec.clone()
+        }
+    }
+}
+
 /// The reference `rows` samples later, the first sample held before it.
 pub(crate) fn held_later(reference: &[f64], rows: usize) -> Vec<f64> {
     (0..reference.len())

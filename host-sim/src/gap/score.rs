@@ -290,10 +290,7 @@ pub fn repeatability(rig: &Rig, rec: &Record, scorer: &Scorer, sim0: &SimOut) ->
         *r += step;
     }
     let again = simulate(rig, &moved, &Effects::nominal());
-    let mut as_log = rec.clone();
-    as_log.output = sim0.output.clone();
-    as_log.effort = sim0.effort.clone();
-    scorer.fit(&as_log, &again)
+    scorer.fit(&sim0.as_log(rec), &again)
 }
 
 #[cfg(test)]
