@@ -716,12 +716,7 @@ fn fit_readout(rig: &Rig, head: &Record, threads: usize) -> (Rig, Epos4Readout) 
     // ran to where play or a tyre lags the column (1.5 deg of play then read as a tyre).
     // Without it, the age to a quarter millisecond near the best millisecond.
     if age.is_some() {
-        let mut chosen = rig.clone();
-        if let RigModel::Paper(m) = &mut chosen.model {
-            m.epos4.sync_after_push_s = sync;
-            m.epos4.readout = r;
-        }
-        return (chosen, r);
+        return (with_readout(rig, sync, r), r);
     }
     let ages_fine: Vec<Epos4Readout> = ages(
         r.column_age_s - COLUMN_AGE_COARSE_S,
@@ -735,12 +730,17 @@ fn fit_readout(rig: &Rig, head: &Record, threads: usize) -> (Rig, Epos4Readout) 
     })
     .collect();
     let (sync, r, _) = best_at(sync, &ages_fine);
+    (with_readout(rig, sync, r), r)
+}
+
+/// `rig` with its EPOS4 model's SYNC phase at `sync` (s) and its readout `readout`.
+fn with_readout(rig: &Rig, sync: f64, readout: Epos4Readout) -> Rig {
     let mut chosen = rig.clone();
     if let RigModel::Paper(m) = &mut chosen.model {
         m.epos4.sync_after_push_s = sync;
-        m.epos4.readout = r;
+        m.epos4.readout = readout;
     }
-    (chosen, r)
+    chosen
 }
 
 /// The car for a log as `host-sim gap` takes it: a `drive` or `controller` given (the command

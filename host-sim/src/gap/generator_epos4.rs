@@ -41,30 +41,12 @@ use steering_ecu::units::SteeringDeg;
 pub const DRIVE_CURRENT_HZ: u32 = 25_000;
 /// The drive's position loop, Hz.
 pub const DRIVE_POSITION_HZ: u32 = 2_500;
-/// The drive's loop rates, Hz: current, position.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Rates {
-    pub current_hz: u32,
-    pub position_hz: u32,
-}
-
-impl Rates {
-    /// A real EPOS4's.
-    pub const EPOS4: Rates = Rates {
-        current_hz: DRIVE_CURRENT_HZ,
-        position_hz: DRIVE_POSITION_HZ,
-    };
-
-    /// Current-loop ticks per 10 ms reference period.
-    fn ticks_per_period(self) -> u64 {
-        u64::from(self.current_hz / 100)
-    }
-
-    /// Current-loop ticks per position tick.
-    fn ticks_per_position(self) -> u64 {
-        u64::from(self.current_hz / self.position_hz).max(1)
-    }
-}
+/// Current-loop ticks per 10 ms reference period.
+const CURRENT_TICKS_PER_PERIOD: u64 = (DRIVE_CURRENT_HZ / 100) as u64;
+/// Current-loop ticks per position tick.
+const CURRENT_TICKS_PER_POSITION: u64 = (DRIVE_CURRENT_HZ / DRIVE_POSITION_HZ) as u64;
+/// Position ticks per 10 ms reference period.
+const POSITION_TICKS_PER_PERIOD: u64 = (DRIVE_POSITION_HZ / 100) as u64;
 /// One 8-byte frame at 1 Mbit/s, s.
 const FRAME_S: f64 = 130e-6;
 /// From the SYNC to the drive sending TPDO1 and TPDO2, s.
@@ -117,11 +99,10 @@ struct Drive {
     previous_error: Option<f64>,
     current_setpoint: f64,
     current_integral: f64,
-    rates: Rates,
 }
 
 impl Drive {
-    fn new(gains: &SiGains, at_rest: f64, rates: Rates) -> Drive {
+    fn new(gains: &SiGains, at_rest: f64) -> Drive {
         let f = |v: f32| f64::from(v);
         Drive {
             kp: f(gains.position_kp()),
@@ -135,23 +116,17 @@ impl Drive {
             end: at_rest,
             slope: 0.0,
             accel: 0.0,
-            tick: u64::from(rates.position_hz / 100),
+            tick: POSITION_TICKS_PER_PERIOD,
             held: true,
             position_integral: 0.0,
             previous_error: None,
             current_setpoint: 0.0,
             current_integral: 0.0,
-            rates,
         }
     }
 
-    /// Position ticks per 10 ms period.
-    fn ticks_per_period(&self) -> u64 {
-        u64::from(self.rates.position_hz / 100).max(1)
-    }
-
     fn setpoint_position(&self) -> f64 {
-        let n = self.ticks_per_period();
+        let n = POSITION_TICKS_PER_PERIOD;
         if self.tick >= n {
             self.end
         } else {
@@ -177,8 +152,8 @@ impl Drive {
 
     /// One position tick on the motor angle `measured` (rad).
     fn position_step(&mut self, measured: f64) {
-        let dt = 1.0 / f64::from(self.rates.position_hz);
-        let moving = self.tick < self.ticks_per_period();
+        let dt = 1.0 / f64::from(DRIVE_POSITION_HZ);
+        let moving = self.tick < POSITION_TICKS_PER_PERIOD;
         let position = self.setpoint_position();
         let (velocity, acceleration) = if moving {
             (self.slope, self.accel)
@@ -208,7 +183,7 @@ impl Drive {
 
     /// One current tick on the measured current (A): the voltage at the terminals (V).
     fn current_step(&mut self, measured: f64) -> f64 {
-        let dt = 1.0 / f64::from(self.rates.current_hz);
+        let dt = 1.0 / f64::from(DRIVE_CURRENT_HZ);
         let error = self.current_setpoint - measured;
         let integral = self.current_integral + self.cki * error * dt;
         let demand = self.ckp * error + integral;
@@ -255,7 +230,7 @@ impl Phases {
 }
 
 /// The car's run on the case's reference: the frames on its bus.
-fn run(case: &GenCase, seed: u64, rates: Rates) -> Traffic {
+fn run(case: &GenCase, seed: u64) -> Traffic {
     let mut traffic = Traffic::default();
     let truth = case.truth;
     let ode = Ode::new(truth);
@@ -272,9 +247,9 @@ fn run(case: &GenCase, seed: u64, rates: Rates) -> Traffic {
         return traffic;
     };
     let p = truth.plant;
-    let h = 1.0 / f64::from(rates.current_hz);
+    let h = 1.0 / f64::from(DRIVE_CURRENT_HZ);
     let (ticks_per_period, ticks_per_position) =
-        (rates.ticks_per_period(), rates.ticks_per_position());
+        (CURRENT_TICKS_PER_PERIOD, CURRENT_TICKS_PER_POSITION);
     let inc_rad = std::f64::consts::TAU / f64::from(HALL_COUNTS_PER_REV);
     // The ECU's target for a wheel angle, in whole increments, as motor rad.
     let target_of = |deg: f64| {
@@ -295,7 +270,7 @@ fn run(case: &GenCase, seed: u64, rates: Rates) -> Traffic {
     let mut x: State = at_rest(&p, first.to_radians());
     let mut noise = rng::seeded(seed ^ (case.index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
     let encoder = ColumnEncoder { zero_raw: 0 };
-    let mut drive = Drive::new(&gains, target_of(first).unwrap_or(x[1]), rates);
+    let mut drive = Drive::new(&gains, target_of(first).unwrap_or(x[1]));
     let mut target = target_of(first).unwrap_or(x[1]);
     // Targets on their way to the drive: (tick it has it, motor rad).
     let mut in_flight: std::collections::VecDeque<(u64, f64)> = Default::default();
@@ -363,7 +338,7 @@ fn last_before(series: &[(f64, f64)], t: f64) -> Option<f64> {
 
 /// The case's EPOS4 car logged by `logger` (its `car` is one of the EPOS4 loggers).
 pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
-    let traffic = run(case, seed, Rates::EPOS4);
+    let traffic = run(case, seed);
     let mut rows = Rows::default();
     match logger.car {
         LoggedCar::Epos4StatusFrame => {

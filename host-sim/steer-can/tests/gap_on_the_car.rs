@@ -6,10 +6,12 @@
 #![cfg(feature = "sim")]
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
+#[path = "../../tests/support/gap_file.rs"]
+mod gap_file;
+
 use host_io::scenario::Sweep;
-use host_sim::gap::drive::{self, LogHeader, Source};
-use host_sim::gap::rig::{CarDrive, Rig};
-use host_sim::gap::{EffectKind, Options, diagnose};
+use host_sim::gap::drive::{self, Source};
+use host_sim::gap::rig::CarDrive;
 use host_sim::sim_ecu::{CarEffects, SimCar, SimDrive, SimEcu};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -54,31 +56,16 @@ fn diagnosed_as_logged(
     let path = dir.path().join("car.csv.gz");
     campaign::save_log(&built.log, &path).unwrap();
 
-    let rig = Rig::paper();
-    let loaded = rig.load_log(&path).unwrap();
-    let rec = loaded.record;
-    let header = LogHeader::parse(&loaded.comments).unwrap();
     let want = match car.drive {
         SimDrive::Epos4 => CarDrive::Epos4,
         SimDrive::Direct => CarDrive::Direct,
     };
-    assert_eq!(header.drive, Some(want), "the log's header names the drive");
-    let (rig, rec, choice) =
-        drive::choose_for_log(&rig, &rec, &header, loaded.timing, None, None, 2);
-    let choice = choice.unwrap();
-    println!("{}", choice.describe());
-    let d = diagnose(
-        &rig,
-        &rec,
-        None,
-        // The candidates `host-sim gap` fits on this rig, as the command sets them.
-        &Options {
-            effects: EffectKind::for_rig(&rig),
-            threads: 2,
-            ..Options::default()
-        },
+    let (d, choice) = gap_file::diagnose_file(&path, None, None);
+    assert_eq!(
+        (choice.drive, choice.drive_from),
+        (want, Source::Header),
+        "the log's header names the drive"
     );
-    println!("{}", d.summary());
     (d, choice)
 }
 
