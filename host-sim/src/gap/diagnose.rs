@@ -315,8 +315,8 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             // a second effect that lowers the log's GoF below the single's is fitting the
             // window (an independent EPOS4 car with a tyre alone: play of 0.75 deg beside it
             // halved what the tyre left on the window, and the GoF fell from 92.1 to 89.8 %).
+            // Checked last, so the rules above still say why where they refuse the pair too.
             let lowers_gof = pair_removes && pair.gof < best.gof;
-            let pair_removes = pair_removes && !lowers_gof;
             let on_lag = if pair_removes {
                 best_with_log_lag(rig, frec, fscorer, best, opts, &progress)
             } else {
@@ -332,15 +332,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                 None
             };
             refit_simulations += on_refit.map_or(0, |(_, _, n)| n);
-            if lowers_gof {
-                findings.push(Finding::PairLowersGof {
-                    pair: pair.effect.clone(),
-                    gain_pct: 100.0 * gain / best.cost,
-                    best: best.effect.clone(),
-                    pair_gof: pair.gof,
-                    best_gof: best.gof,
-                });
-            } else if let Some((c_lag, lag_s)) = on_lag
+            if let Some((c_lag, lag_s)) = on_lag
                 && lag_explains
             {
                 findings.push(Finding::PairLagExplains {
@@ -369,6 +361,14 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
                     tolerance: PARAMETER_TOLERANCE,
                     single: c_single,
                     with_pair: c_pair,
+                });
+            } else if lowers_gof {
+                findings.push(Finding::PairLowersGof {
+                    pair: pair.effect.clone(),
+                    gain_pct: 100.0 * gain / best.cost,
+                    best: best.effect.clone(),
+                    pair_gof: pair.gof,
+                    best_gof: best.gof,
                 });
             } else if pair_removes {
                 // The pair may have grown from the runner-up and hold no part of the best.
