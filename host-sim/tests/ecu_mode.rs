@@ -6,7 +6,7 @@
 
 use host_sim::analysis::tracking_error;
 use host_sim::effect_plant::PlantEffects;
-use host_sim::gap::generator::{RkPlant, Truth};
+use host_sim::gap::generator::{RkPlant, Truth, Unmodelled};
 use host_sim::linear_model::{LinearModel, PhysicalLimit};
 use host_sim::plant::PlantParams;
 use host_sim::report;
@@ -95,6 +95,7 @@ fn ecu_mode_tracks_within_1_5_deg_with_belt_play_and_rack_friction() {
         dahl_force_n: 0.0,
         dahl_stiffness_n_per_mm: 0.0,
         reference_delay_s: 0.0,
+        unmodelled: Unmodelled::NONE,
     };
     let cfg = with(Controller::Ecu);
     let run = sim::run_on(&mut RkPlant::new(truth), &track, &cfg, &mut NoTap).unwrap();

@@ -8,15 +8,9 @@ use host_sim::gap::model::Effects;
 use host_sim::gap::rig::Rig;
 use host_sim::gap::{Scorer, simulate};
 
-fn sweep() -> Vec<f64> {
-    host_sim::scenario::Sweep {
-        amplitude_deg: 8.0,
-        f_start_hz: 0.2,
-        f_end_hz: 4.0,
-        duration_s: 6.0,
-    }
-    .samples()
-}
+#[path = "support/world_sweep.rs"]
+mod world_sweep;
+use world_sweep::sweep;
 
 #[test]
 fn the_rk4_world_and_the_model_agree_without_effects_at_every_log_rate() {

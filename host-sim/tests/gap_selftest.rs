@@ -89,7 +89,13 @@ fn two_cars_under_two_loggers() {
         Some(host_sim::gap::rig::CarDrive::Direct),
         Some(host_sim::sim::Controller::Paper),
     );
-    let report = selftest::run_loggers(&[team], car, &[0, 9], 1, 12.0, &opts, &|_| {}).unwrap();
+    let cars = selftest::Cars {
+        world: selftest::World::Independent,
+        cases: &[0, 9],
+        seed: 1,
+        duration_s: 12.0,
+    };
+    let report = selftest::run_loggers(&[team], car, cars, &opts, &|_| {}).unwrap();
     print!("{}", report.table());
     let kinds: Vec<&str> = report.loggers.iter().map(|l| l.kind.as_str()).collect();
     assert_eq!(kinds, ["ours", "starting-100-jitter-drop"]);

@@ -63,6 +63,11 @@ pub struct GapArgs {
     /// world (a check of the search, not of the model).
     #[arg(long)]
     pub model_world: bool,
+    /// selftest: the independent world's cars with an effect no candidate has (the torque
+    /// constant x0.7-0.8 or x1.25-1.4, a current sensor offset of 0.3-0.6 A, cogging of
+    /// 0.01-0.03 Nm), each right when answered `unexplained` or `parameters`.
+    #[arg(long, conflicts_with = "model_world")]
+    pub unmodelled: bool,
     /// selftest: diagnose each car from the files of these loggers, as `gap FILE` reads them
     /// (ours always, first): `ours`, `drawn` (a team's logger drawn with each case), or
     /// `ending|starting-100|200|1000[-jitter][-drop]`; or the world's EPOS4 car (its own drive
@@ -204,6 +209,7 @@ fn print_help(selftest: bool) -> Result<()> {
         "seed",
         "duration_s",
         "model_world",
+        "unmodelled",
         "loggers",
         "drive",
         "controller",
@@ -403,6 +409,8 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
     let started = Instant::now();
     let world = if args.model_world {
         selftest::World::Model
+    } else if args.unmodelled {
+        selftest::World::Unmodelled
     } else {
         selftest::World::Independent
     };
@@ -444,9 +452,12 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
         let report = selftest::run_loggers(
             &kinds,
             car_options(args)?,
-            &indices,
-            args.seed,
-            args.duration_s,
+            selftest::Cars {
+                world,
+                cases: &indices,
+                seed: args.seed,
+                duration_s: args.duration_s,
+            },
             &opts,
             &print_case,
         )?;

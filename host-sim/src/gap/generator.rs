@@ -51,7 +51,53 @@ pub struct Truth {
     pub dahl_stiffness_n_per_mm: f64,
     /// The reference reaches the ECU this late, s.
     pub reference_delay_s: f64,
+    /// What no candidate is ([`Unmodelled`]); [`Unmodelled::NONE`] in every case of
+    /// [`draw`].
+    pub unmodelled: Unmodelled,
 }
+
+/// Effects the diagnosis has no candidate for and Table 4 does not hold, in this world's own
+/// forms: a car with one is answered right by `unexplained` or `parameters`, never by a named
+/// effect and never by `none` ([`draw_unmodelled`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Unmodelled {
+    /// The motor's torque constant, and with it its back-EMF constant, against Table 1's
+    /// 52.5 mNm/A (1 = the table's).
+    pub torque_constant_factor: f64,
+    /// Offset of the current sensor, A: the ECU's current loop and the log read the same one.
+    pub current_offset_a: f64,
+    /// Cogging torque at the motor shaft, Nm: a sine of [`COGGING_PERIODS_PER_REV`] periods
+    /// per motor turn.
+    pub cogging_nm: f64,
+}
+
+impl Truth {
+    /// The car `plant` with no effect.
+    pub fn effect_free(plant: PlantParams) -> Truth {
+        Truth {
+            plant,
+            rack_friction_n: 0.0,
+            belt_play_deg: 0.0,
+            dahl_force_n: 0.0,
+            dahl_stiffness_n_per_mm: 0.0,
+            reference_delay_s: 0.0,
+            unmodelled: Unmodelled::NONE,
+        }
+    }
+}
+
+impl Unmodelled {
+    /// Nothing unmodelled.
+    pub const NONE: Unmodelled = Unmodelled {
+        torque_constant_factor: 1.0,
+        current_offset_a: 0.0,
+        cogging_nm: 0.0,
+    };
+}
+
+/// Cogging periods per motor turn: the least common multiple of a 12-slot, 8-pole motor's
+/// slots and poles (the world's choice; Table 1 does not give the motor's build).
+pub const COGGING_PERIODS_PER_REV: f64 = 24.0;
 
 fn table4_factors<S: serde::Serializer>(plant: &PlantParams, s: S) -> Result<S::Ok, S::Error> {
     use serde::ser::SerializeMap;
@@ -229,13 +275,9 @@ const CURRENT_NOISE_A: f64 = 0.1;
 /// Noise on the column angle before the 12-bit encoder's quantisation, deg.
 const ANGLE_NOISE_DEG: f64 = 0.01;
 
-/// Draw case `index` of a run seeded with `seed`. `sweep_s` is the length of a sweep; tracks
-/// are 120 s.
-pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
-    let mut rng = rng::seeded(seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ index as u64);
-    let mut plant = PlantParams::PAPER;
-    // Every case: all nine Table 4 parameters off by up to 10 %.
-    let scale = |p: &mut PlantParams, name: &str, f: f64| match name {
+/// Table 4's parameter `name` of `p` scaled by `f`.
+fn scale_parameter(p: &mut PlantParams, name: &str, f: f64) {
+    match name {
         "j_bs" => p.j_bs *= f,
         "j_sw" => p.j_sw *= f,
         "j_w" => p.j_w *= f,
@@ -245,7 +287,15 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
         "k_tb" => p.k_tb *= f,
         "beta_tb" => p.beta_tb *= f,
         _ => p.beta_sw *= f,
-    };
+    }
+}
+
+/// Draw case `index` of a run seeded with `seed`. `sweep_s` is the length of a sweep; tracks
+/// are 120 s.
+pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
+    let mut rng = rng::seeded(seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ index as u64);
+    let mut plant = PlantParams::PAPER;
+    // Every case: all nine Table 4 parameters off by up to 10 %.
     let names: Vec<&'static str> = PlantParams::PAPER
         .identified()
         .iter()
@@ -253,16 +303,9 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
         .collect();
     for n in &names {
         let f = rng.range(0.9, 1.1);
-        scale(&mut plant, n, f);
+        scale_parameter(&mut plant, n, f);
     }
-    let mut truth = Truth {
-        plant,
-        rack_friction_n: 0.0,
-        belt_play_deg: 0.0,
-        dahl_force_n: 0.0,
-        dahl_stiffness_n_per_mm: 0.0,
-        reference_delay_s: 0.0,
-    };
+    let mut truth = Truth::effect_free(plant);
     let effects = ["backlash", "coulomb_friction", "delay", "tire_ground"];
     let roll = rng.unit();
     let mut hidden: Vec<String> = Vec::new();
@@ -278,7 +321,7 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
             let name = prominent[(first + 2 * i) % 5];
             let f = rng.range(2.0, 3.0);
             let f = if rng.unit() < 0.5 { f } else { 1.0 / f };
-            scale(&mut truth.plant, name, f);
+            scale_parameter(&mut truth.plant, name, f);
         }
     } else if roll < 0.8 {
         hidden.push(effects[(rng.next_u64() % 4) as usize].into());
@@ -334,6 +377,53 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
     }
 }
 
+/// Case `index` of the world's cars with an effect no candidate has: the scenario, log rate,
+/// stamping lag and logger of [`draw`]'s case `index`, Table 4 off by up to 10 % again, and one
+/// of: the torque constant x0.7-0.8 or x1.25-1.4, a current sensor offset of 0.3-0.6 A either
+/// way, or 0.01-0.03 Nm of cogging at the motor (0.2-0.6 A of Table 1's torque constant).
+/// Labelled `unmodelled`. Its own stream: the world's case `index` is unchanged.
+pub fn draw_unmodelled(seed: u64, index: usize, sweep_s: f64) -> GenCase {
+    let mut case = draw(seed, index, sweep_s);
+    let mut rng = rng::seeded(
+        seed.wrapping_mul(0x7c3a_91e5_2b6d_f04f)
+            ^ (index as u64).wrapping_mul(0x94d0_49bb_1331_11eb),
+    );
+    let mut plant = PlantParams::PAPER;
+    for (name, _) in PlantParams::PAPER.identified().iter() {
+        let f = rng.range(0.9, 1.1);
+        scale_parameter(&mut plant, name, f);
+    }
+    let either_way = |rng: &mut rng::Rng, v: f64| if rng.unit() < 0.5 { v } else { -v };
+    let mut unmodelled = Unmodelled::NONE;
+    let what = match rng.next_u64() % 3 {
+        0 => {
+            let f = if rng.unit() < 0.5 {
+                rng.range(0.7, 0.8)
+            } else {
+                rng.range(1.25, 1.4)
+            };
+            unmodelled.torque_constant_factor = f;
+            format!("torque constant x{f:.2}")
+        }
+        1 => {
+            let a = rng.range(0.3, 0.6);
+            unmodelled.current_offset_a = either_way(&mut rng, a);
+            format!("current offset {:+.2} A", unmodelled.current_offset_a)
+        }
+        _ => {
+            unmodelled.cogging_nm = rng.range(0.01, 0.03);
+            format!("cogging {:.3} Nm", unmodelled.cogging_nm)
+        }
+    };
+    case.truth = Truth {
+        unmodelled,
+        ..Truth::effect_free(plant)
+    };
+    case.hidden = vec!["unmodelled".into()];
+    case.scenario = format!("{}, {what}", case.scenario);
+    case
+}
+
 /// State: winding current, motor angle and speed, nut angle and speed, column angle and
 /// speed, Dahl force at the rack.
 pub(super) type State = [f64; 8];
@@ -380,7 +470,7 @@ impl Ode {
 
     fn deriv(&self, x: &State, v: f64) -> State {
         let p = &self.p;
-        let [i, _th_rot, w_rot, th_bs, w_bs, d_sw, w_sw, f_dahl] = *x;
+        let [i, th_rot, w_rot, th_bs, w_bs, d_sw, w_sw, f_dahl] = *x;
         let tb = 1.0 / p.belt_reduction;
         // Belt: a spring with play; its damper acts only while the belt is taut.
         let stretch = x[1] * tb - th_bs;
@@ -399,8 +489,14 @@ impl Ode {
         let v_rack = w_bs * p.tau_bs;
         let f_fric = self.truth.rack_friction_n * (v_rack / FRICTION_SPEED_M_S).tanh();
         let t_rack = (f_fric + f_dahl) * p.tau_bs;
-        let di = (v - p.ra * i - p.ke * w_rot) / p.la;
-        let dw_rot = (p.kt * i - p.r * w_rot - tb * t_belt) / p.j_rot;
+        let u = &self.truth.unmodelled;
+        let cogging = u.cogging_nm * (COGGING_PERIODS_PER_REV * th_rot).sin();
+        let (kt, ke) = (
+            p.kt * u.torque_constant_factor,
+            p.ke * u.torque_constant_factor,
+        );
+        let di = (v - p.ra * i - ke * w_rot) / p.la;
+        let dw_rot = (kt * i - p.r * w_rot - tb * t_belt - cogging) / p.j_rot;
         let dw_bs = (t_belt - p.beta_bs * w_bs - self.g * t_tb - t_rack) / self.j_bs;
         let dw_sw = (t_tb - p.beta_sw * w_sw) / p.j_sw;
         // Dahl: dF/dt = sigma v (1 - F/Fmax sgn v).
@@ -560,6 +656,7 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
         .round() as i64;
     let n_pos = case.reference.len() as i64 * POSITION_TICKS_PER_REFERENCE as i64;
     let period_pos = POSITION_TICKS_PER_REFERENCE as i64;
+    let offset_a = truth.unmodelled.current_offset_a;
     let mut current_integral = 0.0;
     let mut integral_at_last_row = 0.0;
     let mut tick: u64 = 0;
@@ -575,7 +672,8 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
         let hall = hall_from_motor(x[1]);
         cascade.position_step(hall);
         for _ in 0..CURRENT_TICKS_PER_POSITION_TICK {
-            let v = cascade.current_step(Amps(x[0] as f32)).voltage.0 as f64;
+            let sensed = x[0] + truth.unmodelled.current_offset_a;
+            let v = cascade.current_step(Amps(sensed as f32)).voltage.0 as f64;
             // The current over the step, by the trapezoid of its ends.
             let i0 = x[0];
             ode.rk4(&mut x, v, h);
@@ -606,7 +704,7 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
                 rows.motor_rad
                     .push(motor_from_hall(hall_from_motor(x[1])).0 as f64);
                 rows.current_a
-                    .push(mean_current + CURRENT_NOISE_A * rng.normal());
+                    .push(mean_current + offset_a + CURRENT_NOISE_A * rng.normal());
             }
         }
     }
@@ -725,14 +823,7 @@ impl GenCase {
             index: 0,
             scenario: "nominal".into(),
             hidden: vec![],
-            truth: Truth {
-                plant: PlantParams::PAPER,
-                rack_friction_n: 0.0,
-                belt_play_deg: 0.0,
-                dahl_force_n: 0.0,
-                dahl_stiffness_n_per_mm: 0.0,
-                reference_delay_s: 0.0,
-            },
+            truth: Truth::effect_free(PlantParams::PAPER),
             log_rate_hz,
             skew_s: 0.0,
             reference,

@@ -294,7 +294,8 @@ fn run(case: &GenCase, seed: u64) -> Traffic {
                 target = tg;
             }
         }
-        let measured = x[0] + CURRENT_SENSOR_NOISE_A * noise.normal();
+        let measured =
+            x[0] + truth.unmodelled.current_offset_a + CURRENT_SENSOR_NOISE_A * noise.normal();
         if n >= sync_phase && (n - sync_phase).is_multiple_of(ticks_per_period) {
             drive.latch(target);
             let position = (x[1] / inc_rad).round() * inc_rad;
