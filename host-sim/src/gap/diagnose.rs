@@ -4,14 +4,14 @@
 use super::diagnosis::{
     Candidate, Diagnosis, MAX_FIT_S, MIN_IMPROVEMENT, MIN_PAIR_IMPROVEMENT,
     MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, OFFSET_MIN_SHARE, OFFSET_SIGNIFICANCE,
-    Options, UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict, VerdictKind,
+    Options, SCALE_MIN_SHARE, UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict, VerdictKind,
 };
 use super::finding::{self, BestSingle, Finding, Shortfall};
 use super::model::{Effects, SimOut};
 use super::pairs;
 use super::refits::{self, Refits};
 use super::rig::{CarDrive, Rig, RigModel};
-use super::score::{cost, effort_offset, repeatability, simulate};
+use super::score::{cost, effort_offset, effort_scale, repeatability, simulate};
 use super::search::{FitOut, Progress, fit_effects, fit_window, make_candidate, parallel_map};
 use super::signature::{self, Signature};
 use super::{EffectKind, Fit, Record, Scorer, identify, locate};
@@ -120,6 +120,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let fit0 = scorer.fit(rec, &sim0);
     let repeat = repeatability(rig, rec, &scorer, &sim0);
     let offset = effort_offset(rec, &sim0, scorer.skip());
+    let scale = effort_scale(rec, &sim0, scorer.skip());
     let signature = log_signature(rig, rec, &sim0, opts);
     let (effects, mut findings) = rule_out(rig, signature.as_ref(), &opts.effects);
     // A long log is fitted on the window where the nominal residual is largest (the figures
@@ -255,6 +256,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         noise: scorer.noise(),
         repeatability: repeat,
         effort_offset: offset,
+        effort_scale: scale,
         signature,
         verdict,
         ranking,
@@ -314,7 +316,19 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             share_pct: 100.0 * offset.share_of_effort(),
         });
     }
-    let unexplained = far_above_floor || offset_left;
+    // So is a current the log keeps at a share off the model's throughout: a torque constant
+    // off Table 1, or a current scaled wrong, which a refit of Table 4 mimics only by moving
+    // every inertia, damping and stiffness together, and often does not reach.
+    let scale_left = verdict_candidate.is_none()
+        && scale.significance() > OFFSET_SIGNIFICANCE
+        && (scale.factor - 1.0).abs() > SCALE_MIN_SHARE;
+    if scale_left {
+        findings.push(Finding::EffortScale {
+            factor: scale.factor,
+            standard_error: scale.standard_error,
+        });
+    }
+    let unexplained = far_above_floor || offset_left || scale_left;
     if unexplained {
         findings.push(Finding::TryElse);
     }

@@ -5,7 +5,7 @@ use super::effects::{apply_all, specs_of};
 use super::fit::FitOptions;
 use super::model::Effects;
 use super::rig::Rig;
-use super::score::Offset;
+use super::score::{Offset, Scale};
 use super::{EffectKind, Fit, Noise, identify, locate};
 use std::collections::BTreeMap;
 
@@ -87,6 +87,8 @@ pub struct Diagnosis {
     pub repeatability: Fit,
     /// The constant part of the nominal model's effort residual (`score::effort_offset`).
     pub effort_offset: Offset,
+    /// How many times the nominal model's effort the log's is (`score::effort_scale`).
+    pub effort_scale: Scale,
     /// What the log says of play in the belt and Coulomb friction at the rack, by itself or
     /// against the nominal model's own balance on an EPOS4 car
     /// (`gap::signature`), on the paper rig with a motor column; the candidates it rules out
@@ -140,6 +142,13 @@ pub const OFFSET_SIGNIFICANCE: f64 = 6.0;
 /// rounding of the drive's current (effect-free cars: at most 0.1 %; a 0.3 A offset: 2.4-3.4 %
 /// of sweeps of 9-12 A RMS).
 pub const OFFSET_MIN_SHARE: f64 = 0.01;
+/// With nothing named, a log whose effort is more than this share off the nominal model's
+/// throughout (`score::effort_scale`, by [`OFFSET_SIGNIFICANCE`] standard errors or more) is
+/// not the nominal car: a torque constant or a current scale off. Effect-free cars of the
+/// independent world (Table 4 off by up to 10 %, either drive, every logger): at most 7.2 %
+/// off; the simulated car: 1.2 %; the world's cars with the torque constant x0.7-0.8 or
+/// x1.25-1.4: 22-37 %.
+pub const SCALE_MIN_SHARE: f64 = 0.15;
 pub const PARAMETER_ITERATIONS: usize = 6;
 /// The refit is the verdict when its cost is below this share of the best effect
 /// verdict's (or of the nominal cost), besides removing what an effect must remove...
@@ -219,6 +228,12 @@ impl Diagnosis {
             100.0 * r.gof,
             100.0 * r.gof_output,
             100.0 * r.gof_effort
+        );
+        let sc = &self.effort_scale;
+        let _ = writeln!(
+            s,
+            "effort scale: x{:.3} the nominal model's (standard error {:.3})",
+            sc.factor, sc.standard_error
         );
         let o = &self.effort_offset;
         let _ = writeln!(

@@ -187,6 +187,9 @@ pub enum Finding {
         /// Of the logged effort's RMS, %.
         share_pct: f64,
     },
+    /// The log's effort is a share off the nominal model's throughout (`score::effort_scale`):
+    /// a torque constant or a current scale off, which no effect makes.
+    EffortScale { factor: f64, standard_error: f64 },
     /// The log's own torque balance (`gap::signature`) shows less of what this candidate
     /// models than half the smallest size it is named at: it is not fitted, so it cannot
     /// stand in for another effect.
@@ -461,6 +464,16 @@ impl fmt::Display for Finding {
                  {share_pct:.1} % of the effort's RMS) that no candidate effect and no Table 4 \
                  parameter makes: a current sensor's offset, or a logger's zero",
                 mean.abs() / standard_error.max(1e-12)
+            ),
+            Finding::EffortScale {
+                factor,
+                standard_error,
+            } => write!(
+                f,
+                "the effort is x{factor:.2} the nominal model's throughout ({:.0} standard \
+                 errors), which no candidate effect makes: the motor's torque constant off \
+                 Table 1, or the current logged in another scale",
+                (factor - 1.0).abs() / standard_error.max(1e-12)
             ),
             Finding::RuledOutByLog {
                 effect,

@@ -45,6 +45,6 @@ pub use diagnosis::{Candidate, Diagnosis, Options, Verdict, VerdictKind};
 pub use effects::EffectKind;
 pub(crate) use record::interp_at;
 pub use record::{CurrentSamples, LogTiming, Record};
-pub use score::{Fit, Noise, Scorer, combined_gof, repeatability, simulate};
+pub use score::{Fit, Noise, Offset, Scale, Scorer, combined_gof, repeatability, simulate};
 pub use search::Progress;
 pub(crate) use search::parallel_map;

@@ -240,6 +240,10 @@ pub struct CaseResult {
     pub ranking: Vec<super::Candidate>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub parameters: Option<super::identify::Identified>,
+    /// The constant and the scale the log's effort keeps against the nominal model's.
+    pub effort_offset: super::Offset,
+    /// How many times the nominal model's effort the log's is.
+    pub effort_scale: super::Scale,
     /// The logger that wrote the case's file, in a run under several loggers.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub logger: Option<LoggedBy>,
@@ -317,6 +321,8 @@ fn diagnosed(
         reason: d.verdict.reason.clone(),
         ranking: d.ranking,
         parameters: d.parameters,
+        effort_offset: d.effort_offset,
+        effort_scale: d.effort_scale,
         case,
         logger,
     }

@@ -144,33 +144,59 @@ fn the_epos4_car_under_the_ecu_controller_on_a_sweep_is_none() {
 /// (`the_default_epos4_car_on_a_sweep_is_none_against_its_own_chain`).
 #[test]
 fn a_current_that_reads_high_is_unexplained_with_its_offset_named() {
-    for controller in [ControllerKind::Paper, ControllerKind::Ecu] {
-        let (d, _) = diagnosed_as_logged(
-            epos4(controller),
-            profile::sweep(Sweep::PAPER).unwrap(),
-            |log| {
-                for a in &mut log.current_a {
-                    *a += 0.3;
-                }
-            },
-        );
-        assert_eq!(
-            d.verdict.kind,
-            host_sim::gap::VerdictKind::Unexplained,
-            "{controller:?}: {}",
-            d.verdict.reason
-        );
-        assert!(
-            d.verdict.reason.contains("a current sensor's offset"),
-            "{}",
-            d.verdict.reason
-        );
+    for d in unexplained_with_the_current(|a| a + 0.3, "a current sensor's offset") {
         assert!(
             (d.effort_offset.mean - 0.3).abs() < 0.03,
             "offset {:.3} A",
             d.effort_offset.mean
         );
     }
+}
+
+/// The default car's sweep with its current logged 0.8 times too small (a logger's scale, or
+/// a drive whose torque constant is a quarter above Table 1's, to the model the same): no
+/// candidate makes a current a share off throughout, and a refit of Table 4 would have to move
+/// every parameter together. Before the scale was read the log was already `unexplained` (its
+/// nominal GoF 82.6 %, far above its floor), but the report did not say what was left.
+#[test]
+fn a_current_logged_in_another_scale_is_unexplained_with_its_scale_named() {
+    for d in unexplained_with_the_current(|a| 0.8 * a, "x0.80 the nominal model's") {
+        assert!(
+            (d.effort_scale.factor - 0.8).abs() < 0.02,
+            "scale x{:.3}",
+            d.effort_scale.factor
+        );
+    }
+}
+
+/// The default car's sweep under either controller with each logged current passed through
+/// `logged`, diagnosed; each must be `unexplained` with a reason that `says`.
+fn unexplained_with_the_current(
+    logged: impl Fn(f64) -> f64,
+    says: &str,
+) -> Vec<host_sim::gap::Diagnosis> {
+    [ControllerKind::Paper, ControllerKind::Ecu]
+        .into_iter()
+        .map(|controller| {
+            let (d, _) = diagnosed_as_logged(
+                epos4(controller),
+                profile::sweep(Sweep::PAPER).unwrap(),
+                |log| {
+                    for a in &mut log.current_a {
+                        *a = logged(*a);
+                    }
+                },
+            );
+            assert_eq!(
+                d.verdict.kind,
+                host_sim::gap::VerdictKind::Unexplained,
+                "{controller:?}: {}",
+                d.verdict.reason
+            );
+            assert!(d.verdict.reason.contains(says), "{}", d.verdict.reason);
+            d
+        })
+        .collect()
 }
 
 /// One car of the chain selftest: what it hides, as `--plant-effects` takes it, and the
