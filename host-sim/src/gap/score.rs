@@ -207,7 +207,7 @@ pub const OFFSET_BLOCKS: usize = 16;
 pub struct Offset {
     /// The intercept, in the effort's unit (A on the paper rig).
     pub mean: f64,
-    /// Its standard error, from the scatter of the intercept over [`OFFSET_BLOCKS`]
+    /// Its standard error, from the scatter of the intercept over `OFFSET_BLOCKS` (16)
     /// contiguous blocks (the residual is far from white: a block's mean carries its
     /// correlation).
     pub standard_error: f64,
@@ -273,7 +273,7 @@ pub fn effort_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
 pub struct Scale {
     /// The log's effort over the model's (1 = the same).
     pub factor: f64,
-    /// Its standard error, by a jackknife over [`OFFSET_BLOCKS`] contiguous blocks.
+    /// Its standard error, by a jackknife over `OFFSET_BLOCKS` (16) contiguous blocks.
     pub standard_error: f64,
 }
 
