@@ -672,7 +672,7 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
         let hall = hall_from_motor(x[1]);
         cascade.position_step(hall);
         for _ in 0..CURRENT_TICKS_PER_POSITION_TICK {
-            let sensed = x[0] + truth.unmodelled.current_offset_a;
+            let sensed = x[0] + offset_a;
             let v = cascade.current_step(Amps(sensed as f32)).voltage.0 as f64;
             // The current over the step, by the trapezoid of its ends.
             let i0 = x[0];

@@ -269,7 +269,7 @@ pub fn effort_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
 /// off Table 1 leaves (the same motion takes 1/x the current), or a current scaled wrong by a
 /// logger. Table 4 off by a few per cent scales the current by as little; a car off it by x1.5
 /// in one parameter changes its shape more than its size.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Scale {
     /// The log's effort over the model's (1 = the same).
     pub factor: f64,
@@ -278,13 +278,20 @@ pub struct Scale {
 }
 
 impl Scale {
+    /// No reading (a log too short for its blocks, or a model effort without motion): the
+    /// factor 1, nothing off, so no verdict rests on it.
+    pub const UNREAD: Scale = Scale {
+        factor: 1.0,
+        standard_error: 0.0,
+    };
+
     /// How far the factor stands from 1, in standard errors.
     pub fn significance(&self) -> f64 {
         (self.factor - 1.0).abs() / self.standard_error.max(1e-12)
     }
 }
 
-/// Rows a moving mean of [`effort_scale`] spans, s: longer than the current's chatter (a
+/// The span of [`effort_scale`]'s moving mean, s: longer than the current's chatter (a
 /// loop's quantised feedback, which a model and a car do not share sample for sample), short
 /// beside a sweep's or a track's motion.
 const SCALE_SMOOTHING_S: f64 = 0.05;
@@ -307,7 +314,7 @@ pub fn effort_scale(rec: &Record, sim: &SimOut, skip: usize) -> Scale {
     let y = smooth(&rec.effort[s..n]);
     let len = x.len() / OFFSET_BLOCKS;
     if len < 2 {
-        return Scale::default();
+        return Scale::UNREAD;
     }
     // Each block's sums, so the slope without any one block is cheap.
     let sums: Vec<[f64; 5]> = x
@@ -339,7 +346,7 @@ pub fn effort_scale(rec: &Record, sim: &SimOut, skip: usize) -> Scale {
     let mean = without.iter().sum::<f64>() / k;
     let var = (k - 1.0) / k * without.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
     if !factor.is_finite() || !var.is_finite() {
-        return Scale::default();
+        return Scale::UNREAD;
     }
     Scale {
         factor,
@@ -436,11 +443,13 @@ mod tests {
     #[test]
     fn a_log_too_short_or_without_motion_has_no_scale() {
         let (rec, sim) = record_and_model(|_| (1.0, 0.0));
-        assert_eq!(effort_scale(&rec, &sim, 0), Scale::default());
+        let still = effort_scale(&rec, &sim, 0);
+        assert_eq!(still, Scale::UNREAD);
+        assert_eq!(still.significance(), 0.0);
         let (mut rec, mut sim) = record_and_model(|t| (t, t));
         rec.effort.truncate(20);
         sim.effort.truncate(20);
-        assert_eq!(effort_scale(&rec, &sim, 0), Scale::default());
+        assert_eq!(effort_scale(&rec, &sim, 0), Scale::UNREAD);
     }
 
     #[test]
