@@ -82,6 +82,10 @@ pub struct Tried {
     pub controller: Controller,
     /// EPOS4 only: the SYNC after each reference sample, s.
     pub sync_after_push_s: Option<f64>,
+    /// Direct drive only: how far into its period the ECU takes each reference sample, s
+    /// (whole position-loop ticks, [`super::rig::PaperModel::push_tick`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub push_after_s: Option<f64>,
     /// Rows the reference column was moved later by: 1 when the logger writes at each row
     /// the reference that starts there (the ECU uses it from that instant), 0 when the one in
     /// force over the period that ends there (host-sim's and steer-can's logs).
@@ -113,6 +117,9 @@ pub struct CarChoice {
     pub drive_from: Source,
     pub controller_from: Source,
     pub sync_after_push_s: Option<f64>,
+    /// Direct drive: how far into its period the ECU takes each reference sample, s (fitted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub push_after_s: Option<f64>,
     /// The reference convention: `None` when the header states it, else the rows the
     /// reference column was moved by (see [`Tried::reference_shift_rows`]).
     pub reference_shift_rows: Option<usize>,
@@ -147,6 +154,12 @@ impl CarChoice {
         if let Some(s) = self.sync_after_push_s {
             line.push_str(&format!(
                 "; SYNC {:.2} ms after each reference sample (fitted)",
+                1e3 * s
+            ));
+        }
+        if let Some(s) = self.push_after_s {
+            line.push_str(&format!(
+                "; each reference sample taken {:.1} ms into its period (fitted)",
                 1e3 * s
             ));
         }
@@ -242,12 +255,25 @@ const SYNC_SEARCH_S: f64 = 10.0;
 /// car's is not refined: a phase moves the GoF by less.
 const PRUNE_GOF: f64 = 0.15;
 
-fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, sync: f64) -> Rig {
+/// The position-loop ticks into its period at which a direct-drive car may take each reference
+/// sample: the frame's time on the bus (0.1-0.3 ms at 500 kbit/s - 1 Mbit/s) and the wait for
+/// the next tick of the free-running 2 kHz loop (up to 0.5 ms) put it 0-2 ticks after the
+/// vehicle computer sent it.
+const PUSH_TICKS: [u32; 3] = [0, 1, 2];
+const POSITION_TICK_S: f64 = 1.0 / steering_ecu::paper_mode::POSITION_LOOP_HZ as f64;
+
+/// `rig` as the car `drive` + `controller`, its reference timed by `phase` (s after each
+/// reference sample): an EPOS4's SYNC, or the direct drive's position tick that takes it.
+fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, phase: f64) -> Rig {
     let mut r = rig.clone();
     if let RigModel::Paper(m) = &mut r.model {
         m.drive = drive;
         m.controller = controller;
-        m.epos4.sync_after_push_s = sync;
+        match drive {
+            CarDrive::Epos4 => m.epos4.sync_after_push_s = phase,
+            // A whole number of ticks, 0 to 2 (the `as` saturates anything else to 0).
+            CarDrive::Direct => m.push_tick = ((phase / POSITION_TICK_S).round() as u32).min(2),
+        }
     }
     r
 }
@@ -391,7 +417,11 @@ pub fn choose(
         for &c in &controllers {
             for &k in &shifts {
                 match d {
-                    CarDrive::Direct => jobs.push((d, c, 0.0, k)),
+                    CarDrive::Direct => jobs.extend(
+                        PUSH_TICKS
+                            .iter()
+                            .map(|&t| (d, c, f64::from(t) * POSITION_TICK_S, k)),
+                    ),
                     CarDrive::Epos4 => jobs.extend(SYNC_COARSE_S.iter().map(|&s| (d, c, s, k))),
                 }
             }
@@ -405,6 +435,7 @@ pub fn choose(
                 drive: d,
                 controller: c,
                 sync_after_push_s: (d == CarDrive::Epos4).then_some(s),
+                push_after_s: (d == CarDrive::Direct).then_some(s),
                 reference_shift_rows: k,
                 gof: fit.gof,
                 readout: None,
@@ -474,7 +505,7 @@ pub fn choose(
             rig,
             t.drive,
             t.controller,
-            t.sync_after_push_s.unwrap_or(0.0),
+            t.sync_after_push_s.or(t.push_after_s).unwrap_or(0.0),
         );
         if let (Some(readout), RigModel::Paper(m)) = (t.readout, &mut r.model) {
             m.epos4.readout = readout;
@@ -555,6 +586,7 @@ pub fn choose(
         drive_from: drive.map_or(Source::Fitted, |(_, s)| s),
         controller_from: controller.map_or(Source::Fitted, |(_, s)| s),
         sync_after_push_s: best.sync_after_push_s,
+        push_after_s: best.push_after_s,
         reference_shift_rows: fitted_convention.then_some(best.reference_shift_rows),
         timing_bound_s,
         compared_late,

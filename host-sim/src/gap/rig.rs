@@ -63,6 +63,13 @@ pub struct PaperModel {
     /// when the diagnosis is not told).
     #[serde(default)]
     pub epos4: Epos4Timing,
+    /// Direct drive: the position-loop tick (0.5 ms) into each reference period at which the
+    /// ECU takes that period's sample. The frame crosses the bus, and the next tick of the
+    /// ECU's free-running position loop takes it, so it lands a fraction of a millisecond
+    /// after the vehicle computer sent it. Fitted from the log when the diagnosis is not told
+    /// (0-2 ticks); 0 is the period's start.
+    #[serde(default)]
+    pub push_tick: u32,
     /// A delay the log's own timing can explain (its stamps' jitter, a reference convention
     /// the log does not state), s: a `delay` is named only beyond it.
     #[serde(default)]
@@ -299,6 +306,7 @@ impl Rig {
                 drive: CarDrive::Direct,
                 controller: crate::sim::Controller::Paper,
                 epos4: Epos4Timing::default(),
+                push_tick: 0,
                 timing_bound_s: 0.0,
             }),
             skip_s: 0.2,
