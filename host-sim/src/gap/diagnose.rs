@@ -3,8 +3,8 @@
 
 use super::diagnosis::{
     Candidate, Diagnosis, MAX_FIT_S, MIN_IMPROVEMENT, MIN_PAIR_IMPROVEMENT,
-    MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, OFFSET_MIN_SHARE, OFFSET_SIGNIFICANCE,
-    Options, SCALE_MIN_SHARE, UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict, VerdictKind,
+    MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, Options, UNEXPLAINED_BELOW_GOF,
+    UNEXPLAINED_RATIO, Verdict, VerdictKind,
 };
 use super::finding::{self, BestSingle, Finding, Shortfall};
 use super::model::{Effects, SimOut};
@@ -306,9 +306,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         && fit0.gof < UNEXPLAINED_BELOW_GOF;
     // A constant left in the effort is no noise and no car the table describes, whatever the
     // GoF: a log near the nominal one with it is not `none`.
-    let offset_left = verdict_candidate.is_none()
-        && offset.significance() > OFFSET_SIGNIFICANCE
-        && offset.share_of_effort() > OFFSET_MIN_SHARE;
+    let offset_left = verdict_candidate.is_none() && offset.stands_out();
     if offset_left {
         findings.push(Finding::EffortOffset {
             mean: offset.mean,
@@ -319,9 +317,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // So is a current the log keeps at a share off the model's throughout: a torque constant
     // off Table 1, or a current scaled wrong, which a refit of Table 4 mimics only by moving
     // every inertia, damping and stiffness together, and often does not reach.
-    let scale_left = verdict_candidate.is_none()
-        && scale.significance() > OFFSET_SIGNIFICANCE
-        && (scale.factor - 1.0).abs() > SCALE_MIN_SHARE;
+    let scale_left = verdict_candidate.is_none() && scale.stands_out();
     if scale_left {
         findings.push(Finding::EffortScale {
             factor: scale.factor,

@@ -2,6 +2,7 @@
 //! cost the fits minimise ([`Scorer`]) and the floors it is judged against.
 
 use super::Record;
+use super::diagnosis::{OFFSET_MIN_SHARE, OFFSET_SIGNIFICANCE, SCALE_MIN_SHARE};
 use super::model::{self, Effects, SimOut};
 use super::rig::{Rig, RigModel};
 
@@ -227,6 +228,22 @@ impl Offset {
     pub fn share_of_effort(&self) -> f64 {
         self.mean.abs() / self.effort_rms.max(1e-12)
     }
+
+    /// A constant no noise and no car the table describes leaves: beyond
+    /// [`OFFSET_SIGNIFICANCE`] standard errors and [`OFFSET_MIN_SHARE`] of the effort.
+    pub fn stands_out(&self) -> bool {
+        stands_out(
+            self.significance(),
+            self.share_of_effort(),
+            OFFSET_MIN_SHARE,
+        )
+    }
+}
+
+/// A reading of the effort against the model's is the log's own, not noise, beyond
+/// [`OFFSET_SIGNIFICANCE`] standard errors, and worth a team's look beyond `min_share`.
+fn stands_out(significance: f64, share: f64, min_share: f64) -> bool {
+    significance > OFFSET_SIGNIFICANCE && share > min_share
 }
 
 /// The effort's [`Offset`] of `sim` against `rec`, from `skip` on.
@@ -288,6 +305,16 @@ impl Scale {
     /// How far the factor stands from 1, in standard errors.
     pub fn significance(&self) -> f64 {
         (self.factor - 1.0).abs() / self.standard_error.max(1e-12)
+    }
+
+    /// A current a share off the model's throughout: beyond [`OFFSET_SIGNIFICANCE`] standard
+    /// errors and [`SCALE_MIN_SHARE`] from 1.
+    pub fn stands_out(&self) -> bool {
+        stands_out(
+            self.significance(),
+            (self.factor - 1.0).abs(),
+            SCALE_MIN_SHARE,
+        )
     }
 }
 
