@@ -802,3 +802,38 @@ pub fn choose_for_log(
     };
     choose(rig, rec, drive, controller, says, threads)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn push_tick_of(phase: f64) -> u32 {
+        match with_car(&Rig::paper(), CarDrive::Direct, Controller::Ecu, phase).model {
+            RigModel::Paper(m) => m.push_tick,
+            _ => unreachable!("the paper rig"),
+        }
+    }
+
+    #[test]
+    fn a_direct_cars_phase_is_a_whole_position_tick_within_the_fitted_range() {
+        assert_eq!(push_tick_of(0.0), 0);
+        assert_eq!(push_tick_of(0.0005), 1);
+        assert_eq!(push_tick_of(0.0007), 1);
+        assert_eq!(push_tick_of(0.001), 2);
+        // Beyond the range, or no number: the nearest end.
+        assert_eq!(push_tick_of(0.004), 2);
+        assert_eq!(push_tick_of(-0.001), 0);
+        assert_eq!(push_tick_of(f64::NAN), 0);
+        assert_eq!(push_tick_of(f64::INFINITY), 2);
+    }
+
+    #[test]
+    fn an_epos4_cars_phase_is_its_sync_and_leaves_the_push_tick() {
+        let r = with_car(&Rig::paper(), CarDrive::Epos4, Controller::Paper, 0.004);
+        let RigModel::Paper(m) = r.model else {
+            unreachable!("the paper rig")
+        };
+        assert_eq!(m.epos4.sync_after_push_s, 0.004);
+        assert_eq!(m.push_tick, 0);
+    }
+}
