@@ -117,6 +117,56 @@ impl Series {
     }
 }
 
+/// The fewest frames, and the shortest span (µs), over which [`grid_drift`] reads a drift.
+const DRIFT_MIN_FRAMES: usize = 100;
+const DRIFT_MIN_SPAN_US: f64 = 5e6;
+
+/// The period of a train of frames sent every `nominal` µs (some may be lost), µs: the
+/// least-squares slope of their times on their period counts, each count the last one plus
+/// the whole periods in the gap (so a grid that walks a period or more over the recording is
+/// still counted right). `None` where more than one gap in ten is no whole number of periods
+/// (within a quarter): no such train.
+fn grid_period(t: &[f64], nominal: f64) -> Option<f64> {
+    let (&first, &last) = (t.first()?, t.last()?);
+    if t.len() < DRIFT_MIN_FRAMES || last - first < DRIFT_MIN_SPAN_US || nominal <= 0.0 {
+        return None;
+    }
+    let mut k = Vec::with_capacity(t.len());
+    let mut count = 0.0;
+    let mut off_grid = 0usize;
+    for (i, x) in t.iter().enumerate() {
+        if i > 0 {
+            let periods = (x - t[i - 1]) / nominal;
+            if (periods - periods.round()).abs() > 0.25 || periods.round() < 1.0 {
+                off_grid += 1;
+            }
+            count += periods.round().max(1.0);
+        }
+        k.push(count);
+    }
+    if off_grid * 10 > t.len() {
+        return None;
+    }
+    let n = t.len() as f64;
+    let (km, tm) = (k.iter().sum::<f64>() / n, t.iter().sum::<f64>() / n);
+    let (mut skt, mut skk) = (0.0, 0.0);
+    for (ki, ti) in k.iter().zip(t) {
+        skt += (ki - km) * (ti - tm);
+        skk += (ki - km) * (ki - km);
+    }
+    let period = skt / skk;
+    (period.is_finite() && period > 0.5 * nominal && period < 1.5 * nominal).then_some(period)
+}
+
+/// How fast the SYNC grid (the drive's TPDO1 times, `tpdo_us`) walks against the reference
+/// frames (`reference_us`), s per s: its period over theirs, less one. `None` where either is
+/// too short to tell (under [`DRIFT_MIN_FRAMES`] frames or 5 s).
+pub fn grid_drift(tpdo_us: &[f64], reference_us: &[f64], nominal_us: f64) -> Option<f64> {
+    let sync = grid_period(tpdo_us, nominal_us)?;
+    let reference = grid_period(reference_us, nominal_us)?;
+    Some(sync / reference - 1.0)
+}
+
 /// The log of `frames` (in time order), rows per `rows`.
 pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built, BringupError> {
     let mut refs: Vec<(u64, f64, AsState)> = Vec::new();
@@ -187,6 +237,12 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
                 .to_string(),
         );
     }
+    // Each TPDO1 answers a SYNC; read before the PDOs may become the motor series.
+    let sync_drift = grid_drift(
+        &epos_motor.t,
+        &refs.iter().map(|r| r.0 as f64).collect::<Vec<_>>(),
+        PERIOD_US as f64,
+    );
     let from_epos = motor.t.is_empty() && !epos_motor.t.is_empty() && !epos_current.t.is_empty();
     if from_epos {
         notes.push(
@@ -277,6 +333,12 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
     ));
     // The reference in force over the period that ends at the row's t.
     log.comments.push("reference: period-ending".to_string());
+    // The ECU's SYNC grid runs on the ECU's clock, the reference frames on the vehicle
+    // computer's: how fast the one walks against the other, read from the bus.
+    if let Some(d) = sync_drift.filter(|_| drive == "epos4") {
+        log.comments
+            .push(format!("sync-drift: {:+.1} ppm", 1e6 * d));
+    }
     if log.is_empty() {
         return Err(BringupError::Log {
             reason: match rows {
@@ -347,6 +409,48 @@ mod tests {
 
     fn decoder() -> Decoder {
         Decoder::new(NodeId::new(1).unwrap(), PositionScale::new(84).unwrap())
+    }
+
+    /// Frames sent every 10 ms x (1 + `drift`) from `phase_us`, one in 50 lost, each stamped
+    /// up to 40 us late (a receiver's jitter).
+    fn train(n: u64, drift: f64, phase_us: f64) -> Vec<f64> {
+        (0..n)
+            .filter(|k| k % 50 != 7)
+            .map(|k| phase_us + k as f64 * 10_000.0 * (1.0 + drift) + ((k * 37) % 41) as f64)
+            .collect()
+    }
+
+    #[test]
+    fn a_sync_grid_that_walks_against_the_references_is_read_from_their_times() {
+        for drift in [0.0, 35e-6, -91e-6, 2e-4] {
+            let got = grid_drift(
+                &train(3000, drift, 1_850.0),
+                &train(3000, 0.0, 0.0),
+                10_000.0,
+            )
+            .unwrap();
+            assert!((got - drift).abs() < 0.5e-6, "{drift}: read {got}");
+        }
+        // Both on a clock 100 ppm fast: no walk between them.
+        let got = grid_drift(&train(3000, 1e-4, 900.0), &train(3000, 1e-4, 0.0), 10_000.0).unwrap();
+        assert!(got.abs() < 0.5e-6, "{got}");
+    }
+
+    #[test]
+    fn too_few_frames_or_too_short_a_span_read_no_drift() {
+        assert_eq!(
+            grid_drift(&train(60, 1e-4, 0.0), &train(3000, 0.0, 0.0), 10_000.0),
+            None
+        );
+        assert_eq!(grid_drift(&train(3000, 1e-4, 0.0), &[], 10_000.0), None);
+        // 400 frames packed into 4 s (every 10 ms, but the span is under 5 s).
+        assert_eq!(
+            grid_drift(&train(400, 0.0, 0.0), &train(3000, 0.0, 0.0), 10_000.0),
+            None
+        );
+        // Frames whose times are not a 10 ms train at all.
+        let wild: Vec<f64> = (0..1000).map(|k| f64::from(k) * 25_000.0).collect();
+        assert_eq!(grid_drift(&wild, &train(3000, 0.0, 0.0), 10_000.0), None);
     }
 
     #[test]
