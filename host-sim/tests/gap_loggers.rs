@@ -39,6 +39,7 @@ fn team(reference: ReferenceConvention, rate_hz: u32, jitter: bool, drop: bool) 
         drop_chance: if drop { LOGGER_DROP_CHANCE } else { 0.0 },
         header: false,
         car: LoggedCar::Direct,
+        drifting_clock: false,
     }
 }
 

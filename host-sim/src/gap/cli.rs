@@ -72,7 +72,9 @@ pub struct GapArgs {
     /// (ours always, first): `ours`, `drawn` (a team's logger drawn with each case), or
     /// `ending|starting-100|200|1000[-jitter][-drop]`; or the world's EPOS4 car (its own drive
     /// at 25 kHz / 2.5 kHz) as `epos4-convert` (steer-can convert's rows and header) or
-    /// `epos4-status[-jitter][-drop]` (a row as each TPDO arrives, no header); bare `--loggers`
+    /// `epos4-status[-jitter][-drop]` (a row as each TPDO arrives, no header), either with
+    /// `-drift` after `epos4-convert`/`epos4-status` (the car's ECU on a clock of its own,
+    /// 20-100 ppm off the vehicle computer's: its SYNC grid walks); bare `--loggers`
     /// is `drawn`. Prints per logger the verdicts right, those changed against ours, the
     /// confusion matrix. With `--drive` / `--controller` the car is given, as to `gap FILE`.
     #[arg(long, value_delimiter = ',', num_args = 0.., default_missing_value = "drawn", value_name = "LIST")]

@@ -10,7 +10,7 @@
 //! SYNC's phase is not in any header: the ECU's SYNC grid runs on its own clock, so it is
 //! searched on every EPOS4 log.
 
-use super::model::Effects;
+use super::model::{Effects, MAX_SYNC_DRIFT};
 use super::rig::{CarDrive, Epos4Readout, Rig, RigModel};
 use super::{Fit, Record, Scorer, parallel_map, simulate};
 use crate::sim::Controller;
@@ -24,6 +24,10 @@ pub struct LogHeader {
     pub current: Option<String>,
     /// `# reference: ...` as written.
     pub reference: Option<String>,
+    /// `# sync-drift: +35.2 ppm`: how fast the EPOS4 car's SYNC grid walks against the
+    /// reference frames, s per s, as `steer-can convert` reads it off the bus.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sync_drift: Option<f64>,
 }
 
 impl LogHeader {
@@ -49,6 +53,21 @@ impl LogHeader {
                 }
                 "current" => h.current = Some(v.to_string()),
                 "reference" => h.reference = Some(v.to_string()),
+                "sync-drift" => {
+                    h.sync_drift = Some(
+                        v.strip_suffix("ppm")
+                            .and_then(|n| n.trim().parse::<f64>().ok())
+                            .filter(|d| d.is_finite() && d.abs() <= 1e6 * MAX_SYNC_DRIFT)
+                            .map(|d| d / 1e6)
+                            .ok_or_else(|| {
+                                format!(
+                                    "header `# sync-drift: {v}`: expected parts per million \
+                                     within +-{:.0}, e.g. `+35.2 ppm`",
+                                    1e6 * MAX_SYNC_DRIFT
+                                )
+                            })?,
+                    )
+                }
                 _ => {}
             }
         }
@@ -86,6 +105,11 @@ pub struct Tried {
     /// (whole position-loop ticks, [`super::rig::PaperModel::push_tick`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub push_after_s: Option<f64>,
+    /// EPOS4 only: the drift of the SYNC grid its model runs, s per s, where the header gives
+    /// one and it fits the log better than one SYNC phase; `sync_after_push_s` is then the
+    /// phase at the log's start.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sync_drift: Option<f64>,
     /// Rows the reference column was moved later by: 1 when the logger writes at each row
     /// the reference that starts there (the ECU uses it from that instant), 0 when the one in
     /// force over the period that ends there (host-sim's and steer-can's logs).
@@ -120,6 +144,14 @@ pub struct CarChoice {
     /// Direct drive: how far into its period the ECU takes each reference sample, s (fitted).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub push_after_s: Option<f64>,
+    /// EPOS4: how fast its SYNC grid walks against the reference, s per s, as the model runs
+    /// it: the header's, where it fits the log better than one SYNC phase
+    /// (`sync_after_push_s` is then the phase at the log's start).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sync_drift: Option<f64>,
+    /// EPOS4: the drift the header states (`# sync-drift:`), run or not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub header_sync_drift: Option<f64>,
     /// The reference convention: `None` when the header states it, else the rows the
     /// reference column was moved by (see [`Tried::reference_shift_rows`]).
     pub reference_shift_rows: Option<usize>,
@@ -157,6 +189,19 @@ impl CarChoice {
                 1e3 * s
             ));
         }
+        match (self.sync_drift, self.header_sync_drift) {
+            (Some(d), _) => line.push_str(&format!(
+                "; the SYNC grid walking {:+.1} ppm against the reference (the ECU's clock \
+                 against the vehicle computer's, from the header of the log)",
+                1e6 * d
+            )),
+            (None, Some(d)) if d != 0.0 => line.push_str(&format!(
+                "; the header's SYNC drift of {:+.1} ppm not run: one SYNC phase fits the log \
+                 better",
+                1e6 * d
+            )),
+            _ => {}
+        }
         if let Some(s) = self.push_after_s {
             line.push_str(&format!(
                 "; each reference sample taken {:.1} ms into its period (fitted)",
@@ -167,7 +212,7 @@ impl CarChoice {
             line.push_str(&format!(
                 "; the drive's samples read as {}, the column {:.2} ms old (fitted; the header \
                  does not say)",
-                if r.current_at_row > 0.75 {
+                if r.rows_per_sync() {
                     "a row per SYNC (the current at the row's end)"
                 } else {
                     "steer-can convert reads them (the current at the row's middle)"
@@ -374,6 +419,9 @@ pub struct LogSays {
     /// EPOS4 car's samples were read into the rows (`steer-can convert`'s way).
     pub current_stated: bool,
     pub timing: super::LogTiming,
+    /// How fast an EPOS4 car's SYNC grid walks against the reference frames, s per s, where
+    /// the header says (`# sync-drift:`); the model runs it ([`super::rig::Epos4Timing::sync_drift`]).
+    pub sync_drift: Option<f64>,
 }
 
 /// The car for a log on the paper rig: `drive` and `controller` where given (the command line
@@ -436,6 +484,7 @@ pub fn choose(
                 controller: c,
                 sync_after_push_s: (d == CarDrive::Epos4).then_some(s),
                 push_after_s: (d == CarDrive::Direct).then_some(s),
+                sync_drift: None,
                 reference_shift_rows: k,
                 gof: fit.gof,
                 readout: None,
@@ -507,15 +556,37 @@ pub fn choose(
             t.controller,
             t.sync_after_push_s.or(t.push_after_s).unwrap_or(0.0),
         );
-        if let (Some(readout), RigModel::Paper(m)) = (t.readout, &mut r.model) {
-            m.epos4.readout = readout;
+        if let RigModel::Paper(m) = &mut r.model {
+            if let Some(readout) = t.readout {
+                m.epos4.readout = readout;
+            }
+            m.epos4.sync_drift = t.sync_drift.unwrap_or(0.0);
         }
         r
     };
-    // The cars compared on the whole log.
+    // The cars compared on the whole log; an EPOS4 car also with its SYNC grid walking as the
+    // header says, where that fits the log better.
     let whole = parallel_map(&best_of_car, threads, |t| {
-        let fit = nominal_fit(&rig_of(t), &records[index_of(t.reference_shift_rows)]);
-        Tried { gof: fit.gof, ..*t }
+        let on = &records[index_of(t.reference_shift_rows)];
+        let one_phase = Tried {
+            gof: nominal_fit(&rig_of(t), on).gof,
+            ..*t
+        };
+        match (says.sync_drift, t.sync_after_push_s) {
+            (Some(d), Some(phase)) if t.drive == CarDrive::Epos4 && d != 0.0 => {
+                let walking = drifting(one_phase, phase, d, on.len() as f64 * on.dt);
+                let walking = Tried {
+                    gof: nominal_fit(&rig_of(&walking), on).gof,
+                    ..walking
+                };
+                if walking.gof > one_phase.gof {
+                    walking
+                } else {
+                    one_phase
+                }
+            }
+            _ => one_phase,
+        }
     });
     // A reference that reaches the ECU late looks, to a car's nominal model, much like the
     // EPOS4's latch at its SYNC and its interpolation over the period: a direct-drive car 40 ms
@@ -587,6 +658,8 @@ pub fn choose(
         controller_from: controller.map_or(Source::Fitted, |(_, s)| s),
         sync_after_push_s: best.sync_after_push_s,
         push_after_s: best.push_after_s,
+        sync_drift: best.sync_drift,
+        header_sync_drift: says.sync_drift.filter(|_| best.drive == CarDrive::Epos4),
         reference_shift_rows: fitted_convention.then_some(best.reference_shift_rows),
         timing_bound_s,
         compared_late,
@@ -599,6 +672,21 @@ pub fn choose(
     }
     let record = records[index_of(best.reference_shift_rows)].clone();
     (chosen, record, Some(choice))
+}
+
+/// `car` (an EPOS4 car whose SYNC phase `phase` was fitted on the head of the log) with its
+/// SYNC grid walking `drift` s per s over a log of `duration` s: the head's phase holds at
+/// the middle of the head, where it was fitted, so the phase at the log's start is that less
+/// the walk to there, within a period.
+fn drifting(car: Tried, phase: f64, drift: f64, duration: f64) -> Tried {
+    let period = 1.0 / steering_ecu::paper_mode::REFERENCE_HZ as f64;
+    let middle = 0.5 * duration.min(SYNC_SEARCH_S);
+    let tick = SYNC_FINE_STEP_S;
+    Tried {
+        sync_after_push_s: Some((phase - drift * middle - tick).rem_euclid(period) + tick),
+        sync_drift: Some(drift),
+        ..car
+    }
 }
 
 fn sync_of(rig: &Rig) -> f64 {
@@ -799,6 +887,7 @@ pub fn choose_for_log(
         reference_stated: header.reference.is_some(),
         current_stated: header.current.is_some(),
         timing,
+        sync_drift: header.sync_drift,
     };
     choose(rig, rec, drive, controller, says, threads)
 }
@@ -825,6 +914,34 @@ mod tests {
         assert_eq!(push_tick_of(-0.001), 0);
         assert_eq!(push_tick_of(f64::NAN), 0);
         assert_eq!(push_tick_of(f64::INFINITY), 2);
+    }
+
+    fn header(line: &str) -> Result<LogHeader, String> {
+        LogHeader::parse(&[line.to_string()])
+    }
+
+    #[test]
+    fn a_headers_sync_drift_is_read_in_parts_per_million() {
+        let d = header("sync-drift: +35.2 ppm").unwrap().sync_drift.unwrap();
+        assert!((d - 35.2e-6).abs() < 1e-12, "{d}");
+        let d = header("sync-drift: -91ppm").unwrap().sync_drift.unwrap();
+        assert!((d + 91e-6).abs() < 1e-12, "{d}");
+        assert_eq!(header("drive: epos4").unwrap().sync_drift, None);
+    }
+
+    #[test]
+    fn a_sync_drift_that_is_no_number_or_beyond_one_percent_is_refused() {
+        for bad in [
+            "sync-drift: fast",
+            "sync-drift: 35.2",
+            "sync-drift: nan ppm",
+            "sync-drift: inf ppm",
+            "sync-drift: 20000 ppm",
+            "sync-drift:  ppm",
+        ] {
+            let e = header(bad).unwrap_err();
+            assert!(e.contains("parts per million"), "{bad}: {e}");
+        }
     }
 
     #[test]

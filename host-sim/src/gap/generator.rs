@@ -178,6 +178,10 @@ pub struct Logger {
     /// EPOS4 car ([`super::generator_epos4`]) as `steer-can convert` or a team's logger of
     /// the drive's status frames writes it.
     pub car: LoggedCar,
+    /// The EPOS4 car only: its ECU runs on a clock of its own, drawn per car 20-100 ppm off
+    /// the vehicle computer's either way, so its SYNC grid walks against the reference frames
+    /// (a crystal against a PC's); otherwise one clock.
+    pub drifting_clock: bool,
 }
 
 /// The car a [`Logger`] logs, and how.
@@ -210,6 +214,7 @@ impl Logger {
             drop_chance: 0.0,
             header: true,
             car: LoggedCar::Direct,
+            drifting_clock: false,
         }
     }
 
@@ -244,6 +249,7 @@ impl Logger {
             drop_chance,
             header: false,
             car: LoggedCar::Direct,
+            drifting_clock: false,
         }
     }
 
@@ -259,6 +265,9 @@ impl Logger {
         }
         if self.drop_chance > 0.0 {
             s.push_str(&format!(" {:.0} % lost", 100.0 * self.drop_chance));
+        }
+        if self.drifting_clock {
+            s.push_str(" ECU clock drifting");
         }
         if self.header {
             s.push_str(" header");
@@ -762,12 +771,18 @@ pub fn log_of(case: &GenCase, seed: u64, logger: &Logger) -> crate::logfmt::Log 
     };
     let comments = if logger.car == LoggedCar::Epos4Convert {
         // What `steer-can convert` writes of an EPOS4 car: the bus shows the drive, not the
-        // ECU's controller.
-        vec![
+        // ECU's controller; and, where the ECU's clock runs apart, how fast the drive's PDOs
+        // (its SYNC grid) walk against the reference frames.
+        let mut c: Vec<String> = vec![
             "drive: epos4".into(),
             "current: sync-sample".into(),
             "reference: period-ending".into(),
-        ]
+        ];
+        if logger.drifting_clock {
+            let d = super::generator_epos4::ecu_clock_drift(case, seed, logger);
+            c.push(format!("sync-drift: {:+.1} ppm", 1e6 * d));
+        }
+        c
     } else if logger.car == LoggedCar::Epos4StatusFrame {
         Vec::new()
     } else if logger.header {

@@ -229,8 +229,58 @@ impl Phases {
     }
 }
 
-/// The car's run on the case's reference: the frames on its bus.
-fn run(case: &GenCase, seed: u64) -> Traffic {
+/// How far the car's ECU clock runs off the vehicle computer's for `logger`: its periods
+/// are (1 + this) of the vehicle's, so its SYNC grid walks this many seconds later per second
+/// (the model's `Epos4Timing::sync_drift`). Drawn per car, 20-100 ppm either way, from a
+/// stream of its own; 0 where the logger's car runs on one clock.
+pub fn ecu_clock_drift(case: &GenCase, seed: u64, logger: &Logger) -> f64 {
+    if !logger.drifting_clock {
+        return 0.0;
+    }
+    let mut rng = rng::seeded(
+        seed ^ (case.index as u64).wrapping_mul(0x5851_f42d_4c95_7f2d) ^ 0x1f83_d9ab_fb41_bd6b,
+    );
+    let ppm = rng.range(20.0, 100.0);
+    let sign = if rng.unit() < 0.5 { 1.0 } else { -1.0 };
+    sign * ppm * 1e-6
+}
+
+/// Events on the ECU's clock, counted in the world's (the vehicle computer's) ticks: the
+/// `i`-th at `phase + i period (1 + drift)`, rounded to a tick.
+struct EcuGrid {
+    phase: u64,
+    period: u64,
+    drift: f64,
+    next: u64,
+    count: u64,
+}
+
+impl EcuGrid {
+    fn new(phase: u64, period: u64, drift: f64) -> EcuGrid {
+        EcuGrid {
+            phase,
+            period: period.max(1),
+            drift,
+            next: phase,
+            count: 0,
+        }
+    }
+
+    /// Whether an event falls on tick `n` (called for every tick in order).
+    fn due(&mut self, n: u64) -> bool {
+        if n < self.next {
+            return false;
+        }
+        self.count += 1;
+        let at = self.count as f64 * self.period as f64 * (1.0 + self.drift);
+        self.next = (self.phase + at.round() as u64).max(n + 1);
+        true
+    }
+}
+
+/// The car's run on the case's reference, its ECU's clock `drift` off the vehicle's
+/// ([`ecu_clock_drift`]): the frames on its bus.
+fn run(case: &GenCase, seed: u64, drift: f64) -> Traffic {
     let mut traffic = Traffic::default();
     let truth = case.truth;
     let ode = Ode::new(truth);
@@ -263,6 +313,9 @@ fn run(case: &GenCase, seed: u64) -> Traffic {
     let status_phase = tick_of(phases.status_s);
     let encoder_ticks = tick_of(ENCODER_PERIOD_S);
     let encoder_phase = status_phase % encoder_ticks;
+    let mut sync_grid = EcuGrid::new(sync_phase, ticks_per_period, drift);
+    let mut status_grid = EcuGrid::new(status_phase, ticks_per_period, drift);
+    let mut encoder_grid = EcuGrid::new(encoder_phase, encoder_ticks, drift);
     // The ECU takes reference m when its frame arrives (late by the delay), the drive its
     // target one frame later.
     let arrive = tick_of(FRAME_S + truth.reference_delay_s);
@@ -296,7 +349,7 @@ fn run(case: &GenCase, seed: u64) -> Traffic {
         }
         let measured =
             x[0] + truth.unmodelled.current_offset_a + CURRENT_SENSOR_NOISE_A * noise.normal();
-        if n >= sync_phase && (n - sync_phase).is_multiple_of(ticks_per_period) {
+        if sync_grid.due(n) {
             drive.latch(target);
             let position = (x[1] / inc_rad).round() * inc_rad;
             traffic.tpdo1.push((t + TPDO1_AFTER_SYNC_S, position));
@@ -304,10 +357,10 @@ fn run(case: &GenCase, seed: u64) -> Traffic {
                 .tpdo2
                 .push((t + TPDO2_AFTER_SYNC_S, (measured * 1e3).round() * 1e-3));
         }
-        if n >= status_phase && (n - status_phase).is_multiple_of(ticks_per_period) {
+        if status_grid.due(n) {
             traffic.status.push((t, column_sample));
         }
-        if n >= encoder_phase && (n - encoder_phase).is_multiple_of(encoder_ticks) {
+        if encoder_grid.due(n) {
             // The encoder sits at the pinion end of the torsion bar (delta_P, section 3.2).
             let col = x[3] * p.screw_to_pinion() + (ANGLE_NOISE_DEG * noise.normal()).to_radians();
             column_sample = f64::from(encoder.angle(encoder.raw_from_angle(col)).0).to_degrees();
@@ -339,7 +392,7 @@ fn last_before(series: &[(f64, f64)], t: f64) -> Option<f64> {
 
 /// The case's EPOS4 car logged by `logger` (its `car` is one of the EPOS4 loggers).
 pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
-    let traffic = run(case, seed);
+    let traffic = run(case, seed, ecu_clock_drift(case, seed, logger));
     let mut rows = Rows::default();
     match logger.car {
         LoggedCar::Epos4StatusFrame => {

@@ -248,6 +248,10 @@ pub fn simulate_epos4(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
     epos4_samples(m, rec, fx).read(m.epos4.readout)
 }
 
+/// The largest drift of an EPOS4 car's SYNC grid the model takes, s per s (1 %: an ECU on
+/// its internal RC oscillator; a crystal is off by 1e-4 at most).
+pub const MAX_SYNC_DRIFT: f64 = 0.01;
+
 /// What the EPOS4 model's run gives before a log's readout reads it into rows.
 #[derive(Debug, Clone, Default)]
 pub struct Epos4Samples {
@@ -373,7 +377,20 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
         .to_degrees()
     };
     let per_motor = p.motor_per_pinion();
-    let sync_tick = latch.sync_tick;
+    // The SYNCs on the ECU's grid: the first at the latch's tick, then every period of the
+    // ECU's clock, which walks `sync_drift` against the reference's. A SYNC latches the target
+    // made from the newest reference, whichever period it falls in.
+    let drift = if m.epos4.sync_drift.is_finite() {
+        m.epos4.sync_drift.clamp(-MAX_SYNC_DRIFT, MAX_SYNC_DRIFT)
+    } else {
+        0.0
+    };
+    let sync_at = |i: u64| {
+        let walk = (i as f64 * ticks_per_period as f64 * drift).round() as i64;
+        (latch.sync_tick + i * ticks_per_period).saturating_add_signed(walk)
+    };
+    let mut syncs_done: u64 = 0;
+    let mut next_sync = sync_at(0);
     let n = reference.len();
     // SYNC samples: the tick they were taken at, the position (output units) and the current.
     let mut at = Vec::with_capacity(n + 1);
@@ -418,7 +435,7 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
                 target = s.next_target(Some(column));
             }
         }
-        for j in 1..=ticks_per_period {
+        for _ in 0..ticks_per_period {
             drive.tick(true);
             tick += 1;
             if tick.is_multiple_of(column_every) {
@@ -427,7 +444,9 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
             if tick % encoder_ticks == encoder_phase {
                 encoder_sample = column_deg(&drive);
             }
-            if j == sync_tick {
+            if tick >= next_sync {
+                syncs_done += 1;
+                next_sync = sync_at(syncs_done).max(tick + 1);
                 // The target as whole increments of the drive, then back at the wheel, as the
                 // drive reads it. The increments count from where the motor stood at power-up;
                 // taken here as the column's zero (a car powered up straight).
@@ -738,5 +757,74 @@ mod tests {
         // No number of ticks: the earliest latch, as for no latency at all.
         assert_eq!(latch(f64::NAN), (0, 1));
         assert_eq!(latch(f64::INFINITY), (0, 1));
+    }
+}
+
+#[cfg(test)]
+mod sync_drift {
+    use super::epos4_samples;
+    use crate::gap::Record;
+    use crate::gap::model::Effects;
+    use crate::gap::rig::{CarDrive, Rig, RigModel};
+
+    /// The EPOS4 model's SYNC instants over `n` periods of a resting car, with its grid
+    /// walking `drift` s per s.
+    fn syncs(drift: f64, n: usize) -> Vec<f64> {
+        let mut rig = Rig::paper();
+        let RigModel::Paper(m) = &mut rig.model else {
+            unreachable!("the paper rig")
+        };
+        m.drive = CarDrive::Epos4;
+        m.epos4.sync_after_push_s = 0.003;
+        m.epos4.sync_drift = drift;
+        let rec = Record {
+            dt: 0.01,
+            reference: vec![0.0; n],
+            output: vec![0.0; n],
+            effort: vec![0.0; n],
+            ..Record::default()
+        };
+        epos4_samples(m, &rec, &Effects::nominal()).at
+    }
+
+    #[test]
+    fn on_one_clock_the_syncs_sit_a_period_apart_at_their_phase() {
+        let at = syncs(0.0, 100);
+        assert_eq!(at.len(), 100);
+        for (k, t) in at.iter().enumerate() {
+            assert!(
+                (t - (0.003 + 0.01 * k as f64)).abs() < 1e-9,
+                "SYNC {k} at {t}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_drifting_grid_walks_by_its_drift_and_wraps_through_the_period() {
+        // 1 %: the SYNC walks 0.1 ms a period, past a whole period over 200.
+        for drift in [0.01, -0.01] {
+            let at = syncs(drift, 200);
+            let spacing = (at[at.len() - 1] - at[0]) / (at.len() - 1) as f64;
+            assert!(
+                (spacing - 0.01 * (1.0 + drift)).abs() < 1e-7,
+                "{drift}: spacing {spacing}"
+            );
+            // One SYNC fewer (a slower grid) or more (a faster one) than periods, each at
+            // most one tick off its place.
+            assert!(at.len().abs_diff(200) <= 3, "{drift}: {} SYNCs", at.len());
+            for (i, t) in at.iter().enumerate() {
+                let want = 0.003 + 0.01 * i as f64 * (1.0 + drift);
+                assert!(
+                    (t - want).abs() <= 50e-6,
+                    "{drift}: SYNC {i} at {t}, {want}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_drift_that_is_no_number_or_past_one_percent_is_held_to_it() {
+        assert_eq!(syncs(f64::NAN, 50), syncs(0.0, 50));
+        assert_eq!(syncs(0.5, 300), syncs(0.01, 300));
     }
 }

@@ -108,8 +108,15 @@ pub struct Epos4Timing {
     /// From the instant the ECU takes a reference sample to the SYNC at which the drive
     /// latches the target made from it (and samples the position and current it reports), s;
     /// in (0, one reference period]. The ECU's SYNC grid runs on its own clock, so on a car
-    /// this phase is the log's, not a constant.
+    /// this phase is the log's, not a constant. With a [`Epos4Timing::sync_drift`], the
+    /// phase at the log's start.
     pub sync_after_push_s: f64,
+    /// How fast the ECU's SYNC grid walks against the reference frames, s per s: the ECU's
+    /// clock against the vehicle computer's (5e-5 is 50 ppm, which moves the SYNC 6 ms later
+    /// over a 120 s track). Each reference is latched at the first SYNC after it is taken,
+    /// wherever the grid has walked to. 0 on one clock (the simulated car).
+    #[serde(default)]
+    pub sync_drift: f64,
     pub current: DriveCurrent,
     /// When, after each reference sample, the ECU's 2 ms column-encoder task samples, modulo
     /// its period, s (the ECU controller's column terms take the newest sample).
@@ -125,6 +132,7 @@ impl Default for Epos4Timing {
     fn default() -> Self {
         Epos4Timing {
             sync_after_push_s: 0.005,
+            sync_drift: 0.0,
             current: DriveCurrent::Instantaneous,
             encoder_phase_s: 0.0,
             readout: Epos4Readout::CONVERT,
@@ -153,6 +161,12 @@ impl Epos4Readout {
         current_at_row: 0.5,
         column_age_s: 0.0,
     };
+
+    /// Whether the rows are the drive's SYNCs (a row as each TPDO arrives, the current at its
+    /// end) rather than the reference's periods (convert's rows).
+    pub fn rows_per_sync(&self) -> bool {
+        self.current_at_row > 0.75
+    }
 }
 
 impl Default for Epos4Readout {

@@ -354,7 +354,8 @@ impl LoggerKind {
         let bad = || {
             format!(
                 "logger {name:?}: expected `ours`, `drawn`, ending|starting-100|200|1000[-jitter][-drop] \
-                 (e.g. starting-100-jitter-drop), or the EPOS4 car's epos4-convert|status[-jitter][-drop]"
+                 (e.g. starting-100-jitter-drop), or the EPOS4 car's \
+                 epos4-convert[-drift]|epos4-status[-drift][-jitter][-drop]"
             )
         };
         let mut parts = name.split('-');
@@ -388,10 +389,15 @@ impl LoggerKind {
                 drop_chance: 0.0,
                 header: false,
                 car: LoggedCar::Direct,
+                drifting_clock: false,
             },
         };
         for p in parts {
             match p {
+                // The EPOS4 car's ECU on a clock of its own.
+                "drift" if logger.car != LoggedCar::Direct && !logger.drifting_clock => {
+                    logger.drifting_clock = true
+                }
                 // Convert's rows are one per reference period, on its grid, every one.
                 _ if logger.car == LoggedCar::Epos4Convert => return Err(bad()),
                 "jitter" if logger.jitter_s == 0.0 => logger.jitter_s = generator::LOGGER_JITTER_S,
@@ -415,6 +421,9 @@ impl LoggerKind {
                     LoggedCar::Epos4Convert => "epos4-convert".into(),
                     LoggedCar::Epos4StatusFrame => "epos4-status".into(),
                 };
+                if l.drifting_clock {
+                    s.push_str("-drift");
+                }
                 if l.jitter_s > 0.0 {
                     s.push_str("-jitter");
                 }
