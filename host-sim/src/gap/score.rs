@@ -230,7 +230,7 @@ impl Offset {
     }
 
     /// A constant no noise and no car the table describes leaves: beyond
-    /// [`OFFSET_SIGNIFICANCE`] standard errors and [`OFFSET_MIN_SHARE`] of the effort.
+    /// `OFFSET_SIGNIFICANCE` (6) standard errors and `OFFSET_MIN_SHARE` (1 %) of the effort.
     pub fn stands_out(&self) -> bool {
         stands_out(
             self.significance(),
@@ -307,8 +307,8 @@ impl Scale {
         (self.factor - 1.0).abs() / self.standard_error.max(1e-12)
     }
 
-    /// A current a share off the model's throughout: beyond [`OFFSET_SIGNIFICANCE`] standard
-    /// errors and [`SCALE_MIN_SHARE`] from 1.
+    /// A current a share off the model's throughout: beyond `OFFSET_SIGNIFICANCE` (6) standard
+    /// errors and `SCALE_MIN_SHARE` (15 %) from 1.
     pub fn stands_out(&self) -> bool {
         stands_out(
             self.significance(),

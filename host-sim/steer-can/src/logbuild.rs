@@ -160,7 +160,7 @@ fn grid_period(t: &[f64], nominal: f64) -> Option<f64> {
 
 /// How fast the SYNC grid (the drive's TPDO1 times, `tpdo_us`) walks against the reference
 /// frames (`reference_us`), s per s: its period over theirs, less one. `None` where either is
-/// too short to tell (under [`DRIFT_MIN_FRAMES`] frames or 5 s).
+/// too short to tell (under 100 frames or 5 s) or is no train of `nominal_us` periods.
 pub fn grid_drift(tpdo_us: &[f64], reference_us: &[f64], nominal_us: f64) -> Option<f64> {
     let sync = grid_period(tpdo_us, nominal_us)?;
     let reference = grid_period(reference_us, nominal_us)?;
