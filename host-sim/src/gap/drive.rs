@@ -316,7 +316,8 @@ fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, phase: f64) -> R
         m.controller = controller;
         match drive {
             CarDrive::Epos4 => m.epos4.sync_after_push_s = phase,
-            // A whole number of ticks, 0 to 2 (the `as` saturates anything else to 0).
+            // A whole number of ticks, 0 to 2: the `as` takes a negative or NaN phase to 0,
+            // the `min` holds a larger one (or an infinite one) to 2.
             CarDrive::Direct => m.push_tick = ((phase / POSITION_TICK_S).round() as u32).min(2),
         }
     }
