@@ -304,7 +304,8 @@ const PRUNE_GOF: f64 = 0.15;
 /// sample: the frame's time on the bus (0.1-0.3 ms at 500 kbit/s - 1 Mbit/s) and the wait for
 /// the next tick of the free-running 2 kHz loop (up to 0.5 ms) put it 0-2 ticks after the
 /// vehicle computer sent it.
-const PUSH_TICKS: [u32; 3] = [0, 1, 2];
+const MAX_PUSH_TICK: u32 = 2;
+const PUSH_TICKS: [u32; MAX_PUSH_TICK as usize + 1] = [0, 1, MAX_PUSH_TICK];
 const POSITION_TICK_S: f64 = 1.0 / steering_ecu::paper_mode::POSITION_LOOP_HZ as f64;
 
 /// `rig` as the car `drive` + `controller`, its reference timed by `phase` (s after each
@@ -318,7 +319,9 @@ fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, phase: f64) -> R
             CarDrive::Epos4 => m.epos4.sync_after_push_s = phase,
             // A whole number of ticks, 0 to 2: the `as` takes a negative or NaN phase to 0,
             // the `min` holds a larger one (or an infinite one) to 2.
-            CarDrive::Direct => m.push_tick = ((phase / POSITION_TICK_S).round() as u32).min(2),
+            CarDrive::Direct => {
+                m.push_tick = ((phase / POSITION_TICK_S).round() as u32).min(MAX_PUSH_TICK)
+            }
         }
     }
     r
@@ -421,7 +424,8 @@ pub struct LogSays {
     pub current_stated: bool,
     pub timing: super::LogTiming,
     /// How fast an EPOS4 car's SYNC grid walks against the reference frames, s per s, where
-    /// the header says (`# sync-drift:`); the model runs it ([`super::rig::Epos4Timing::sync_drift`]).
+    /// the header says (`# sync-drift:`); the model runs it
+    /// ([`super::rig::Epos4Timing::sync_drift`]) where it fits the log better than one phase.
     pub sync_drift: Option<f64>,
 }
 

@@ -163,9 +163,10 @@ pub fn simulate_paper(m: &PaperModel, rec: &Record, fx: &Effects) -> SimOut {
         return simulate_epos4(m, rec, fx);
     }
     let p = m.plant;
-    // A reference late by `delay_s` reaches the ECU that much after the car's own `push_tick`,
-    // and the ECU takes it when it arrives: whole periods of the reference, then the position-loop tick
-    // it is pushed at (a held reference whose steps come late, never a blend of two samples).
+    // A reference late by `delay_s` reaches the ECU that much after the car's own
+    // `push_tick`, and the ECU takes it when it arrives: whole periods of the reference, then
+    // the position-loop tick it is pushed at (a held reference whose steps come late, never a
+    // blend of two samples).
     let ticks = (fx.delay_s.max(0.0) * POSITION_LOOP_HZ as f64).round();
     let ticks = if ticks.is_finite() { ticks as u64 } else { 0 };
     let ticks = ticks.saturating_add(u64::from(m.push_tick));

@@ -66,8 +66,8 @@ pub struct PaperModel {
     /// Direct drive: the position-loop tick (0.5 ms) into each reference period at which the
     /// ECU takes that period's sample. The frame crosses the bus, and the next tick of the
     /// ECU's free-running position loop takes it, so it lands a fraction of a millisecond
-    /// after the vehicle computer sent it. Fitted from the log when the diagnosis is not told
-    /// (0-2 ticks); 0 is the period's start.
+    /// after the vehicle computer sent it. Fitted from every log (0-2 ticks); 0 is the
+    /// period's start.
     #[serde(default)]
     pub push_tick: u32,
     /// A delay the log's own timing can explain (its stamps' jitter, a reference convention
