@@ -436,6 +436,71 @@ mod tests {
         assert!(got.abs() < 0.5e-6, "{got}");
     }
 
+    /// A recording of `periods` reference periods in EPOS4 mode (no motor frames), the
+    /// drive's PDOs on a SYNC grid `drift` off the references'.
+    fn epos4_recording(periods: u64, drift: f64) -> Vec<Stamped> {
+        let cfg = ProtocolConfig::DEFAULT;
+        let mut out = Vec::new();
+        for k in 0..periods {
+            let c = AliveCounter::wrapping(k as u8);
+            out.push(Stamped {
+                t_us: k * 10_000,
+                frame: cfg.encode_reference(&Reference {
+                    angle: SteeringDeg(1.0),
+                    as_state: AsState::Driving,
+                    counter: c,
+                    clear_faults: false,
+                }),
+            });
+            out.push(Stamped {
+                t_us: k * 10_000 + 3_000,
+                frame: cfg.encode_status(&Status {
+                    angle: SteeringDeg(1.0),
+                    current: Amps(0.5),
+                    ecu_state: 2,
+                    faults: 0,
+                    counter: c,
+                }),
+            });
+            let sync = (1_850.0 + k as f64 * 10_000.0 * (1.0 + drift)) as u64;
+            let mut tpdo1 = vec![0x37, 0x02];
+            tpdo1.extend_from_slice(&42i32.to_le_bytes());
+            let tpdo2 = 1500i32.to_le_bytes();
+            for (id, data, after) in [(0x181u16, &tpdo1[..], 160), (0x281, &tpdo2[..], 280)] {
+                out.push(Stamped {
+                    t_us: sync + after,
+                    frame: Frame::new(StandardId::new(id).unwrap(), data).unwrap(),
+                });
+            }
+        }
+        out.sort_by_key(|f| f.t_us);
+        out
+    }
+
+    #[test]
+    fn an_epos4_log_says_how_fast_its_sync_grid_walks() {
+        let drift_line = |frames: &[Stamped]| {
+            let built = build(frames, &decoder(), Rows::Active).unwrap();
+            built
+                .log
+                .comments
+                .iter()
+                .find(|c| c.starts_with("sync-drift"))
+                .cloned()
+        };
+        assert_eq!(
+            drift_line(&epos4_recording(1000, 50e-6)).as_deref(),
+            Some("sync-drift: +50.0 ppm")
+        );
+        assert_eq!(
+            drift_line(&epos4_recording(1000, -91e-6)).as_deref(),
+            Some("sync-drift: -91.0 ppm")
+        );
+        // Too short a recording to tell (20 periods), and a direct-drive one (no PDOs).
+        assert_eq!(drift_line(&epos4_recording(20, 50e-6)), None);
+        assert_eq!(drift_line(&frames(false)), None);
+    }
+
     #[test]
     fn too_few_frames_or_too_short_a_span_read_no_drift() {
         assert_eq!(
