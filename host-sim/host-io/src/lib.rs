@@ -4,12 +4,14 @@
 //! - [`logfmt`]: the project's one log format (CSV or `.csv.gz`, the columns, their bounds).
 //! - [`scenario`]: the references at 100 Hz: the paper's sweep, the built-in track, a step, a
 //!   track from a CSV.
+//! - [`grid`]: where stamped events sit on a regular grid (a log's rows, a train of frames).
 //! - [`lines`]: reading text a line at a time with a cap on a line's length.
 //! - [`out`]: printing for the command-line programs (a closed pipe ends them quietly,
 //!   progress lines on a terminal only).
 //!
-//! Nothing here does numerics, so the laptop build of steer-can stays small.
+//! Nothing here needs a numerics crate, so the laptop build of steer-can stays small.
 
+pub mod grid;
 pub mod lines;
 pub mod logfmt;
 pub mod out;

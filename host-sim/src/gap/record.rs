@@ -88,13 +88,7 @@ impl LogTiming {
         let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
         gaps.sort_by(|a, b| a.total_cmp(b));
         let median_gap = gaps[gaps.len() / 2].max(1e-9);
-        let mut places = Vec::with_capacity(t.len());
-        let mut place = 0u64;
-        places.push(0);
-        for w in t.windows(2) {
-            place += (((w[1] - w[0]) / median_gap).round() as u64).max(1);
-            places.push(place);
-        }
+        let (places, _) = host_io::grid::places_by_gaps(t, median_gap);
         let by_gaps = LogTiming::on_places(t, &places, median_gap);
         if by_gaps.is_regular() {
             return (by_gaps, places);
@@ -128,19 +122,16 @@ impl LogTiming {
     /// The grid through stamps `t` at rows `places`: the least-squares line, the robust
     /// spread about it, the rows the places skip. `spacing` where the line has no slope.
     fn on_places(t: &[f64], places: &[u64], spacing: f64) -> LogTiming {
-        // t = a + b * place by least squares.
-        let n = t.len() as f64;
-        let mx = places.iter().map(|&p| p as f64).sum::<f64>() / n;
-        let my = t.iter().sum::<f64>() / n;
-        let (mut sxy, mut sxx) = (0.0, 0.0);
-        for (&p, &tj) in places.iter().zip(t) {
-            let dx = p as f64 - mx;
-            sxy += dx * (tj - my);
-            sxx += dx * dx;
-        }
-        let b = if sxx > 0.0 { sxy / sxx } else { spacing };
-        let b = if b.is_finite() && b > 0.0 { b } else { spacing };
-        let a = my - b * mx;
+        // t = a + b * place by least squares; through the mean with `spacing` where that
+        // has no positive slope.
+        let (a, b) = match host_io::grid::line_through(t, places) {
+            Some((a, b)) if b > 0.0 => (a, b),
+            _ => {
+                let n = t.len() as f64;
+                let mx = places.iter().map(|&p| p as f64).sum::<f64>() / n;
+                (t.iter().sum::<f64>() / n - spacing * mx, spacing)
+            }
+        };
         let mut offsets: Vec<f64> = places
             .iter()
             .zip(t)

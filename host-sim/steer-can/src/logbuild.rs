@@ -131,31 +131,12 @@ fn grid_period(t: &[f64], nominal: f64) -> Option<f64> {
     if t.len() < DRIFT_MIN_FRAMES || last - first < DRIFT_MIN_SPAN_US || nominal <= 0.0 {
         return None;
     }
-    let mut k = Vec::with_capacity(t.len());
-    let mut count = 0.0;
-    let mut off_grid = 0usize;
-    for (i, x) in t.iter().enumerate() {
-        if i > 0 {
-            let periods = (x - t[i - 1]) / nominal;
-            if (periods - periods.round()).abs() > 0.25 || periods.round() < 1.0 {
-                off_grid += 1;
-            }
-            count += periods.round().max(1.0);
-        }
-        k.push(count);
-    }
+    let (counts, off_grid) = host_io::grid::places_by_gaps(t, nominal);
     if off_grid * 10 > t.len() {
         return None;
     }
-    let n = t.len() as f64;
-    let (km, tm) = (k.iter().sum::<f64>() / n, t.iter().sum::<f64>() / n);
-    let (mut skt, mut skk) = (0.0, 0.0);
-    for (ki, ti) in k.iter().zip(t) {
-        skt += (ki - km) * (ti - tm);
-        skk += (ki - km) * (ki - km);
-    }
-    let period = skt / skk;
-    (period.is_finite() && period > 0.5 * nominal && period < 1.5 * nominal).then_some(period)
+    let (_, period) = host_io::grid::line_through(t, &counts)?;
+    (period > 0.5 * nominal && period < 1.5 * nominal).then_some(period)
 }
 
 /// How fast the SYNC grid (the drive's TPDO1 times, `tpdo_us`) walks against the reference
