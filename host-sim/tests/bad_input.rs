@@ -147,6 +147,42 @@ fn gap_refuses_a_required_column_that_is_all_nan() {
     assert_refused(&o, &["no_current.csv", "current_a", "only nan"]);
 }
 
+/// A required column that holds one value in every row (a stuck current sensor) carries no
+/// signal: refused with the column and its value, not diagnosed (the old reader called such a
+/// log `parameters` at a GoF of -1e15 %, the effort's variance being zero).
+#[test]
+fn gap_refuses_a_required_column_that_never_changes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = step_log(dir.path());
+    for line in 2..=lines.len() {
+        set_field(&mut lines, line, 4, "0.2");
+    }
+    let log = dir.path().join("stuck_current.csv");
+    write_lines(&log, &lines);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert_refused(&o, &["stuck_current.csv", "current_a", "0.2 in every row"]);
+}
+
+/// A motor angle that never changes while the column moves (a Hall sensor that died) is left
+/// out, with a note, as a column of nan is: the log is diagnosed on what it still has.
+#[test]
+fn gap_leaves_out_a_motor_angle_that_never_changes_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = step_log(dir.path());
+    for line in 2..=lines.len() {
+        set_field(&mut lines, line, 3, "0.1");
+    }
+    let log = dir.path().join("stuck_motor.csv");
+    write_lines(&log, &lines);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("column `motor_rad` holds 0.1 in every row; left out"),
+        "{err}"
+    );
+}
+
 /// Row 2: duplicated time, time going back, and t = 1e300.
 #[test]
 fn gap_refuses_time_that_does_not_increase_with_file_line_and_reason() {

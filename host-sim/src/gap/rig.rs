@@ -274,6 +274,12 @@ pub enum RigError {
         path: String,
         column: String,
     },
+    /// A required signal holds one value in every row: no signal to compare a model with.
+    Constant {
+        path: String,
+        column: String,
+        value: f64,
+    },
 }
 
 impl std::fmt::Display for RigError {
@@ -292,6 +298,15 @@ impl std::fmt::Display for RigError {
             RigError::NoSamples { path, column } => {
                 write!(f, "{path}: column {column:?} holds no sample, only nan")
             }
+            RigError::Constant {
+                path,
+                column,
+                value,
+            } => write!(
+                f,
+                "{path}: column {column:?} holds {value} in every row: no signal to diagnose (a \
+                 stuck sensor, or the wrong column?)"
+            ),
         }
     }
 }
@@ -527,6 +542,31 @@ impl Rig {
         if t.len() < 20 {
             return Err(RigError::TooShort { path: name });
         }
+        // A signal with one value in every row has no variance for a GoF to be scored on
+        // (eq. 11 divides by it): a required one is refused, the motor angle left out.
+        for (c, values) in [
+            (&self.columns.reference, &reference),
+            (&self.columns.output, &output),
+            (&self.columns.effort, &effort),
+        ] {
+            if let Some(value) = one_value(values) {
+                return Err(RigError::Constant {
+                    path: name,
+                    column: c.clone(),
+                    value,
+                });
+            }
+        }
+        let motor = motor.filter(|m| match one_value(m) {
+            Some(v) => {
+                let c = self.columns.motor.as_deref().unwrap_or("motor");
+                notes.push(format!(
+                    "{name}: column `{c}` holds {v} in every row; left out"
+                ));
+                false
+            }
+            None => true,
+        });
         let record = match &self.model {
             RigModel::Paper(m) => {
                 let per = m.plant.motor_per_pinion();
@@ -563,6 +603,12 @@ impl Rig {
             timing: super::LogTiming::of(&t),
         })
     }
+}
+
+/// The one value every sample holds, if they all hold the same.
+fn one_value(values: &[f64]) -> Option<f64> {
+    let first = *values.first()?;
+    values.iter().all(|v| *v == first).then_some(first)
 }
 
 /// A BAM log's columns as read.
