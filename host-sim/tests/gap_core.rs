@@ -189,6 +189,63 @@ fn rows_on_the_grid_each_fill_their_own_step() {
     }
 }
 
+/// A row per SYNC stamped on another clock: a team's logger writes a row as each TPDO
+/// arrives, and the ECU's clock runs 72 ppm slow against the vehicle computer's that stamps
+/// them, so over 120 s the rows walk 8.6 ms against steps of exactly 10 ms. Each row is still
+/// its own step (the rows' spacing is the step at the grid's own rate): read at 10 ms steps,
+/// a current that alternates between SYNCs was averaged towards zero where the walk reached
+/// half a step.
+#[test]
+fn rows_a_step_apart_on_a_clock_of_their_own_each_fill_their_own_step() {
+    let spacing = 0.01 * (1.0 + 72e-6);
+    let t: Vec<f64> = (0..12_000)
+        .map(|k| 0.0041 + (k + 1) as f64 * spacing)
+        .collect();
+    let y: Vec<f64> = (0..12_000).map(|k| k as f64).collect();
+    let chatter: Vec<f64> = (0..12_000)
+        .map(|k| if k % 2 == 0 { 1.0 } else { -1.0 })
+        .collect();
+    for current in [
+        host_sim::gap::CurrentSamples::IntervalMean,
+        host_sim::gap::CurrentSamples::Instantaneous,
+    ] {
+        let rec = host_sim::gap::Record::from_samples(
+            &t,
+            &y,
+            &y,
+            &chatter,
+            Some(y.clone()),
+            0.01,
+            current,
+        );
+        assert_eq!(rec.len(), 12_000, "{current:?}");
+        assert_eq!(
+            rec.dt, 0.01,
+            "the model's steps stay the reference's periods"
+        );
+        for (k, want) in chatter.iter().enumerate() {
+            assert_eq!(
+                rec.reference[k], k as f64,
+                "{current:?}: reference, step {k}"
+            );
+            assert!(
+                (rec.output[k] - k as f64).abs() < 1e-6,
+                "{current:?}: output, step {k}"
+            );
+            let motor = rec.motor.as_ref().unwrap()[k];
+            assert!(
+                (motor - k as f64).abs() < 1e-6,
+                "{current:?}: motor, step {k}"
+            );
+            assert!(
+                (rec.effort[k] - want).abs() < 1e-6,
+                "{current:?}: effort, step {k}: {}",
+                rec.effort[k]
+            );
+        }
+    }
+}
+
 #[test]
 fn a_1_khz_log_is_read_as_instants_and_interval_means() {
     // 1 kHz rows: y = t (s) for the angle, the current the mean of t over each 1 ms row

@@ -158,8 +158,14 @@ impl LogTiming {
     }
 }
 
+/// How near the rows' spacing must be to a grid step for each row to be its step: 1 %, an
+/// ECU on its internal RC oscillator (the largest SYNC drift the EPOS4 model takes).
+const ONE_ROW_A_STEP: f64 = super::model::MAX_SYNC_DRIFT;
+
 impl Record {
-    /// Log rows at any rate (>= the grid's is best) onto a grid of step `dt`. The grid
+    /// Log rows at any rate (>= the grid's is best) onto a grid of step `dt`; with a row a
+    /// step (the spacing within 1 % of `dt`), of the rows' own spacing, so that a logger on
+    /// a clock of its own keeps each row as its step. The grid
     /// starts where the first row's interval starts (its time minus the typical row
     /// spacing), so a log written from t = one row interval on, as host-sim writes them,
     /// lands on the reference periods exactly. Rows need not sit on the grid: angles are
@@ -208,6 +214,16 @@ impl Record {
         } else {
             t[0] - row_dt
         };
+        // At the grid's own rate each row is its step, whatever clock stamped it: the grid's
+        // step is then the rows' spacing (`dt` stays the record's, the reference's period). A
+        // logger that writes a row as each TPDO arrives stamps the ECU's SYNCs in the vehicle
+        // computer's time; 72 ppm apart, a 120 s track's rows walk 8.6 ms against steps of
+        // exactly 10 ms, and each row read at those steps' ends was a blend of two SYNCs.
+        let step = if timing.is_regular() && (row_dt / dt - 1.0).abs() < ONE_ROW_A_STEP {
+            row_dt
+        } else {
+            dt
+        };
         let last = t[t.len() - 1];
         let several_rows = timing.is_regular() && row_dt < 0.75 * dt;
         // With several rows a step, a row within a quarter of the spacing of a place is that
@@ -219,8 +235,8 @@ impl Record {
         } else {
             1e-6 * row_dt
         };
-        let n = (((last - origin + near) / dt + 1e-6).floor() as usize).max(1);
-        let end = |k: usize| origin + (k + 1) as f64 * dt;
+        let n = (((last - origin + near) / step + 1e-6).floor() as usize).max(1);
+        let end = |k: usize| origin + (k + 1) as f64 * step;
         // The row stamped at `at`, within a quarter of a row spacing.
         let row_at = |at: f64| {
             let j = t.partition_point(|v| *v < at - 0.25 * row_dt);
@@ -251,7 +267,7 @@ impl Record {
         let reference = (0..n)
             .map(|k| {
                 // The row whose interval holds the middle of the step.
-                let mid = origin + (k as f64 + 0.5) * dt;
+                let mid = origin + (k as f64 + 0.5) * step;
                 // A row stamped `near` below the middle is the middle's (200 Hz rows sit on
                 // it).
                 let j = t.partition_point(|v| *v < mid - near).min(t.len() - 1);
@@ -263,13 +279,17 @@ impl Record {
                 let missing = j > 0 && t[j] - t[j - 1] > 1.5 * row_dt && mid < t[j] - row_dt;
                 // Several rows a step, none on its middle (lost, or rows off the 5 ms
                 // points): the row on the step's boundary that holds it, if kept.
-                let boundary = if period_starting { end(k) - dt } else { end(k) };
+                let boundary = if period_starting {
+                    end(k) - step
+                } else {
+                    end(k)
+                };
                 // Many rows a step (1 kHz): the row nearest the middle, if it lies well inside
                 // the step. The grid's boundaries need not sit on the ECU's periods (its
                 // origin comes from the stamps, the periods from the car), so a row on a
                 // boundary may hold either neighbour; a row a few ms from the middle holds
                 // the step's own sample for any offset under half a step less a row.
-                let inside = 0.5 * dt - 0.75 * row_dt;
+                let inside = 0.5 * step - 0.75 * row_dt;
                 let near_mid = || {
                     (j.saturating_sub(1)..=j)
                         .filter(|&i| (t[i] - mid).abs() <= inside)
@@ -301,7 +321,7 @@ impl Record {
         let effort = match current {
             CurrentSamples::IntervalMean => (0..n)
                 .map(|k| {
-                    let (a, b) = (end(k) - dt, end(k));
+                    let (a, b) = (end(k) - step, end(k));
                     let (mut sum, mut w) = (0.0, 0.0);
                     let j0 = t.partition_point(|v| *v <= a);
                     for j in j0..t.len() {
@@ -318,22 +338,22 @@ impl Record {
                     if w > 0.0 {
                         sum / w
                     } else {
-                        interp_at(t, effort, b - 0.5 * dt)
+                        interp_at(t, effort, b - 0.5 * step)
                     }
                 })
                 .collect(),
             CurrentSamples::Instantaneous => (0..n)
                 .map(|k| {
-                    let (a, b) = (end(k) - dt, end(k));
-                    let j0 = t.partition_point(|v| *v <= a + 1e-9 * dt);
-                    let j1 = t.partition_point(|v| *v <= b + 1e-9 * dt);
+                    let (a, b) = (end(k) - step, end(k));
+                    let j0 = t.partition_point(|v| *v <= a + 1e-9 * step);
+                    let j1 = t.partition_point(|v| *v <= b + 1e-9 * step);
                     let vals: Vec<f64> = effort[j0..j1]
                         .iter()
                         .copied()
                         .filter(|v| v.is_finite())
                         .collect();
                     if vals.is_empty() {
-                        interp_at(t, effort, b - 0.5 * dt)
+                        interp_at(t, effort, b - 0.5 * step)
                     } else {
                         vals.iter().sum::<f64>() / vals.len() as f64
                     }
