@@ -183,6 +183,61 @@ fn gap_leaves_out_a_motor_angle_that_never_changes_and_says_so() {
     );
 }
 
+/// A logger on a wall clock stamps its rows in Unix seconds (1.7e9 s, as candump and a ROS
+/// export do): the log is read from its first whole second, says so, and is diagnosed as the
+/// same rows stamped from 0 are.
+#[test]
+fn gap_reads_stamps_of_a_wall_clock_from_their_first_whole_second() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines = step_log(dir.path());
+    let mut wall = lines.clone();
+    for line in 2..=wall.len() {
+        let t: f64 = wall[line - 1].split(',').next().unwrap().parse().unwrap();
+        set_field(&mut wall, line, 0, &format!("{:.6}", t + 1_733_300_000.0));
+    }
+    let gof = |lines: &[String], name: &str| -> (f64, String, String) {
+        let (log, json) = (
+            dir.path().join(name),
+            dir.path().join(format!("{name}.json")),
+        );
+        write_lines(&log, lines);
+        let o = host_sim(&["gap", s(&log), "--threads", "2", "--json", s(&json)]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let gof = v["baseline"]["gof"].as_f64().unwrap();
+        (gof, v["verdict"]["kind"].to_string(), stderr(&o))
+    };
+    let (gof_from_0, kind_from_0, _) = gof(&lines, "from0.csv");
+    let (gof_wall, kind_wall, err) = gof(&wall, "wall.csv");
+    assert!(
+        err.contains("stamps start at 1733300000.0"),
+        "the shift is said: {err}"
+    );
+    assert_eq!(kind_wall, kind_from_0);
+    assert!(
+        (gof_wall - gof_from_0).abs() < 1e-6,
+        "GoF {gof_wall} on the wall clock's stamps, {gof_from_0} from 0"
+    );
+}
+
+/// Stamps in milliseconds written under `t` (seconds) put 100 Hz rows 10 s apart: a 20 s log
+/// read as 5.5 hours of a reference interpolated across 10 s. Refused, with the spacing and
+/// the question of the unit, not diagnosed (the old reader ran it for minutes).
+#[test]
+fn gap_refuses_rows_too_far_apart_for_the_grid_and_asks_for_seconds() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = step_log(dir.path());
+    for line in 2..=lines.len() {
+        let t: f64 = lines[line - 1].split(',').next().unwrap().parse().unwrap();
+        set_field(&mut lines, line, 0, &format!("{:.3}", 1e3 * t));
+    }
+    let log = dir.path().join("ms.csv");
+    write_lines(&log, &lines);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert_refused(&o, &["ms.csv", "apart", "`t` in seconds"]);
+}
+
 /// Row 2: duplicated time, time going back, and t = 1e300.
 #[test]
 fn gap_refuses_time_that_does_not_increase_with_file_line_and_reason() {

@@ -37,8 +37,9 @@
 //!   so one in a file means a bug upstream. A tool that cannot use a gap fills it with
 //!   [`fill_missing`] (linear between the neighbours) and says how many samples it filled.
 //! * **Physical bounds.** Every value, time included, must lie within a bound set by the unit at
-//!   the end of its column's name ([`bound_for`]): `t` and `_s` 1e6 s, `_deg` 1e6 deg, `_rad`
-//!   1e6 rad, `_a` 1e4 A, `_v` 1e4 V, `_m` 1e3 m, `_n` 1e6 N, anything else 1e12. The bounds are
+//!   the end of its column's name ([`bound_for`]): the time column 1e10 s (a Unix clock's
+//!   seconds, as a wall-clock logger stamps its rows, up to the year 2286), `_s` 1e6 s,
+//!   `_deg` 1e6 deg, `_rad` 1e6 rad, `_a` 1e4 A, `_v` 1e4 V, `_m` 1e3 m, `_n` 1e6 N, anything else 1e12. The bounds are
 //!   far beyond the actuator (its motor needs 36 min at full speed to turn 1e6 rad), so they
 //!   only catch garbage such as an uninitialised float or `1e300`, which would otherwise turn
 //!   every figure computed from the log into `inf` or NaN. Refused with line and column.
@@ -663,6 +664,27 @@ impl Table {
     }
 }
 
+/// From this stamp on, s, a log's time is a wall clock's (Unix seconds, 1.7e9 in 2024):
+/// 1e6 s is 11.6 days, more than any log runs from its own zero.
+pub const WALL_CLOCK_S: f64 = 1e6;
+
+/// Stamps of a wall clock (the first at [`WALL_CLOCK_S`] or beyond) read from the first
+/// stamp's whole second, which keeps each stamp's place within a 10 ms grid and leaves the
+/// numbers a log's length, not 1.7e9 s. At 1.7e9 s an f64 holds a stamp to 0.24 us; read back
+/// to the microsecond (the finest a CAN logger writes), each stamp is the one its text gives.
+/// Returns the whole second taken off, `None` (and `t` as it was) for stamps from their own
+/// zero.
+pub fn from_wall_clock(t: &mut [f64]) -> Option<f64> {
+    let first = *t.first()?;
+    if !first.is_finite() || first.abs() < WALL_CLOCK_S {
+        return None;
+    }
+    let from = first.floor();
+    t.iter_mut()
+        .for_each(|v| *v = ((*v - from) * 1e6).round() / 1e6);
+    Some(from)
+}
+
 /// Fills each run of missing samples (NaN) linearly between the samples on either side; a run
 /// at the start or the end takes the nearest sample. Returns how many were filled, or `None`
 /// when there is no sample at all to fill from. Interpolation, not zero or a hold, because a
@@ -692,12 +714,19 @@ pub fn fill_missing(values: &mut [f64]) -> Option<usize> {
     Some(filled)
 }
 
+/// The largest stamp the time column may hold, s: a Unix clock's seconds (1.7e9 in 2024) fit
+/// until the year 2286, so a logger on the wall clock is read; stamps in milliseconds or
+/// nanoseconds since 1970 (1.7e12, 1.7e18) do not.
+pub const TIME_BOUND_S: f64 = 1e10;
+
 /// The largest magnitude a column may hold and its unit, from the unit at the end of its name
 /// (module doc). Generous on purpose: the bound is for garbage, not for physics.
 pub fn bound_for(column: &str) -> (f64, &'static str) {
+    if column == "t" {
+        return (TIME_BOUND_S, "s");
+    }
     let suffix = match column.rsplit_once('_') {
         Some((_, unit)) => unit.to_ascii_lowercase(),
-        None if column == "t" => "s".to_string(),
         None => String::new(),
     };
     match suffix.as_str() {
@@ -1322,6 +1351,7 @@ mod tests {
             ("0.1,1,2,3,4,2e4,6", "voltage_v"),
             ("0.1,1,2,3,4,5,1e13", "gain"),
             ("1e300,1,2,3,4,5,6", "t"),
+            ("1.7e12,1,2,3,4,5,6", "t"),
         ] {
             let err = read_str(&format!("{head}{row}\n")).expect_err(row);
             assert!(
@@ -1332,16 +1362,29 @@ mod tests {
         }
         // Within the bounds: a long log's motor angle, a large unitless value.
         read_str(&format!("{head}0.1,90,-90,9e5,-20,24,9e11\n")).expect("in bounds");
+        // A wall clock's stamps (Unix seconds).
+        read_str(&format!("{head}1733300000.01,90,-90,9e5,-20,24,9e11\n")).expect("Unix time");
     }
 
     #[test]
     fn bounds_follow_the_unit_at_the_end_of_the_name() {
-        assert_eq!(bound_for("t"), (1e6, "s"));
+        assert_eq!(bound_for("t"), (1e10, "s"));
         assert_eq!(bound_for("t_s"), (1e6, "s"));
         assert_eq!(bound_for("vir_V"), (1e4, "V"));
         assert_eq!(bound_for("current_setpoint_a"), (1e4, "A"));
         assert_eq!(bound_for("qm_m"), (1e3, "m"));
         assert_eq!(bound_for("gain").0, 1e12);
+    }
+
+    #[test]
+    fn a_wall_clocks_stamps_are_read_from_their_first_whole_second_to_the_microsecond() {
+        let mut t = vec![1_733_300_000.017_61, 1_733_300_000.027_61, 1_733_300_001.5];
+        assert_eq!(from_wall_clock(&mut t), Some(1_733_300_000.0));
+        assert_eq!(t, vec![0.017_61, 0.027_61, 1.5]);
+        let mut own = vec![0.01, 0.02, 999_999.0];
+        assert_eq!(from_wall_clock(&mut own), None);
+        assert_eq!(own, vec![0.01, 0.02, 999_999.0]);
+        assert_eq!(from_wall_clock(&mut []), None);
     }
 
     #[test]
@@ -1352,9 +1395,14 @@ mod tests {
             log.write_to(Vec::new()),
             Err(LogError::ValueOutOfBounds { row: 7, .. })
         ));
+        // A wall clock's Unix seconds are written; milliseconds since 1970 are not.
         let mut log = sample_log(&[]);
         for t in &mut log.t {
-            *t += 2e6;
+            *t += 1.7e9;
+        }
+        assert!(log.write_to(Vec::new()).is_ok());
+        for t in &mut log.t {
+            *t *= 1e3;
         }
         assert!(matches!(
             log.write_to(Vec::new()),

@@ -219,7 +219,8 @@ impl std::error::Error for ReferenceFileError {}
 
 /// A track profile from a CSV with columns `t,ref_sw_deg` (any sampling, further columns
 /// ignored, `#` comments skipped; a full project log works too), resampled to 100 Hz by linear
-/// interpolation from `t = 0` (the first sample is held before its time). Read by the log
+/// interpolation from `t = 0` (the first sample is held before its time; a wall clock's
+/// stamps, Unix seconds, from their first whole second: `logfmt::from_wall_clock`). Read by the log
 /// reader (`logfmt::Table`), so plain or gzip, time strictly increasing, values within their
 /// physical bounds, every error with file and line.
 pub fn track_from_csv(path: &Path) -> Result<Vec<f64>, ReferenceFileError> {
@@ -237,7 +238,10 @@ pub fn track_from_csv(path: &Path) -> Result<Vec<f64>, ReferenceFileError> {
             found: table.names.join(","),
         });
     }
-    let (t, r) = (&table.columns[0], &table.columns[1]);
+    // A wall clock's stamps (a logger's Unix seconds) from their first whole second.
+    let mut t = table.columns[0].clone();
+    crate::logfmt::from_wall_clock(&mut t);
+    let (t, r) = (&t, &table.columns[1]);
     if let Some(row) = r.iter().position(|v| v.is_nan()) {
         return Err(ReferenceFileError::MissingSample {
             path: name,
@@ -373,6 +377,18 @@ mod tests {
         assert!(
             (r[5] - 1.0).abs() < 1e-9 && (r[100] - 20.0).abs() < 1e-9,
             "{r:?}"
+        );
+        // The same rows stamped by a wall clock (Unix seconds) are the same track.
+        let mut text = String::from("t,ref_sw_deg\n");
+        for k in 0..=10 {
+            text += &format!("{:.6},{}\n", 1_733_300_000.0 + f64::from(k) * 0.1, 2 * k);
+        }
+        std::fs::write(&p, text).unwrap();
+        let wall = track_from_csv(&p).unwrap();
+        assert_eq!(wall.len(), r.len());
+        assert!(
+            wall.iter().zip(&r).all(|(a, b)| (a - b).abs() < 1e-9),
+            "{wall:?}"
         );
     }
 

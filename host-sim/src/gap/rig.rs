@@ -280,7 +280,20 @@ pub enum RigError {
         column: String,
         value: f64,
     },
+    /// The rows sit further apart than the model's grid can follow ([`MAX_ROW_STEPS`] steps,
+    /// median): the reference between them is not known.
+    Sparse {
+        path: String,
+        column: String,
+        spacing_s: f64,
+        grid_s: f64,
+    },
 }
+
+/// The widest median spacing of a log's rows the diagnosis takes, in grid steps: 40 ms on
+/// the paper rig's 10 ms grid. A reference of 100 Hz logged more sparsely is not known
+/// between its rows, and stamps in milliseconds read as seconds sit 1000 x too far apart.
+pub const MAX_ROW_STEPS: f64 = 4.0;
 
 impl std::fmt::Display for RigError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -306,6 +319,19 @@ impl std::fmt::Display for RigError {
                 f,
                 "{path}: column {column:?} holds {value} in every row: no signal to diagnose (a \
                  stuck sensor, or the wrong column?)"
+            ),
+            RigError::Sparse {
+                path,
+                column,
+                spacing_s,
+                grid_s,
+            } => write!(
+                f,
+                "{path}: rows {} ms apart (median), too far apart for the diagnosis's {} ms \
+                 grid (it needs a row at least every {} ms); is `{column}` in seconds?",
+                1e3 * spacing_s,
+                1e3 * grid_s,
+                1e3 * MAX_ROW_STEPS * grid_s
             ),
         }
     }
@@ -541,6 +567,29 @@ impl Rig {
         };
         if t.len() < 20 {
             return Err(RigError::TooShort { path: name });
+        }
+        let mut t = t;
+        if !matches!(self.model, RigModel::Emps(_)) {
+            // A logger on the wall clock stamps Unix seconds: read from the first stamp's
+            // whole second.
+            let first = t[0];
+            if let Some(from) = crate::logfmt::from_wall_clock(&mut t) {
+                notes.push(format!(
+                    "{name}: stamps start at {first:.3} s (a wall clock's?); read as seconds \
+                     from {from:.0} s"
+                ));
+            }
+            let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+            gaps.sort_by(f64::total_cmp);
+            let spacing_s = gaps[gaps.len() / 2];
+            if spacing_s > MAX_ROW_STEPS * self.grid_s() {
+                return Err(RigError::Sparse {
+                    path: name,
+                    column: self.columns.time.clone(),
+                    spacing_s,
+                    grid_s: self.grid_s(),
+                });
+            }
         }
         // A signal with one value in every row has no variance for a GoF to be scored on
         // (eq. 11 divides by it): a required one is refused, the motor angle left out.
