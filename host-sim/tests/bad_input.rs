@@ -238,6 +238,49 @@ fn gap_refuses_rows_too_far_apart_for_the_grid_and_asks_for_seconds() {
     assert_refused(&o, &["ms.csv", "apart", "`t` in seconds"]);
 }
 
+/// A logger that stalled (0.2 s without a row) or a sensor that dropped out (0.15 s of `nan`
+/// current) leaves a stretch the reader can only fill with a line between its ends: refused,
+/// with where, not scored against the line (2 s of a 100 Hz track missing turned an
+/// effect-free car `unexplained`). A dropout of 50 ms is bridged.
+#[test]
+fn gap_refuses_a_hole_longer_than_it_bridges_and_says_where() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines = step_log(dir.path());
+    assert!(lines[500].starts_with("0.500000,"), "{}", lines[500]);
+
+    let mut stalled = lines.clone();
+    stalled.drain(500..700);
+    let log = dir.path().join("stalled.csv");
+    write_lines(&log, &stalled);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert_refused(
+        &o,
+        &[
+            "stalled.csv",
+            "nothing from t = 0.500 s to 0.700 s",
+            "200 ms",
+        ],
+    );
+
+    let mut dropout = lines.clone();
+    for line in 801..951 {
+        set_field(&mut dropout, line, 4, "nan");
+    }
+    let log = dir.path().join("dropout.csv");
+    write_lines(&log, &dropout);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert_refused(&o, &["dropout.csv", "nothing from t = 0.800 s to 0.950 s"]);
+
+    let mut short = lines;
+    for line in 801..851 {
+        set_field(&mut short, line, 4, "nan");
+    }
+    let log = dir.path().join("short.csv");
+    write_lines(&log, &short);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
 /// Row 2: duplicated time, time going back, and t = 1e300.
 #[test]
 fn gap_refuses_time_that_does_not_increase_with_file_line_and_reason() {
