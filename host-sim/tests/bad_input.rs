@@ -37,6 +37,13 @@ fn step_log(dir: &Path) -> Vec<String> {
         .collect()
 }
 
+/// `lines` written as `name` in `dir`, and `host-sim gap` run on that file on two threads.
+fn gap_of(dir: &Path, name: &str, lines: &[String]) -> Output {
+    let log = dir.join(name);
+    write_lines(&log, lines);
+    host_sim(&["gap", s(&log), "--threads", "2"])
+}
+
 /// Sets field `column` of file line `line` (1-based, as an editor shows it).
 fn set_field(lines: &mut [String], line: usize, column: usize, value: &str) {
     let mut fields: Vec<String> = lines[line - 1].split(',').map(str::to_string).collect();
@@ -141,9 +148,7 @@ fn gap_refuses_a_required_column_that_is_all_nan() {
     for line in 2..=lines.len() {
         set_field(&mut lines, line, 4, "nan");
     }
-    let log = dir.path().join("no_current.csv");
-    write_lines(&log, &lines);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "no_current.csv", &lines);
     assert_refused(&o, &["no_current.csv", "current_a", "only nan"]);
 }
 
@@ -157,9 +162,7 @@ fn gap_refuses_a_required_column_that_never_changes() {
     for line in 2..=lines.len() {
         set_field(&mut lines, line, 4, "0.2");
     }
-    let log = dir.path().join("stuck_current.csv");
-    write_lines(&log, &lines);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "stuck_current.csv", &lines);
     assert_refused(&o, &["stuck_current.csv", "current_a", "0.2 in every row"]);
 }
 
@@ -172,9 +175,7 @@ fn gap_leaves_out_a_motor_angle_that_never_changes_and_says_so() {
     for line in 2..=lines.len() {
         set_field(&mut lines, line, 3, "0.1");
     }
-    let log = dir.path().join("stuck_motor.csv");
-    write_lines(&log, &lines);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "stuck_motor.csv", &lines);
     let err = stderr(&o);
     assert!(o.status.success(), "{err}");
     assert!(
@@ -232,9 +233,7 @@ fn gap_refuses_rows_too_far_apart_for_the_grid_and_asks_for_seconds() {
         let t: f64 = lines[line - 1].split(',').next().unwrap().parse().unwrap();
         set_field(&mut lines, line, 0, &format!("{:.3}", 1e3 * t));
     }
-    let log = dir.path().join("ms.csv");
-    write_lines(&log, &lines);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "ms.csv", &lines);
     assert_refused(&o, &["ms.csv", "apart", "`t` in seconds"]);
 }
 
@@ -250,9 +249,7 @@ fn gap_refuses_a_hole_longer_than_it_bridges_and_says_where() {
 
     let mut stalled = lines.clone();
     stalled.drain(500..700);
-    let log = dir.path().join("stalled.csv");
-    write_lines(&log, &stalled);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "stalled.csv", &stalled);
     assert_refused(
         &o,
         &[
@@ -266,18 +263,14 @@ fn gap_refuses_a_hole_longer_than_it_bridges_and_says_where() {
     for line in 801..951 {
         set_field(&mut dropout, line, 4, "nan");
     }
-    let log = dir.path().join("dropout.csv");
-    write_lines(&log, &dropout);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "dropout.csv", &dropout);
     assert_refused(&o, &["dropout.csv", "nothing from t = 0.800 s to 0.950 s"]);
 
     let mut short = lines;
     for line in 801..851 {
         set_field(&mut short, line, 4, "nan");
     }
-    let log = dir.path().join("short.csv");
-    write_lines(&log, &short);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "short.csv", &short);
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
@@ -290,23 +283,17 @@ fn gap_refuses_time_that_does_not_increase_with_file_line_and_reason() {
     let mut dup = lines.clone();
     let t_before = dup[99].split(',').next().unwrap().to_string();
     set_field(&mut dup, 101, 0, &t_before);
-    let log = dir.path().join("dup.csv");
-    write_lines(&log, &dup);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "dup.csv", &dup);
     assert_refused(&o, &["dup.csv", "line 101", "strictly increase"]);
 
     let mut back = lines.clone();
     set_field(&mut back, 700, 0, "0.1");
-    let log = dir.path().join("back.csv");
-    write_lines(&log, &back);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "back.csv", &back);
     assert_refused(&o, &["back.csv", "line 700", "strictly increase"]);
 
     let mut far = lines;
     set_field(&mut far, 800, 0, "1e300");
-    let log = dir.path().join("far.csv");
-    write_lines(&log, &far);
-    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    let o = gap_of(dir.path(), "far.csv", &far);
     assert_refused(&o, &["far.csv", "line 800", "column `t`", "physical bound"]);
 }
 

@@ -2,6 +2,18 @@
 //! frames on its sender's period. One way of counting for `host-sim gap`'s log timing and
 //! `steer-can convert`'s SYNC drift, so the two read a walking or gappy grid alike.
 
+/// The median of the gaps between successive stamps, at least 1 ns (so a spacing divides
+/// safely): a logger's row spacing, which a lost row or a late stamp does not move. 1 ns for
+/// fewer than two stamps.
+pub fn median_gap(t: &[f64]) -> f64 {
+    let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    if gaps.is_empty() {
+        return 1e-9;
+    }
+    gaps.sort_by(f64::total_cmp);
+    gaps[gaps.len() / 2].max(1e-9)
+}
+
 /// Each stamp's place on a grid of `spacing`: the place before it plus the whole spacings in
 /// its gap (at least one), so lost events count and a grid that walks a spacing or more over
 /// the stamps is still counted right. Also how many gaps were no whole number of spacings
@@ -50,6 +62,12 @@ pub fn line_through(t: &[f64], places: &[u64]) -> Option<(f64, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_median_gap_is_not_moved_by_a_lost_row() {
+        assert_eq!(median_gap(&[0.0, 10.0, 30.0, 40.0, 50.0]), 10.0);
+        assert_eq!(median_gap(&[5.0]), 1e-9);
+    }
 
     #[test]
     fn a_lost_event_is_counted_in_its_gap() {

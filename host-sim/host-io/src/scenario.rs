@@ -225,7 +225,7 @@ impl std::error::Error for ReferenceFileError {}
 /// physical bounds, every error with file and line.
 pub fn track_from_csv(path: &Path) -> Result<Vec<f64>, ReferenceFileError> {
     let name = path.display().to_string();
-    let table = Table::load(path, "t").map_err(|e| match e.root() {
+    let mut table = Table::load(path, "t").map_err(|e| match e.root() {
         LogError::MissingNamedColumn { found_header, .. } => ReferenceFileError::Header {
             path: name.clone(),
             found: found_header.clone(),
@@ -239,9 +239,8 @@ pub fn track_from_csv(path: &Path) -> Result<Vec<f64>, ReferenceFileError> {
         });
     }
     // A wall clock's stamps (a logger's Unix seconds) from their first whole second.
-    let mut t = table.columns[0].clone();
-    crate::logfmt::from_wall_clock(&mut t);
-    let (t, r) = (&t, &table.columns[1]);
+    crate::logfmt::from_wall_clock(&mut table.columns[0]);
+    let (t, r) = (&table.columns[0], &table.columns[1]);
     if let Some(row) = r.iter().position(|v| v.is_nan()) {
         return Err(ReferenceFileError::MissingSample {
             path: name,

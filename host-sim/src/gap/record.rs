@@ -85,9 +85,7 @@ impl LogTiming {
                 (0..t.len() as u64).collect(),
             );
         }
-        let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        gaps.sort_by(|a, b| a.total_cmp(b));
-        let median_gap = gaps[gaps.len() / 2].max(1e-9);
+        let median_gap = host_io::grid::median_gap(t);
         let (places, _) = host_io::grid::places_by_gaps(t, median_gap);
         let by_gaps = LogTiming::on_places(t, &places, median_gap);
         if by_gaps.is_regular() {
@@ -203,9 +201,7 @@ impl Record {
         let row_dt = if timing.is_regular() {
             timing.row_dt_s
         } else {
-            let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-            gaps.sort_by(|a, b| a.total_cmp(b));
-            gaps[gaps.len() / 2].max(1e-9)
+            host_io::grid::median_gap(t)
         };
         // The grid from every row's stamp, not the first one's alone: a logger's stamps jitter,
         // and the first row's jitter would shift every step of the log by as much.

@@ -554,7 +554,7 @@ impl Rig {
             }
             Ok(Some(values))
         };
-        let t = col(&self.columns.time, true)?.unwrap_or_default();
+        let mut t = col(&self.columns.time, true)?.unwrap_or_default();
         let reference = col(&self.columns.reference, true)?.unwrap_or_default();
         let output = col(&self.columns.output, true)?.unwrap_or_default();
         let effort = col(&self.columns.effort, true)?.unwrap_or_default();
@@ -596,7 +596,6 @@ impl Rig {
         if t.len() < 20 {
             return Err(RigError::TooShort { path: name });
         }
-        let mut t = t;
         if !matches!(self.model, RigModel::Emps(_)) {
             // A logger on the wall clock stamps Unix seconds: read from the first stamp's
             // whole second.
@@ -607,9 +606,7 @@ impl Rig {
                      from {from:.0} s"
                 ));
             }
-            let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-            gaps.sort_by(f64::total_cmp);
-            let spacing_s = gaps[gaps.len() / 2];
+            let spacing_s = host_io::grid::median_gap(&t);
             if spacing_s > MAX_ROW_STEPS * self.grid_s() {
                 return Err(RigError::Sparse {
                     path: name,
@@ -622,16 +619,16 @@ impl Rig {
             // between its ends; over more than a few reference periods that line is a guess
             // the model would be scored against (2 s of a 100 Hz track missing turned an
             // effect-free car `unexplained`).
+            let required: Vec<&[f64]> = [
+                &self.columns.reference,
+                &self.columns.output,
+                &self.columns.effort,
+            ]
+            .iter()
+            .filter_map(|c| table.column(c))
+            .collect();
             let present: Vec<f64> = (0..t.len())
-                .filter(|&j| {
-                    [
-                        &self.columns.reference,
-                        &self.columns.output,
-                        &self.columns.effort,
-                    ]
-                    .iter()
-                    .all(|c| table.column(c).is_some_and(|v| !v[j].is_nan()))
-                })
+                .filter(|&j| required.iter().all(|v| !v[j].is_nan()))
                 .map(|j| t[j])
                 .collect();
             if let Some((from, to)) = longest_hole(&t, &present, spacing_s)
