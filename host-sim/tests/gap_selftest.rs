@@ -69,6 +69,55 @@ fn the_independent_worlds_first_50_cases() {
             r.reason
         );
     }
+    the_balance_reads_each_car_on_the_right_side_of_its_rule(&report);
+}
+
+/// The torque balance, the model-free reading beside the verdicts, on the same 50 cars: where
+/// it holds, it reads every car with play above half the smallest play the diagnosis names
+/// (the size under which it rules the candidate out) and every car without below it, and the
+/// same for the force at the rack on cars with rack friction and on cars with neither friction
+/// nor a tyre. The summary the selftest prints says so.
+fn the_balance_reads_each_car_on_the_right_side_of_its_rule(report: &selftest::SelftestReport) {
+    use host_sim::gap::signature::{NEGATIVE_SLACK_DEG, NEGATIVE_SLACK_N};
+    let mut held = 0;
+    for r in &report.cases {
+        let (Some(case), Some(g)) = (&r.case.truth, &r.signature) else {
+            continue;
+        };
+        if !g.holds {
+            continue;
+        }
+        held += 1;
+        let t = &case.truth;
+        let play_seen = g.belt_play_deg > NEGATIVE_SLACK_DEG;
+        assert_eq!(
+            play_seen,
+            t.belt_play_deg > 0.0,
+            "case {}: play {:.2} deg hidden, {:.2} +- {:.2} read",
+            r.case.index,
+            t.belt_play_deg,
+            g.belt_play_deg,
+            g.belt_play_se_deg
+        );
+        if t.rack_friction_n > 0.0 || t.dahl_force_n == 0.0 {
+            assert_eq!(
+                g.rack_coulomb_n > NEGATIVE_SLACK_N,
+                t.rack_friction_n > 0.0,
+                "case {}: rack friction {:.0} N hidden, {:.0} +- {:.0} read",
+                r.case.index,
+                t.rack_friction_n,
+                g.rack_coulomb_n,
+                g.rack_coulomb_se_n
+            );
+        }
+    }
+    assert!(held >= 40, "the balance holds on only {held} of 50 logs");
+    let summary = report.balance_summary();
+    assert!(
+        summary.contains("play in the belt") && summary.contains("Coulomb force at the rack"),
+        "{summary}"
+    );
+    println!("{summary}");
 }
 
 /// Two of the independent world's cars at 100 Hz (seed 1: an effect-free sweep and a late

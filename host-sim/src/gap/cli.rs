@@ -478,7 +478,10 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
             &opts,
             &print_case,
         );
-        (report.confusion_table(), serde_json::to_value(&report)?)
+        (
+            format!("{}{}", report.confusion_table(), report.balance_summary()),
+            serde_json::to_value(&report)?,
+        )
     };
     print!("{table}");
     println!("{:.1} s", started.elapsed().as_secs_f64());

@@ -244,6 +244,10 @@ pub struct CaseResult {
     pub effort_offset: super::Offset,
     /// How many times the nominal model's effort the log's is.
     pub effort_scale: super::Scale,
+    /// The log's torque balance, read without the model ([`super::signature`]): the second
+    /// reading of play and rack friction beside the verdict; `None` where it cannot be read.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub signature: Option<super::signature::Signature>,
     /// The logger that wrote the case's file, in a run under several loggers.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub logger: Option<LoggedBy>,
@@ -323,6 +327,7 @@ fn diagnosed(
         parameters: d.parameters,
         effort_offset: d.effort_offset,
         effort_scale: d.effort_scale,
+        signature: d.signature,
         case,
         logger,
     }
@@ -603,6 +608,7 @@ impl LoggersReport {
                 }
             );
             s.push_str(&l.report.confusion_table());
+            s.push_str(&l.report.balance_summary());
             s.push('\n');
         }
         s
@@ -683,6 +689,121 @@ impl SelftestReport {
         );
         s
     }
+}
+
+impl SelftestReport {
+    /// What the log's torque balance read against what each car hides, over the cases whose
+    /// truth is known and whose balance holds: the play on cars with play and the largest on
+    /// cars without; the force at the rack on cars with rack friction and the largest on cars
+    /// with neither friction nor a tyre (a saturated tyre is a force at the rack too). Empty
+    /// where no case has both.
+    pub fn balance_summary(&self) -> String {
+        let read: Vec<(&generator::Truth, &super::signature::Signature)> = self
+            .cases
+            .iter()
+            .filter_map(|r| Some((&r.case.truth.as_ref()?.truth, r.signature.as_ref()?)))
+            .collect();
+        let holding: Vec<_> = read.iter().filter(|(_, g)| g.holds).collect();
+        if holding.is_empty() {
+            return String::new();
+        }
+        let against = holding.iter().filter(|(_, g)| g.against_model).count();
+        let mut s = format!(
+            "torque balance (no fit; {}), where it holds: {} of {} logs\n",
+            if against == 0 {
+                "the log alone".to_string()
+            } else {
+                format!("{against} read against the nominal model's")
+            },
+            holding.len(),
+            self.cases.len()
+        );
+        // Each reading on the cars that hide the effect (with what they hide) and on those
+        // that hide nothing it could be read as.
+        let split = |has: fn(&generator::Truth) -> f64,
+                     clean: fn(&generator::Truth) -> bool,
+                     reading: fn(&super::signature::Signature) -> f64| {
+            let with: Vec<(f64, f64)> = holding
+                .iter()
+                .filter(|(t, _)| has(t) > 0.0)
+                .map(|(t, g)| (reading(g), has(t)))
+                .collect();
+            let without: Vec<f64> = holding
+                .iter()
+                .filter(|(t, _)| clean(t))
+                .map(|(_, g)| reading(g))
+                .collect();
+            (with, without)
+        };
+        let (with_play, without_play) = split(
+            |t| t.belt_play_deg,
+            |t| t.belt_play_deg == 0.0,
+            |g| g.belt_play_deg,
+        );
+        s.push_str(&balance_line(
+            "play in the belt",
+            "deg",
+            2,
+            &with_play,
+            "play",
+            &without_play,
+            "without it",
+        ));
+        let (with_friction, neither) = split(
+            |t| t.rack_friction_n,
+            |t| t.rack_friction_n == 0.0 && t.dahl_force_n == 0.0,
+            |g| g.rack_coulomb_n,
+        );
+        s.push_str(&balance_line(
+            "Coulomb force at the rack",
+            "N",
+            0,
+            &with_friction,
+            "rack friction",
+            &neither,
+            "with neither friction nor a tyre",
+        ));
+        s
+    }
+}
+
+/// One line of [`SelftestReport::balance_summary`]: the range read on the cars with the effect
+/// (each as read and as a share of what it hides) and the largest magnitude on those without.
+fn balance_line(
+    what: &str,
+    unit: &str,
+    decimals: usize,
+    with: &[(f64, f64)],
+    effect: &str,
+    without: &[f64],
+    without_label: &str,
+) -> String {
+    let range = |v: &mut dyn Iterator<Item = f64>| {
+        v.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+            (lo.min(x), hi.max(x))
+        })
+    };
+    let mut s = format!("  {what}:");
+    if with.is_empty() {
+        s.push_str(&format!(" no car with {effect}"));
+    } else {
+        let (lo, hi) = range(&mut with.iter().map(|&(r, _)| r));
+        let (rlo, rhi) = range(&mut with.iter().map(|&(r, h)| r / h));
+        s.push_str(&format!(
+            " {lo:.decimals$}-{hi:.decimals$} {unit} on the {} cars with {effect} \
+             (x{rlo:.2}-{rhi:.2} of what they hide)",
+            with.len()
+        ));
+    }
+    if !without.is_empty() {
+        let worst = without.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        s.push_str(&format!(
+            "; at most {worst:.decimals$} {unit} from zero on the {} {without_label}",
+            without.len()
+        ));
+    }
+    s.push('\n');
+    s
 }
 
 /// The options the selftest uses by default: the paper rig's candidates, cheap fits.
