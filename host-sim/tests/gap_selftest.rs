@@ -78,7 +78,11 @@ fn the_independent_worlds_first_50_cases() {
 /// same for the force at the rack on cars with rack friction and on cars with neither friction
 /// nor a tyre. The summary the selftest prints says so.
 fn the_balance_reads_each_car_on_the_right_side_of_its_rule(report: &selftest::SelftestReport) {
-    use host_sim::gap::signature::{NEGATIVE_SLACK_DEG, NEGATIVE_SLACK_N};
+    use host_sim::gap::{EffectKind, rig::Rig};
+    // The diagnosis rules a candidate out below half its minimum size (`diagnose`'s `half`).
+    let rig = Rig::paper();
+    let play_limit = EffectKind::BeltPlay.min_size(&rig) / 2.0;
+    let force_limit = EffectKind::RackFriction.min_size(&rig) / 2.0;
     let mut held = 0;
     for r in &report.cases {
         let (Some(case), Some(g)) = (&r.case.truth, &r.signature) else {
@@ -89,7 +93,7 @@ fn the_balance_reads_each_car_on_the_right_side_of_its_rule(report: &selftest::S
         }
         held += 1;
         let t = &case.truth;
-        let play_seen = g.belt_play_deg > NEGATIVE_SLACK_DEG;
+        let play_seen = g.belt_play_deg > play_limit;
         assert_eq!(
             play_seen,
             t.belt_play_deg > 0.0,
@@ -101,7 +105,7 @@ fn the_balance_reads_each_car_on_the_right_side_of_its_rule(report: &selftest::S
         );
         if t.rack_friction_n > 0.0 || t.dahl_force_n == 0.0 {
             assert_eq!(
-                g.rack_coulomb_n > NEGATIVE_SLACK_N,
+                g.rack_coulomb_n > force_limit,
                 t.rack_friction_n > 0.0,
                 "case {}: rack friction {:.0} N hidden, {:.0} +- {:.0} read",
                 r.case.index,

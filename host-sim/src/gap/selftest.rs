@@ -698,12 +698,12 @@ impl SelftestReport {
     /// with neither friction nor a tyre (a saturated tyre is a force at the rack too). Empty
     /// where no case has both.
     pub fn balance_summary(&self) -> String {
-        let read: Vec<(&generator::Truth, &super::signature::Signature)> = self
+        let holding: Vec<(&generator::Truth, &super::signature::Signature)> = self
             .cases
             .iter()
             .filter_map(|r| Some((&r.case.truth.as_ref()?.truth, r.signature.as_ref()?)))
+            .filter(|(_, g)| g.holds)
             .collect();
-        let holding: Vec<_> = read.iter().filter(|(_, g)| g.holds).collect();
         if holding.is_empty() {
             return String::new();
         }
