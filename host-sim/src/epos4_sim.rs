@@ -241,6 +241,16 @@ impl DriveLoop {
         self.tick += 1;
     }
 
+    /// The position loop runs `ticks` current-loop ticks after this loop's first tick (and
+    /// every [`CURRENT_TICKS_PER_POSITION_TICK`] after), instead of at it: a drive's loops run on
+    /// its own clock, not on the instants its log counts from (taken modulo the position
+    /// period).
+    pub fn with_position_phase(mut self, ticks: u32) -> DriveLoop {
+        let per = CURRENT_TICKS_PER_POSITION_TICK as u64;
+        self.tick = (per - u64::from(ticks) % per) % per;
+        self
+    }
+
     /// Start the cascade from rest at the plant's motor angle (the drive entering Operation
     /// enabled).
     pub fn enable(&mut self) {
@@ -287,6 +297,36 @@ mod tests {
 
     fn node() -> NodeId {
         NodeId::new(1).unwrap()
+    }
+
+    /// The tick at which a drive loop at rest, given a step as its target, first drives a
+    /// current: its first position-loop tick, where the interpolator hands the cascade a
+    /// demand.
+    fn first_current_tick(phase: u32) -> u32 {
+        let dt = 1.0 / CURRENT_LOOP_HZ as f64;
+        let plant = EffectPlant::new(PlantParams::PAPER, PlantEffects::default(), dt).unwrap();
+        let mut drive = DriveLoop::new(plant).with_position_phase(phase);
+        drive.enable();
+        drive.push_target(SteeringDeg(5.0)).unwrap();
+        (0..100)
+            .find(|_| {
+                drive.tick(true);
+                drive.plant().current_a().abs() > 1e-9
+            })
+            .unwrap()
+    }
+
+    #[test]
+    fn a_drive_loops_position_phase_moves_its_first_position_tick_by_as_many_ticks() {
+        let base = first_current_tick(0);
+        for phase in [1, 3, 9] {
+            assert_eq!(first_current_tick(phase), base + phase, "phase {phase}");
+        }
+        // Taken modulo the position period.
+        assert_eq!(
+            first_current_tick(CURRENT_TICKS_PER_POSITION_TICK + 2),
+            base + 2
+        );
     }
 
     /// ECU + drive on one bus, stepped in 100 µs slices.

@@ -108,7 +108,19 @@ fn an_effect_free_epos4_car_is_none_under_either_logger() {
 fn a_row_per_tpdo_loggers_readout_is_found() {
     let case = GenCase::nominal(sweep(12.0), 100);
     let (_, convert) = diagnosed(&case, LoggedCar::Epos4Convert);
-    assert_eq!(convert.readout, None, "convert's header says how it reads");
+    // Convert's header says how it reads: a line between the status frames' column samples,
+    // and where those sit (`# column-sampled:`), which the model reads as it.
+    let ours = convert.readout.unwrap();
+    assert_eq!(ours.current_at_row, 0.5);
+    assert!(ours.column_interpolated);
+    let sampled = Phases::of(&case, 3).column_age_convert_s();
+    let off = (ours.column_age_s - sampled).abs();
+    assert!(
+        off.min(0.010 - off) < 0.01e-3,
+        "status frames' column {:.2} ms before each row's end, fitted {:.2} ms",
+        1e3 * sampled,
+        1e3 * ours.column_age_s
+    );
     let (_, theirs) = diagnosed(&case, LoggedCar::Epos4StatusFrame);
     let readout = theirs.readout.unwrap();
     assert_eq!(readout.current_at_row, 1.0);

@@ -10,6 +10,7 @@
 //! SYNC's phase is not in any header: the ECU's SYNC grid runs on its own clock, so it is
 //! searched on every EPOS4 log.
 
+use super::drive_clock;
 use super::model::{Effects, MAX_SYNC_DRIFT};
 use super::rig::{CarDrive, Epos4Readout, Rig, RigModel};
 use super::{Fit, Record, Scorer, parallel_map, simulate};
@@ -28,7 +29,15 @@ pub struct LogHeader {
     /// reference frames, s per s, as `steer-can convert` reads it off the bus.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sync_drift: Option<f64>,
+    /// `# column-sampled: 2.31 ms before each row's end`: where the status frames' column
+    /// samples sit against the rows at the log's start, s (convert reads the column at each
+    /// row's end off a line between them; the ECU's clock places them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub column_sampled_s: Option<f64>,
 }
+
+/// The period a status frame's column sample may sit before a row's end, ms.
+const COLUMN_SAMPLED_MAX_MS: f64 = 10.0;
 
 impl LogHeader {
     /// The `key: value` comment lines (without their `#`); other comments are ignored, and a
@@ -64,6 +73,21 @@ impl LogHeader {
                                     "header `# sync-drift: {v}`: expected parts per million \
                                      within +-{:.0}, e.g. `+35.2 ppm`",
                                     1e6 * MAX_SYNC_DRIFT
+                                )
+                            })?,
+                    )
+                }
+                "column-sampled" => {
+                    h.column_sampled_s = Some(
+                        v.strip_suffix("ms before each row's end")
+                            .and_then(|n| n.trim().parse::<f64>().ok())
+                            .filter(|a| a.is_finite() && (0.0..=COLUMN_SAMPLED_MAX_MS).contains(a))
+                            .map(|a| a * 1e-3)
+                            .ok_or_else(|| {
+                                format!(
+                                    "header `# column-sampled: {v}`: expected milliseconds \
+                                     within 0-{COLUMN_SAMPLED_MAX_MS:.0}, e.g. `2.31 ms before \
+                                     each row's end`"
                                 )
                             })?,
                     )
@@ -116,10 +140,14 @@ pub struct Tried {
     pub reference_shift_rows: usize,
     /// The nominal model's GoF on the log (eq. 11, combined).
     pub gof: f64,
-    /// EPOS4 only, on a log whose header does not say how it read the drive: the readout
-    /// fitted with the phase.
+    /// EPOS4 only: the readout fitted with the phase (on a log whose header does not say how
+    /// it read the drive), or convert's with the status frames' column age fitted.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub readout: Option<Epos4Readout>,
+    /// EPOS4 only: the current-loop ticks from each period's start to the drive's next
+    /// position-loop tick (fitted, [`super::drive_clock`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub position_phase_ticks: Option<u32>,
 }
 
 /// The chosen car run with its reference late, on the head of the log
@@ -163,9 +191,14 @@ pub struct CarChoice {
     pub compared_late: Option<LateComparison>,
     /// The best of each car tried (one entry when the car was given), best first.
     pub tried: Vec<Tried>,
-    /// An EPOS4 car's log whose header does not say how it read the drive: the readout
-    /// fitted ([`Epos4Readout`]); `None` where the header says (`steer-can convert`'s).
+    /// An EPOS4 car: how the log reads the drive ([`Epos4Readout`]): fitted where the header
+    /// does not say; where it does (`steer-can convert`'s), convert's, with where the status
+    /// frames sampled the column fitted.
     pub readout: Option<Epos4Readout>,
+    /// An EPOS4 car: the current-loop ticks (50 us) from each period's start to the drive's
+    /// next position-loop tick (fitted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub position_phase_ticks: Option<u32>,
 }
 
 impl CarChoice {
@@ -189,6 +222,12 @@ impl CarChoice {
                 1e3 * s
             ));
         }
+        if let Some(p) = self.position_phase_ticks {
+            line.push_str(&format!(
+                "; the drive's position loop {:.2} ms into each period (fitted)",
+                1e3 * f64::from(p) * SYNC_FINE_STEP_S
+            ));
+        }
         match (self.sync_drift, self.header_sync_drift) {
             (Some(d), _) => line.push_str(&format!(
                 "; the SYNC grid walking {:+.1} ppm against the reference (the ECU's clock \
@@ -208,7 +247,19 @@ impl CarChoice {
                 1e3 * s
             ));
         }
-        if let Some(r) = &self.readout {
+        if let Some(r) = self.readout.filter(|r| r.column_interpolated) {
+            line.push_str(&if r.column_age_s > 0.0 {
+                format!(
+                    "; the column read as steer-can convert reads it, off a line between the \
+                     status frames' samples {:.2} ms before each row's end (the header's)",
+                    1e3 * r.column_age_s
+                )
+            } else {
+                "; the column at each row's end (the header does not say where the status \
+                 frames sampled it)"
+                    .to_string()
+            });
+        } else if let Some(r) = &self.readout {
             line.push_str(&format!(
                 "; the drive's samples read as {}, the column {:.2} ms old (fitted; the header \
                  does not say)",
@@ -427,6 +478,9 @@ pub struct LogSays {
     /// the header says (`# sync-drift:`); the model runs it
     /// ([`super::rig::Epos4Timing::sync_drift`]) where it fits the log better than one phase.
     pub sync_drift: Option<f64>,
+    /// Where convert's header says the status frames sampled the column, s before each row's
+    /// end (`# column-sampled:`); `None`: the column at the row's end.
+    pub column_sampled_s: Option<f64>,
 }
 
 /// The car for a log on the paper rig: `drive` and `controller` where given (the command line
@@ -445,6 +499,13 @@ pub fn choose(
     if !matches!(rig.model, RigModel::Paper(_)) {
         return (rig.clone(), rec.clone(), None);
     }
+    // Convert's column: a line between the status frames' samples, where its header places
+    // them (else the column at the row's end, as a log from before that line was written).
+    let mut with_column = rig.clone();
+    if let RigModel::Paper(m) = &mut with_column.model {
+        m.epos4.readout.column_age_s = says.column_sampled_s.unwrap_or(0.0);
+    }
+    let rig = &with_column;
     let drives: Vec<CarDrive> = match drive {
         Some((d, _)) => vec![d],
         None => vec![CarDrive::Epos4, CarDrive::Direct],
@@ -493,6 +554,7 @@ pub fn choose(
                 reference_shift_rows: k,
                 gof: fit.gof,
                 readout: None,
+                position_phase_ticks: None,
             }
         })
     };
@@ -550,6 +612,29 @@ pub fn choose(
                     }
                     _ => best,
                 };
+                // The drive's own clock on convert's log: where its position loop ticks
+                // against the SYNC. (On a log whose readout was fitted, see `gap/NOTES.md`.)
+                let readout = best.readout.unwrap_or(Epos4Readout {
+                    column_age_s: says.column_sampled_s.unwrap_or(0.0),
+                    ..Epos4Readout::CONVERT
+                });
+                // Convert's log states its readout; its drive's clock is fitted below.
+                let best = match best.sync_after_push_s {
+                    Some(s) if readout.column_interpolated => {
+                        let car = with_readout(&with_car(rig, d, c, s), s, readout);
+                        match drive_clock::fit(&car, &shorts[index_of(k)], s, threads) {
+                            Some(f) => Tried {
+                                sync_after_push_s: Some(f.sync_after_push_s),
+                                position_phase_ticks: Some(f.position_phase_ticks),
+                                readout: Some(readout),
+                                gof: f.gof,
+                                ..best
+                            },
+                            None => best,
+                        }
+                    }
+                    _ => best,
+                };
                 best_of_car.push(best);
             }
         }
@@ -565,6 +650,7 @@ pub fn choose(
             if let Some(readout) = t.readout {
                 m.epos4.readout = readout;
             }
+            m.epos4.position_phase_ticks = t.position_phase_ticks.unwrap_or(0);
             m.epos4.sync_drift = t.sync_drift.unwrap_or(0.0);
         }
         r
@@ -670,6 +756,7 @@ pub fn choose(
         compared_late,
         tried,
         readout: best.readout,
+        position_phase_ticks: best.position_phase_ticks,
     };
     let mut chosen = rig_of(&best);
     if let RigModel::Paper(m) = &mut chosen.model {
@@ -687,9 +774,20 @@ fn drifting(car: Tried, phase: f64, drift: f64, duration: f64) -> Tried {
     let period = 1.0 / steering_ecu::paper_mode::REFERENCE_HZ as f64;
     let middle = 0.5 * duration.min(SYNC_SEARCH_S);
     let tick = SYNC_FINE_STEP_S;
+    // Convert's column samples walk with the SYNCs, earlier against each row's end: the
+    // header's place (read over the same head) at the log's start.
+    let readout = car.readout.map(|r| Epos4Readout {
+        column_age_s: if r.column_interpolated && r.column_age_s > 0.0 {
+            (r.column_age_s + drift * middle).rem_euclid(period)
+        } else {
+            r.column_age_s
+        },
+        ..r
+    });
     Tried {
         sync_after_push_s: Some((phase - drift * middle - tick).rem_euclid(period) + tick),
         sync_drift: Some(drift),
+        readout,
         ..car
     }
 }
@@ -801,6 +899,7 @@ fn fit_readout(rig: &Rig, head: &Record, threads: usize) -> (Rig, Epos4Readout) 
             coarse_ages.iter().map(move |&a| Epos4Readout {
                 current_at_row: c,
                 column_age_s: a,
+                column_interpolated: false,
             })
         })
         .collect();
@@ -893,6 +992,7 @@ pub fn choose_for_log(
         current_stated: header.current.is_some(),
         timing,
         sync_drift: header.sync_drift,
+        column_sampled_s: header.column_sampled_s,
     };
     choose(rig, rec, drive, controller, says, threads)
 }

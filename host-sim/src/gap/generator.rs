@@ -778,10 +778,18 @@ pub fn log_of(case: &GenCase, seed: u64, logger: &Logger) -> crate::logfmt::Log 
             "current: sync-sample".into(),
             "reference: period-ending".into(),
         ];
+        let d = super::generator_epos4::ecu_clock_drift(case, seed, logger);
         if logger.drifting_clock {
-            let d = super::generator_epos4::ecu_clock_drift(case, seed, logger);
             c.push(format!("sync-drift: {:+.1} ppm", 1e6 * d));
         }
+        // Where the status frames' column samples sit before each row's end, read as convert
+        // reads it: the middle of the first 10 s (or of the log).
+        let middle = 0.5 * (case.reference.len() as f64 * 0.010).min(10.0);
+        let age = super::generator_epos4::Phases::of(case, seed).column_age_convert_s();
+        c.push(format!(
+            "column-sampled: {:.2} ms before each row's end",
+            1e3 * (age - d * middle).rem_euclid(0.010)
+        ));
         c
     } else if logger.car == LoggedCar::Epos4StatusFrame {
         Vec::new()

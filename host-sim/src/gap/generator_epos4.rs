@@ -219,6 +219,13 @@ impl Phases {
         }
     }
 
+    /// Where convert's log has the column sampled before each row's end, s: the status
+    /// frame's sample (one encoder period before the frame was sent) last before the row's
+    /// end, which is a frame after the reference was sent and a period on.
+    pub fn column_age_convert_s(&self) -> f64 {
+        (FRAME_S + ENCODER_PERIOD_S - self.status_s).rem_euclid(0.010)
+    }
+
     /// How old the column is in a row written as TPDO2 arrives ([`LoggedCar::Epos4StatusFrame`]):
     /// from the encoder sample of the last status frame the logger had to the row's stamp, s.
     pub fn column_age_per_tpdo_s(&self) -> f64 {

@@ -21,6 +21,7 @@ pub mod cli;
 mod diagnose;
 mod diagnosis;
 pub mod drive;
+pub mod drive_clock;
 mod effects;
 pub mod finding;
 pub mod fit;

@@ -261,20 +261,38 @@ pub struct Epos4Samples {
     at: Vec<f64>,
     motor: Vec<f64>,
     current: Vec<f64>,
-    /// The column at each row's end, and every `column_step` from the start (the first at
-    /// one step).
+    /// The column at each row's end, every 1 ms from the start (the first at 1 ms), and,
+    /// for convert's readout, the encoder's reading at the end of every current-loop tick
+    /// (`tick` s): convert's line between the status frames' samples takes the encoder's own
+    /// quantised sample of the tick they were read at, not a line between samples (a line
+    /// between samples 1 ms apart moved the column of a 10 Hz sweep by a count, where the
+    /// ECU sent the count it read). Empty where no readout asks for it (it is 20 values a
+    /// millisecond).
     column: Vec<f64>,
-    column_fine: Vec<f64>,
-    column_step: f64,
+    column_ms: Vec<f64>,
+    column_ticks: Vec<f32>,
+    tick: f64,
     period: f64,
+    /// How fast the ECU's clock walks against the rows, s per s (its status frames walk with
+    /// its SYNCs).
+    drift: f64,
 }
 
-/// How finely the EPOS4 model keeps the column for a readout that reads it before the row's
-/// end, s: a line between samples a period apart would take 1.2 % off a 5 Hz sweep's column,
-/// which the torsion bar's damping then stood in for.
-const COLUMN_STEP_S: f64 = 1e-3;
+/// The grid a held column is read on, s (see [`Epos4Samples::read`]).
+const COLUMN_MS_STEP_S: f64 = 1e-3;
 
 impl Epos4Samples {
+    /// The column `before` s before row `k`'s end, on the tick grid (held at the ends).
+    fn column_before(&self, k: usize, before: f64) -> f64 {
+        let t = (k + 1) as f64 * self.period - before;
+        let last = self.column_ticks.len().saturating_sub(1);
+        // Tick i ends at (i + 1) * tick; `as` saturates a negative or NaN index to 0.
+        let i = ((t / self.tick).round() as usize)
+            .saturating_sub(1)
+            .min(last);
+        self.column_ticks.get(i).map_or(f64::NAN, |v| f64::from(*v))
+    }
+
     /// The rows as `readout` reads them.
     pub fn read(&self, readout: super::rig::Epos4Readout) -> SimOut {
         if self.at.is_empty() {
@@ -282,18 +300,40 @@ impl Epos4Samples {
         }
         let n = self.column.len();
         let interp = |t: f64, v: &[f64]| super::interp_at(&self.at, v, t);
-        let output = if readout.column_age_s > 0.0 && !self.column_fine.is_empty() {
-            let at_fine: Vec<f64> = (1..=self.column_fine.len())
-                .map(|i| i as f64 * self.column_step)
-                .collect();
+        let age = readout.column_age_s;
+        let output = if age.is_nan() || age <= 0.0 {
+            self.column.clone()
+        } else if readout.column_interpolated && !self.column_ticks.is_empty() {
+            // Convert's line from the sample before the row's end to the next, a period on;
+            // on an ECU clock of its own the samples walk against the rows, as its SYNCs do.
             (0..n)
                 .map(|k| {
-                    let t = (k + 1) as f64 * self.period - readout.column_age_s;
-                    super::interp_at(&at_fine, &self.column_fine, t)
+                    let end = (k + 1) as f64 * self.period;
+                    let age = (age - self.drift * end).rem_euclid(self.period);
+                    let w = age / self.period;
+                    (1.0 - w) * self.column_before(k, age)
+                        + w * self.column_before(k, age - self.period)
                 })
                 .collect()
         } else {
-            self.column.clone()
+            // A logger that holds the status frame's sample: the column on a 1 ms grid, a line
+            // between (gap/NOTES.md, "The EPOS4 car's clock and convert's column": against
+            // an encoder with noise before its quantisation, the model's exact counts lost
+            // two effect-free cars of the world's EPOS4 car that the line keeps).
+            let step = (COLUMN_MS_STEP_S / self.tick).round().max(1.0) * self.tick;
+            let at: Vec<f64> = (1..=self.column_ms.len())
+                .map(|i| i as f64 * step)
+                .collect();
+            if at.is_empty() {
+                self.column.clone()
+            } else {
+                (0..n)
+                    .map(|k| {
+                        let t = (k + 1) as f64 * self.period - age;
+                        super::interp_at(&at, &self.column_ms, t)
+                    })
+                    .collect()
+            }
         };
         SimOut {
             output,
@@ -312,8 +352,21 @@ impl Epos4Samples {
     }
 }
 
-/// The EPOS4 model's run ([`simulate_epos4`]) before the log's readout.
+/// The EPOS4 model's run ([`simulate_epos4`]) before the log's readout, with the column at
+/// every tick where `m`'s readout is convert's line between status samples.
 pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples {
+    let r = m.epos4.readout;
+    epos4_samples_keeping(m, rec, fx, r.column_interpolated && r.column_age_s > 0.0)
+}
+
+/// [`epos4_samples`], with the column at every tick kept or not (a fit of convert's
+/// readout keeps it whatever the readout it starts from).
+pub fn epos4_samples_keeping(
+    m: &PaperModel,
+    rec: &Record,
+    fx: &Effects,
+    keep_ticks: bool,
+) -> Epos4Samples {
     let p = m.plant;
     let period = 1.0 / REFERENCE_HZ as f64;
     let dt = 1.0 / CURRENT_LOOP_HZ as f64;
@@ -349,7 +402,7 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
         return Epos4Samples::default();
     };
     plant.set_at_rest(first.to_radians());
-    let mut drive = DriveLoop::new(plant);
+    let mut drive = DriveLoop::new(plant).with_position_phase(m.epos4.position_phase_ticks);
     let gains = match m.controller {
         Controller::Paper => m.gains,
         Controller::Ecu => Ecu::ecu_mode_epos4_gains(),
@@ -398,9 +451,15 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
     let mut motor_s = Vec::with_capacity(n + 1);
     let mut current_s = Vec::with_capacity(n + 1);
     let mut column_rows = Vec::with_capacity(n);
-    // The column every COLUMN_STEP_S too, for a readout that takes it before the row's end.
-    let column_every = ((COLUMN_STEP_S / dt).round() as u64).max(1);
-    let mut column_fine = Vec::with_capacity(n * (ticks_per_period / column_every) as usize + 1);
+    // The column every 1 ms too, and at every tick where asked, for a readout that takes it
+    // before the row's end.
+    let column_every = ((COLUMN_MS_STEP_S / dt).round() as u64).max(1);
+    let mut column_ms = Vec::with_capacity(n * (ticks_per_period / column_every) as usize + 1);
+    let mut column_ticks = Vec::with_capacity(if keep_ticks {
+        n * ticks_per_period as usize
+    } else {
+        0
+    });
     let mut target = gearing.motor_from_steering(SteeringRad::from(SteeringDeg(first as f32)));
     let mut tick: u64 = 0;
     // The ECU's column encoder task samples every 2 ms, on its own phase; the shaper takes the
@@ -439,11 +498,15 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
         for _ in 0..ticks_per_period {
             drive.tick(true);
             tick += 1;
+            let column = column_deg(&drive);
+            if keep_ticks {
+                column_ticks.push(column as f32);
+            }
             if tick.is_multiple_of(column_every) {
-                column_fine.push(column_deg(&drive));
+                column_ms.push(column);
             }
             if tick % encoder_ticks == encoder_phase {
-                encoder_sample = column_deg(&drive);
+                encoder_sample = column;
             }
             if tick >= next_sync {
                 syncs_done += 1;
@@ -469,9 +532,11 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
         motor: motor_s,
         current: current_s,
         column: column_rows,
-        column_fine,
-        column_step: column_every as f64 * dt,
+        column_ms,
+        column_ticks,
+        tick: dt,
         period,
+        drift,
     }
 }
 
@@ -827,5 +892,71 @@ mod sync_drift {
     fn a_drift_that_is_no_number_or_past_one_percent_is_held_to_it() {
         assert_eq!(syncs(f64::NAN, 50), syncs(0.0, 50));
         assert_eq!(syncs(0.5, 300), syncs(0.01, 300));
+    }
+}
+
+#[cfg(test)]
+mod column_readout {
+    use super::Epos4Samples;
+    use crate::gap::rig::Epos4Readout;
+
+    const PERIOD: f64 = 0.01;
+    const TICK: f64 = 5e-5;
+
+    /// Samples of a column that moves as t^2 (deg, t in s), every tick over `rows` periods.
+    fn samples(rows: usize) -> Epos4Samples {
+        let col = |t: f64| 100.0 * t * t;
+        let ticks = (rows as f64 * PERIOD / TICK).round() as usize;
+        Epos4Samples {
+            at: vec![0.0, rows as f64 * PERIOD],
+            motor: vec![0.0; 2],
+            current: vec![0.0; 2],
+            column: (1..=rows).map(|k| col(k as f64 * PERIOD)).collect(),
+            column_ms: (1..=rows * 10).map(|i| col(i as f64 * 1e-3)).collect(),
+            column_ticks: (1..=ticks).map(|i| col(i as f64 * TICK) as f32).collect(),
+            tick: TICK,
+            period: PERIOD,
+            drift: 0.0,
+        }
+    }
+
+    fn read(age: f64, interpolated: bool) -> Vec<f64> {
+        samples(20)
+            .read(Epos4Readout {
+                current_at_row: 0.5,
+                column_age_s: age,
+                column_interpolated: interpolated,
+            })
+            .output
+    }
+
+    #[test]
+    fn convert_reads_the_column_off_a_line_between_the_samples_either_side_of_the_rows_end() {
+        let col = |t: f64| 100.0 * t * t;
+        let age = 2.3e-3;
+        let w = age / PERIOD;
+        let got = read(age, true);
+        for (k, v) in got.iter().enumerate().take(15).skip(2) {
+            let end = (k + 1) as f64 * PERIOD;
+            let want = (1.0 - w) * col(end - age) + w * col(end - age + PERIOD);
+            assert!((v - want).abs() < 1e-4, "row {k}: {v} against {want}");
+            // A curve's chord lies above it: the line is not the column at the row's end.
+            assert!(*v > col(end) + 1e-3, "row {k}");
+        }
+    }
+
+    #[test]
+    fn a_held_column_is_the_sample_itself_and_an_age_of_zero_the_rows_end() {
+        let col = |t: f64| 100.0 * t * t;
+        let held = read(4e-3, false);
+        for (k, v) in held.iter().enumerate().take(15).skip(1) {
+            let want = col((k + 1) as f64 * PERIOD - 4e-3);
+            assert!((v - want).abs() < 1e-4, "row {k}: {v} against {want}");
+        }
+        let exact: Vec<f64> = (1..=20).map(|k| col(k as f64 * PERIOD)).collect();
+        assert_eq!(read(0.0, true), exact);
+        assert_eq!(read(0.0, false), exact);
+        // No number for an age: the row's end, not a NaN column.
+        assert_eq!(read(f64::NAN, true), exact);
     }
 }

@@ -126,6 +126,12 @@ pub struct Epos4Timing {
     /// how old the column is against the row. `steer-can convert`'s by default.
     #[serde(default)]
     pub readout: Epos4Readout,
+    /// Current-loop ticks (0-9, 50 us each) from the start of each reference period on the
+    /// model's grid to the drive's next position-loop tick: the drive runs its 2 kHz position
+    /// loop on its own clock, so where its ticks fall against the SYNC is the car's, and
+    /// decides on which tick a latched target first moves the motor.
+    #[serde(default)]
+    pub position_phase_ticks: u32,
 }
 
 impl Default for Epos4Timing {
@@ -136,30 +142,40 @@ impl Default for Epos4Timing {
             current: DriveCurrent::Instantaneous,
             encoder_phase_s: 0.0,
             readout: Epos4Readout::CONVERT,
+            position_phase_ticks: 0,
         }
     }
 }
 
 /// How an EPOS4 car's log reads the drive's SYNC samples and the ECU's column into its rows:
 /// a logger's property, not the car's. `steer-can convert` interpolates the TPDO current to
-/// the middle of each row's period and dates the column when the ECU measured it; a team's
-/// logger that writes a row as each TPDO arrives holds the current the drive sampled at that
-/// SYNC (the row's end) and the column of the ECU's last status frame (up to a period and an
+/// the middle of each row's period, dates each status frame's column when the ECU measured it
+/// and draws a line between those samples (one a period) to the row's end; a team's logger
+/// that writes a row as each TPDO arrives holds the current the drive sampled at that SYNC
+/// (the row's end) and the column of the ECU's last status frame (up to a period and an
 /// encoder tick old).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Epos4Readout {
     /// Where in the row interval the current is read, a fraction of it (0.5 the middle, 1 the
     /// row's end).
     pub current_at_row: f64,
-    /// How much earlier than the row's end the column was measured, s.
+    /// How much earlier than the row's end the column was measured, s: the sample a row
+    /// holds, or with `column_interpolated` the last sample before the row's end.
     pub column_age_s: f64,
+    /// The column at the row's end read off a line between the sample `column_age_s` before
+    /// it and the one a period later (convert's reading of the status frames), instead of the
+    /// sample itself. With an age of 0 the two are one.
+    #[serde(default)]
+    pub column_interpolated: bool,
 }
 
 impl Epos4Readout {
-    /// `steer-can convert`'s (and host-sim's) reading.
+    /// `steer-can convert`'s (and host-sim's) reading, with the column sampled at the row's
+    /// end; on a car, where the status frames sit is fitted (`column_age_s`).
     pub const CONVERT: Epos4Readout = Epos4Readout {
         current_at_row: 0.5,
         column_age_s: 0.0,
+        column_interpolated: true,
     };
 
     /// Whether the rows are the drive's SYNCs (a row as each TPDO arrives, the current at its

@@ -148,6 +148,26 @@ pub fn grid_drift(tpdo_us: &[f64], reference_us: &[f64], nominal_us: f64) -> Opt
     Some(sync / reference - 1.0)
 }
 
+/// The rows over which [`column_sampled_us`] reads where the column's samples sit: the first
+/// 10 s (the diagnosis fits an EPOS4 car's SYNC phase on the same head).
+const COLUMN_SAMPLED_ROWS: usize = 1000;
+
+/// How long before each row's end (µs) the last column sample before it was taken, the median
+/// over the first rows: one number for the log, as the diagnosis reads it. `None` without a
+/// row that has a sample before its end.
+fn column_sampled_us(samples_us: &[f64], row_ends_us: &[f64]) -> Option<f64> {
+    let mut ages: Vec<f64> = row_ends_us
+        .iter()
+        .take(COLUMN_SAMPLED_ROWS)
+        .filter_map(|&end| {
+            let j = samples_us.partition_point(|t| *t <= end);
+            (j > 0).then(|| end - samples_us[j - 1])
+        })
+        .collect();
+    ages.sort_by(f64::total_cmp);
+    ages.get(ages.len() / 2).copied()
+}
+
 /// The log of `frames` (in time order), rows per `rows`.
 pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built, BringupError> {
     let mut refs: Vec<(u64, f64, AsState)> = Vec::new();
@@ -248,6 +268,7 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
     let mut last_k: Option<u64> = None;
     let mut origin_k: Option<u64> = None;
     let mut uncovered = 0;
+    let mut row_ends_us: Vec<f64> = Vec::new();
     for &(t_us, angle, as_state) in &refs {
         if rows == Rows::Active && !as_state.actuator_may_be_powered() {
             continue;
@@ -276,6 +297,7 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
             continue;
         };
         last_k = Some(k);
+        row_ends_us.push(push + SW_AT_US);
         let k0 = *origin_k.get_or_insert(k);
         let mid = push + CURRENT_CENTRE_US;
         log.push(
@@ -319,6 +341,15 @@ pub fn build(frames: &[Stamped], decoder: &Decoder, rows: Rows) -> Result<Built,
     if let Some(d) = sync_drift.filter(|_| drive == "epos4") {
         log.comments
             .push(format!("sync-drift: {:+.1} ppm", 1e6 * d));
+    }
+    // The column at each row's end is read off a line between the status frames' samples;
+    // where those sit against the rows is the ECU's clock's, and the diagnosis's model of an
+    // EPOS4 car reads its column the same way from this line.
+    if let Some(a) = column_sampled_us(&sw.t, &row_ends_us).filter(|_| drive == "epos4") {
+        log.comments.push(format!(
+            "column-sampled: {:.2} ms before each row's end",
+            a * 1e-3
+        ));
     }
     if log.is_empty() {
         return Err(BringupError::Log {
@@ -458,17 +489,20 @@ mod tests {
         out
     }
 
+    /// The header line of the log built from `frames` that starts with `key`.
+    fn header_line(frames: &[Stamped], key: &str) -> Option<String> {
+        let built = build(frames, &decoder(), Rows::Active).unwrap();
+        built
+            .log
+            .comments
+            .iter()
+            .find(|c| c.starts_with(key))
+            .cloned()
+    }
+
     #[test]
     fn an_epos4_log_says_how_fast_its_sync_grid_walks() {
-        let drift_line = |frames: &[Stamped]| {
-            let built = build(frames, &decoder(), Rows::Active).unwrap();
-            built
-                .log
-                .comments
-                .iter()
-                .find(|c| c.starts_with("sync-drift"))
-                .cloned()
-        };
+        let drift_line = |frames: &[Stamped]| header_line(frames, "sync-drift");
         assert_eq!(
             drift_line(&epos4_recording(1000, 50e-6)).as_deref(),
             Some("sync-drift: +50.0 ppm")
@@ -480,6 +514,20 @@ mod tests {
         // Too short a recording to tell (20 periods), and a direct-drive one (no PDOs).
         assert_eq!(drift_line(&epos4_recording(20, 50e-6)), None);
         assert_eq!(drift_line(&frames(false)), None);
+    }
+
+    #[test]
+    fn an_epos4_log_says_where_the_status_frames_sampled_its_column() {
+        let line = |frames: &[Stamped]| header_line(frames, "column-sampled");
+        // Status frames 3 ms after each reference: sent 0.13 ms before they arrive, the sample
+        // dated 2 ms before that, 0.87 ms after the reference; each row ends 10 ms after the
+        // reference's push (0.13 ms after it was sent): 9.26 ms after the last sample.
+        assert_eq!(
+            line(&epos4_recording(200, 0.0)).as_deref(),
+            Some("column-sampled: 9.26 ms before each row's end")
+        );
+        // A direct-drive log: its model reads no such line.
+        assert_eq!(line(&frames(false)), None);
     }
 
     #[test]
