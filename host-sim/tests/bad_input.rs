@@ -455,3 +455,24 @@ fn track_refuses_a_reference_too_short_to_be_a_track() {
         assert!(!stdout(&o).contains("RMSE"), "{}", stdout(&o));
     }
 }
+
+/// A header line with a value the reader does not know (`# column-sampled:` as convert writes
+/// it, but not a place within a period) is refused with what it expects, not read as no line.
+#[test]
+fn gap_refuses_a_header_line_it_cannot_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = step_log(dir.path());
+    for bad in [
+        "# column-sampled: 12.5 ms before each row's end",
+        "# column-sampled: soon",
+        "# sync-drift: 35 ppb",
+    ] {
+        let mut lines = vec!["# drive: epos4".to_string(), bad.to_string()];
+        lines.extend(rows.iter().cloned());
+        let o = gap_of(dir.path(), "header.csv", &lines);
+        assert!(!o.status.success(), "{bad}: {}", stdout(&o));
+        let err = stderr(&o);
+        assert!(err.contains(bad.trim_start_matches("# ")), "{bad}: {err}");
+        assert!(err.contains("expected"), "{bad}: {err}");
+    }
+}

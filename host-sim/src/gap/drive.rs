@@ -1035,6 +1035,27 @@ mod tests {
     }
 
     #[test]
+    fn where_convert_sampled_the_column_is_read_in_milliseconds_and_a_bad_value_refused() {
+        let at = header("column-sampled: 2.31 ms before each row's end")
+            .unwrap()
+            .column_sampled_s
+            .unwrap();
+        assert!((at - 2.31e-3).abs() < 1e-12, "{at}");
+        assert_eq!(header("drive: epos4").unwrap().column_sampled_s, None);
+        for bad in [
+            "column-sampled: 2.31",
+            "column-sampled: soon ms before each row's end",
+            "column-sampled: -0.5 ms before each row's end",
+            "column-sampled: 10.5 ms before each row's end",
+            "column-sampled: nan ms before each row's end",
+            "column-sampled: inf ms before each row's end",
+        ] {
+            let e = header(bad).unwrap_err();
+            assert!(e.contains("milliseconds"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
     fn a_sync_drift_that_is_no_number_or_beyond_one_percent_is_refused() {
         for bad in [
             "sync-drift: fast",

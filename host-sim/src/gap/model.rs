@@ -498,15 +498,22 @@ pub fn epos4_samples_keeping(
         for _ in 0..ticks_per_period {
             drive.tick(true);
             tick += 1;
-            let column = column_deg(&drive);
-            if keep_ticks {
-                column_ticks.push(column as f32);
-            }
-            if tick.is_multiple_of(column_every) {
-                column_ms.push(column);
-            }
-            if tick % encoder_ticks == encoder_phase {
-                encoder_sample = column;
+            // The encoder's reading only where a sample is kept (its quantisation costs).
+            let (every_ms, encoder_tick) = (
+                tick.is_multiple_of(column_every),
+                tick % encoder_ticks == encoder_phase,
+            );
+            if keep_ticks || every_ms || encoder_tick {
+                let column = column_deg(&drive);
+                if keep_ticks {
+                    column_ticks.push(column as f32);
+                }
+                if every_ms {
+                    column_ms.push(column);
+                }
+                if encoder_tick {
+                    encoder_sample = column;
+                }
             }
             if tick >= next_sync {
                 syncs_done += 1;
