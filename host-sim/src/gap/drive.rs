@@ -141,7 +141,7 @@ pub struct Tried {
     /// The nominal model's GoF on the log (eq. 11, combined).
     pub gof: f64,
     /// EPOS4 only: the readout fitted with the phase (on a log whose header does not say how
-    /// it read the drive), or convert's with the status frames' column age fitted.
+    /// it read the drive), or convert's with the column where its header places it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub readout: Option<Epos4Readout>,
     /// EPOS4 only: the current-loop ticks from each period's start to the drive's next
@@ -192,8 +192,8 @@ pub struct CarChoice {
     /// The best of each car tried (one entry when the car was given), best first.
     pub tried: Vec<Tried>,
     /// An EPOS4 car: how the log reads the drive ([`Epos4Readout`]): fitted where the header
-    /// does not say; where it does (`steer-can convert`'s), convert's, with where the status
-    /// frames sampled the column fitted.
+    /// does not say; where it does (`steer-can convert`'s), convert's, with the column where
+    /// the header's `# column-sampled:` line places it.
     pub readout: Option<Epos4Readout>,
     /// An EPOS4 car: the current-loop ticks (50 us) from each period's start to the drive's
     /// next position-loop tick (fitted).
@@ -502,8 +502,10 @@ pub fn choose(
     // Convert's column: a line between the status frames' samples, where its header places
     // them (else the column at the row's end, as a log from before that line was written).
     let mut with_column = rig.clone();
+    let mut stated = Epos4Readout::CONVERT;
     if let RigModel::Paper(m) = &mut with_column.model {
         m.epos4.readout.column_age_s = says.column_sampled_s.unwrap_or(0.0);
+        stated = m.epos4.readout;
     }
     let rig = &with_column;
     let drives: Vec<CarDrive> = match drive {
@@ -614,11 +616,7 @@ pub fn choose(
                 };
                 // The drive's own clock on convert's log: where its position loop ticks
                 // against the SYNC. (On a log whose readout was fitted, see `gap/NOTES.md`.)
-                let readout = best.readout.unwrap_or(Epos4Readout {
-                    column_age_s: says.column_sampled_s.unwrap_or(0.0),
-                    ..Epos4Readout::CONVERT
-                });
-                // Convert's log states its readout; its drive's clock is fitted below.
+                let readout = best.readout.unwrap_or(stated);
                 let best = match best.sync_after_push_s {
                     Some(s) if readout.column_interpolated => {
                         let car = with_readout(&with_car(rig, d, c, s), s, readout);
@@ -1042,32 +1040,40 @@ mod tests {
             .unwrap();
         assert!((at - 2.31e-3).abs() < 1e-12, "{at}");
         assert_eq!(header("drive: epos4").unwrap().column_sampled_s, None);
-        for bad in [
-            "column-sampled: 2.31",
-            "column-sampled: soon ms before each row's end",
-            "column-sampled: -0.5 ms before each row's end",
-            "column-sampled: 10.5 ms before each row's end",
-            "column-sampled: nan ms before each row's end",
-            "column-sampled: inf ms before each row's end",
-        ] {
-            let e = header(bad).unwrap_err();
-            assert!(e.contains("milliseconds"), "{bad}: {e}");
+        assert_refused(
+            &[
+                "column-sampled: 2.31",
+                "column-sampled: soon ms before each row's end",
+                "column-sampled: -0.5 ms before each row's end",
+                "column-sampled: 10.5 ms before each row's end",
+                "column-sampled: nan ms before each row's end",
+                "column-sampled: inf ms before each row's end",
+            ],
+            "milliseconds",
+        );
+    }
+
+    /// Each of `bad` is refused with a message that names `expected`.
+    fn assert_refused(bad: &[&str], expected: &str) {
+        for line in bad {
+            let e = header(line).unwrap_err();
+            assert!(e.contains(expected), "{line}: {e}");
         }
     }
 
     #[test]
     fn a_sync_drift_that_is_no_number_or_beyond_one_percent_is_refused() {
-        for bad in [
-            "sync-drift: fast",
-            "sync-drift: 35.2",
-            "sync-drift: nan ppm",
-            "sync-drift: inf ppm",
-            "sync-drift: 20000 ppm",
-            "sync-drift:  ppm",
-        ] {
-            let e = header(bad).unwrap_err();
-            assert!(e.contains("parts per million"), "{bad}: {e}");
-        }
+        assert_refused(
+            &[
+                "sync-drift: fast",
+                "sync-drift: 35.2",
+                "sync-drift: nan ppm",
+                "sync-drift: inf ppm",
+                "sync-drift: 20000 ppm",
+                "sync-drift:  ppm",
+            ],
+            "parts per million",
+        );
     }
 
     #[test]

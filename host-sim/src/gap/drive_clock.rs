@@ -68,10 +68,9 @@ pub fn fit(rig: &Rig, head: &Record, sync: f64, threads: usize) -> Option<DriveC
     };
     let waits: Vec<u32> = (0..per).collect();
     let scan_waits = |sync: f64| {
-        best(parallel_map(&waits, threads, |&w| {
-            run(sync, phase_after(sync, w))
-        }))
-        .map(|c| (c, waits_of(c, per)))
+        parallel_map(&waits, threads, |&w| (run(sync, phase_after(sync, w)), w))
+            .into_iter()
+            .max_by(|a, b| a.0.gof.total_cmp(&b.0.gof))
     };
     let (at_phase, wait) = scan_waits(sync)?;
     let syncs: Vec<f64> = (-SYNC_STEPS..=SYNC_STEPS)
@@ -92,11 +91,4 @@ pub fn fit(rig: &Rig, head: &Record, sync: f64, threads: usize) -> Option<DriveC
         Some(r) if r.gof > at_sync.gof => r,
         _ => at_sync,
     })
-}
-
-/// The ticks from `c`'s SYNC to its drive's next position tick.
-fn waits_of(c: DriveClock, per: u32) -> u32 {
-    let tick = (c.sync_after_push_s / TICK_S).round() as u64;
-    let per = u64::from(per);
-    ((u64::from(c.position_phase_ticks) + per - tick % per) % per) as u32
 }

@@ -355,18 +355,7 @@ impl Epos4Samples {
 /// The EPOS4 model's run ([`simulate_epos4`]) before the log's readout, with the column at
 /// every tick where `m`'s readout is convert's line between status samples.
 pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples {
-    let r = m.epos4.readout;
-    epos4_samples_keeping(m, rec, fx, r.column_interpolated && r.column_age_s > 0.0)
-}
-
-/// [`epos4_samples`], with the column at every tick kept or not (a fit of convert's
-/// readout keeps it whatever the readout it starts from).
-pub fn epos4_samples_keeping(
-    m: &PaperModel,
-    rec: &Record,
-    fx: &Effects,
-    keep_ticks: bool,
-) -> Epos4Samples {
+    let keep_ticks = m.epos4.readout.column_interpolated && m.epos4.readout.column_age_s > 0.0;
     let p = m.plant;
     let period = 1.0 / REFERENCE_HZ as f64;
     let dt = 1.0 / CURRENT_LOOP_HZ as f64;
