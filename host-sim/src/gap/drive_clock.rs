@@ -3,8 +3,9 @@
 //! SYNC. (Where the ECU's status frames sampled the column, which convert reads the column
 //! off, is the log's header's: `# column-sampled:`.) A log whose readout is fitted
 //! (a team's logger without a header) is left as it was: there the readout's own fit already
-//! trades against the SYNC, and the phase beside it was not measured on the world's EPOS4 car
-//! apart from this change's other part (gap/NOTES.md).
+//! trades against the SYNC, and the phase fitted beside it lost verdicts on the world's EPOS4
+//! car (a row per TPDO 36 -> 34 of the first 40, on a drifting clock 34 -> 31; gap/NOTES.md,
+//! "Two leads measured and dropped").
 //!
 //! Both are the car's, not the model's: the drive runs its loops on its own clock, so a target
 //! latched at a SYNC first moves the motor at the drive's next position tick, anywhere up to
