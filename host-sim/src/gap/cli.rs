@@ -295,7 +295,17 @@ pub fn gap(args: &GapArgs) -> Result<()> {
     }
     let mut d = diagnose(&rig, &rec, val.as_ref(), &opts);
     d.refit_linear = refit;
-    let summary = d.summary();
+    let car = car.map(|c| c.on_the_clock_of(&d));
+    if let Some(r) = &d.clock_refit {
+        r.apply(&mut rig);
+    }
+    // The drive's clock, fitted again with the best candidate in the model, moved: the car
+    // line again, so the report says which clock its figures are on.
+    let mut summary = String::new();
+    if let Some(car) = car.as_ref().filter(|c| c.clock_refitted.is_some()) {
+        summary.push_str(&format!("{}\n", car.describe()));
+    }
+    summary.push_str(&d.summary());
     print!("{summary}");
     let mut json = d.to_json();
     if let Some(car) = &car {

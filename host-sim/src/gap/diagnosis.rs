@@ -108,6 +108,11 @@ pub struct Diagnosis {
     pub parameters: Option<identify::Identified>,
     pub simulations: usize,
     pub elapsed_s: f64,
+    /// An EPOS4 car whose drive clock this diagnosis fitted again with its best single
+    /// candidate in the model, and moved: every figure is on the moved clock
+    /// ([`super::drive_clock::with_best`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clock_refit: Option<super::drive_clock::ClockRefit>,
 }
 
 /// The rules a verdict is made by. Each is a property of the diagnosis, not a knob: the

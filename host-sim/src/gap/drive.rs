@@ -10,7 +10,7 @@
 //! SYNC's phase is not in any header: the ECU's SYNC grid runs on its own clock, so it is
 //! searched on every EPOS4 log.
 
-use super::drive_clock;
+use super::drive_clock::{self, ClockRefit};
 use super::model::{Effects, MAX_SYNC_DRIFT};
 use super::rig::{CarDrive, Epos4Readout, Rig, RigModel};
 use super::{Fit, Record, Scorer, parallel_map, simulate};
@@ -199,9 +199,24 @@ pub struct CarChoice {
     /// next position-loop tick (fitted).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub position_phase_ticks: Option<u32>,
+    /// An EPOS4 car whose drive clock the diagnosis fitted again with its best candidate in
+    /// the model, and moved ([`super::drive_clock::with_best`]); `sync_after_push_s` and
+    /// `position_phase_ticks` are then the moved clock ([`CarChoice::on_the_clock_of`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clock_refitted: Option<ClockRefit>,
 }
 
 impl CarChoice {
+    /// This car on the clock `d` was diagnosed on, where the diagnosis moved it.
+    pub fn on_the_clock_of(mut self, d: &super::Diagnosis) -> CarChoice {
+        if let Some(r) = &d.clock_refit {
+            self.sync_after_push_s = Some(r.sync_after_push_s);
+            self.position_phase_ticks = Some(r.position_phase_ticks);
+            self.clock_refitted = Some(r.clone());
+        }
+        self
+    }
+
     /// One line for the report.
     pub fn describe(&self) -> String {
         let from = |s: Source| match s {
@@ -226,6 +241,15 @@ impl CarChoice {
             line.push_str(&format!(
                 "; the drive's position loop {:.2} ms into each period (fitted)",
                 1e3 * f64::from(p) * SYNC_FINE_STEP_S
+            ));
+        }
+        if let Some(r) = &self.clock_refitted {
+            line.push_str(&format!(
+                " (both fitted again with {} in the model; on the nominal model: SYNC {:.2} ms, \
+                 position loop {:.2} ms)",
+                r.with_effect,
+                1e3 * r.nominal_sync_after_push_s,
+                1e3 * f64::from(r.nominal_position_phase_ticks) * SYNC_FINE_STEP_S
             ));
         }
         match (self.sync_drift, self.header_sync_drift) {
@@ -346,7 +370,7 @@ const SYNC_COARSE_S: [f64; 10] = [
 const SYNC_FINE_STEP_S: f64 = 1.0 / steering_ecu::paper_mode::CURRENT_LOOP_HZ as f64;
 const SYNC_FINE_STEPS: i32 = 10;
 /// The phase is searched on at most this much of the log, s (it is one number for the log).
-const SYNC_SEARCH_S: f64 = 10.0;
+pub(super) const SYNC_SEARCH_S: f64 = 10.0;
 /// An EPOS4 car whose best coarse phase leaves the log this far (GoF, combined) below the best
 /// car's is not refined: a phase moves the GoF by less.
 const PRUNE_GOF: f64 = 0.15;
@@ -449,7 +473,7 @@ pub fn shifted_reference(rec: &Record, rows: usize) -> Record {
 }
 
 /// The first `seconds` of a record.
-fn head(rec: &Record, seconds: f64) -> Record {
+pub(super) fn head(rec: &Record, seconds: f64) -> Record {
     let n = ((seconds / rec.dt).round() as usize).min(rec.len());
     if n >= rec.len() {
         return rec.clone();
@@ -620,7 +644,13 @@ pub fn choose(
                 let best = match best.sync_after_push_s {
                     Some(s) if readout.column_interpolated => {
                         let car = with_readout(&with_car(rig, d, c, s), s, readout);
-                        match drive_clock::fit(&car, &shorts[index_of(k)], s, threads) {
+                        match drive_clock::fit(
+                            &car,
+                            &shorts[index_of(k)],
+                            s,
+                            &Effects::nominal(),
+                            threads,
+                        ) {
                             Some(f) => Tried {
                                 sync_after_push_s: Some(f.sync_after_push_s),
                                 position_phase_ticks: Some(f.position_phase_ticks),
@@ -650,6 +680,8 @@ pub fn choose(
             }
             m.epos4.position_phase_ticks = t.position_phase_ticks.unwrap_or(0);
             m.epos4.sync_drift = t.sync_drift.unwrap_or(0.0);
+            m.epos4.clock_from_nominal =
+                t.position_phase_ticks.is_some() && m.epos4.sync_drift == 0.0;
         }
         r
     };
@@ -755,6 +787,7 @@ pub fn choose(
         tried,
         readout: best.readout,
         position_phase_ticks: best.position_phase_ticks,
+        clock_refitted: None,
     };
     let mut chosen = rig_of(&best);
     if let RigModel::Paper(m) = &mut chosen.model {

@@ -132,6 +132,11 @@ pub struct Epos4Timing {
     /// decides on which tick a latched target first moves the motor.
     #[serde(default)]
     pub position_phase_ticks: u32,
+    /// The SYNC and the position loop's phase were fitted on the nominal model (the car is
+    /// chosen before any effect), on one SYNC phase: the diagnosis fits them again with its
+    /// best single candidate in the model ([`super::drive_clock::with_best`]).
+    #[serde(default)]
+    pub clock_from_nominal: bool,
 }
 
 impl Default for Epos4Timing {
@@ -143,6 +148,7 @@ impl Default for Epos4Timing {
             encoder_phase_s: 0.0,
             readout: Epos4Readout::CONVERT,
             position_phase_ticks: 0,
+            clock_from_nominal: false,
         }
     }
 }

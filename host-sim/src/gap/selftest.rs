@@ -314,6 +314,11 @@ fn diagnosed(
     logger: Option<LoggedBy>,
 ) -> CaseResult {
     let d = diagnose(rig, rec, None, opts);
+    // The car on the clock the diagnosis ran, as `gap FILE` reports it.
+    let logger = logger.map(|mut by| {
+        by.car = by.car.map(|c| c.on_the_clock_of(&d));
+        by
+    });
     let mut named = d.verdict.effects.clone();
     named.sort();
     named.dedup();

@@ -120,6 +120,10 @@ fn the_default_epos4_car_on_a_sweep_is_none_against_its_own_chain() {
     // Convert's header places the status frames' samples: on the simulated car 2.31 ms
     // before each row's end (the status frame 0.05 ms before the reference, its sample an
     // encoder period older, the row's end 10 ms after the reference's push).
+    assert_eq!(
+        choice.clock_refitted, None,
+        "no candidate of an effect-free car moves its clock"
+    );
     let age = choice.readout.unwrap().column_age_s;
     assert!(
         choice.readout.unwrap().column_interpolated && (2.2e-3..=2.4e-3).contains(&age),
@@ -289,6 +293,53 @@ fn frames_that_reach_the_ecu_late_are_a_delay_on_either_drive() {
             100.0 * d.repeatability.gof
         );
     }
+}
+
+/// Friction at the rack moves the drive clock the car is chosen on (fitted before any effect,
+/// on the nominal model): the EPOS4 car's position loop came out 2 ticks into the period
+/// against the effect-free car's 5, and the friction fitted at that clock 278 N for 300. The
+/// diagnosis fits the clock again with its best candidate in the model.
+#[test]
+fn rack_friction_on_the_epos4_car_is_fitted_at_its_size_on_the_car_s_own_clock() {
+    let (_, free) = diagnosed(
+        epos4(ControllerKind::Paper),
+        profile::sweep(Sweep::PAPER).unwrap(),
+    );
+    let car = SimCar {
+        effects: "coulomb_n=300,coulomb_creep_mm_s=1".parse().unwrap(),
+        ..epos4(ControllerKind::Paper)
+    };
+    let (d, choice) = diagnosed(car, profile::sweep(Sweep::PAPER).unwrap());
+    assert_eq!(d.verdict.effects, vec!["coulomb_friction".to_string()]);
+    let best = &d.ranking[0];
+    let force = best.params["force_n"];
+    println!(
+        "300 N at the rack: {} {force:.1} N, creep {:.2} mm/s, GoF {:.2} -> {:.2} % (repeatability {:.2} %); {}",
+        best.effect,
+        best.params["creep_mm_s"],
+        100.0 * d.baseline_gof,
+        100.0 * d.verdict.gof_after,
+        100.0 * d.repeatability.gof,
+        choice.describe()
+    );
+    assert_eq!(best.effect, "coulomb_friction_rack");
+    assert!(
+        (285.0..=315.0).contains(&force),
+        "rack friction fitted {force:.1} N for 300 N"
+    );
+    // The friction in the model, the clock is the one the effect-free car runs.
+    let refit = choice
+        .clock_refitted
+        .as_ref()
+        .expect("the clock fitted again");
+    assert_eq!(refit.with_effect, "coulomb_friction_rack");
+    assert_eq!(choice.position_phase_ticks, free.position_phase_ticks);
+    assert!(
+        d.verdict.gof_after >= d.repeatability.gof - 0.003,
+        "the friction leaves {:.2} % against the chain's repeatability {:.2} %",
+        100.0 * d.verdict.gof_after,
+        100.0 * d.repeatability.gof
+    );
 }
 
 fn lcg(state: &mut u64) -> f64 {

@@ -27,17 +27,13 @@ pub fn diagnose_file(
         controller,
         2,
     );
-    let choice = choice.unwrap();
-    let d = diagnose(
-        &rig,
-        &rec,
-        None,
-        &Options {
-            effects: EffectKind::for_rig(&rig),
-            threads: 2,
-            ..Options::default()
-        },
-    );
+    let opts = Options {
+        effects: EffectKind::for_rig(&rig),
+        threads: 2,
+        ..Options::default()
+    };
+    let d = diagnose(&rig, &rec, None, &opts);
+    let choice = choice.unwrap().on_the_clock_of(&d);
     println!("{}\n{}", choice.describe(), d.summary());
     (d, choice)
 }
