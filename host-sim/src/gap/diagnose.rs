@@ -167,7 +167,6 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         d.simulations += 3 + st.progress.done() + refit.simulations;
         d.clock_refit = Some(refit);
         d.elapsed_s = started.elapsed().as_secs_f64();
-        d.elapsed_s = started.elapsed().as_secs_f64();
         return d;
     }
     // Simulations of Table 4 refits, which do not tick `progress`.
