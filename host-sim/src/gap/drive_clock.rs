@@ -140,8 +140,8 @@ impl ClockRefit {
 
 /// The EPOS4 car `rig` on the clock fitted again on the head of `rec` with `best` (the
 /// diagnosis's best single candidate) in the model, where the car's clock was fitted on the
-/// nominal model (`clock_from_nominal`), `best` removes at least
-/// [`CLOCK_WITH_EFFECT_SHARE`] of the nominal cost and the clock moves; `None` otherwise.
+/// nominal model (`clock_from_nominal`), `best` removes at least half of the nominal cost
+/// (`CLOCK_WITH_EFFECT_SHARE`) and the clock moves; `None` otherwise.
 ///
 /// The car is chosen before any effect, so an effect in the log pulls the clock towards what
 /// makes up for it, and the effect fitted on that clock comes out short (gap/NOTES.md, "The
