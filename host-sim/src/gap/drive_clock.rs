@@ -15,6 +15,9 @@
 //! the simulated EPOS4 car's effect-free sweep, a model that took neither (the position loop
 //! on the row grid, the column at the row's end) left 1.1 % of GoF against 0.2 % that the car
 //! does not repeat itself by (gap/NOTES.md, "The EPOS4 car's clock and convert's column").
+//!
+//! The clock is fitted when the car is chosen, before any effect; [`with_best`] fits it again
+//! with the diagnosis's best single candidate in the model, where that candidate is large.
 
 use super::drive::{SYNC_SEARCH_S, head};
 use super::model::{Effects, simulate_epos4};

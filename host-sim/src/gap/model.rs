@@ -271,6 +271,8 @@ pub struct Epos4Samples {
     column: Vec<f64>,
     column_ms: Vec<f64>,
     column_ticks: Vec<f32>,
+    /// The spacing of `column_ms`, s: 1 ms in whole ticks.
+    column_ms_step: f64,
     tick: f64,
     period: f64,
     /// How fast the ECU's clock walks against the rows, s per s (its status frames walk with
@@ -320,9 +322,8 @@ impl Epos4Samples {
             // between (gap/NOTES.md, "The EPOS4 car's clock and convert's column": against
             // an encoder with noise before its quantisation, the model's exact counts lost
             // two effect-free cars of the world's EPOS4 car that the line keeps).
-            let step = (COLUMN_MS_STEP_S / self.tick).round().max(1.0) * self.tick;
             let at: Vec<f64> = (1..=self.column_ms.len())
-                .map(|i| i as f64 * step)
+                .map(|i| i as f64 * self.column_ms_step)
                 .collect();
             if at.is_empty() {
                 self.column.clone()
@@ -530,6 +531,7 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
         column: column_rows,
         column_ms,
         column_ticks,
+        column_ms_step: column_every as f64 * dt,
         tick: dt,
         period,
         drift,
@@ -910,6 +912,7 @@ mod column_readout {
             column: (1..=rows).map(|k| col(k as f64 * PERIOD)).collect(),
             column_ms: (1..=rows * 10).map(|i| col(i as f64 * 1e-3)).collect(),
             column_ticks: (1..=ticks).map(|i| col(i as f64 * TICK) as f32).collect(),
+            column_ms_step: 1e-3,
             tick: TICK,
             period: PERIOD,
             drift: 0.0,
