@@ -55,16 +55,25 @@ use crate::sensors::{COLUMN_ENCODER_COUNTS, HALL_COUNTS_PER_REV, motor_from_hall
 use crate::units::{Amps, MotorRad, SteeringDeg, SteeringRad, Volts, saturate};
 use core::f32::consts::TAU;
 
-/// Below this reference speed at the column (1 deg/s) the reference counts as resting and the
-/// column integral runs, rad/s.
-const RESTING_RAD_PER_S: f32 = 0.017_453;
+/// Below this reference speed at the column (1.5 deg/s) the reference counts as resting and the
+/// column integral runs, rad/s. The reference comes in bits of 0.01 deg at 100 Hz
+/// ([`crate::protocol::ANGLE_DEG_PER_BIT`], [`REFERENCE_HZ`]), so its speed between two samples
+/// is a whole number of bits per period, 1 deg/s each: one bit per period (an AS computer's
+/// rounding dithering the last bit) rests, two do not, and the threshold lies halfway between
+/// two speeds the reference can have, where the f32 rounding of a difference cannot decide it.
+/// At exactly one bit per period (1 deg/s, the value before) it did: the integral ran at some
+/// steering angles and not at others, and no model could repeat the car's run.
+const RESTING_RAD_PER_S: f32 =
+    1.5 * crate::protocol::ANGLE_DEG_PER_BIT * REFERENCE_HZ as f32 * (TAU / 360.0);
 
 /// The column integral acts only within this error at the column (1 deg, rad): it is for
 /// static offsets (backlash of 1.5 deg leaves at most 0.75 deg), not for the catch-up after a
 /// step.
 const INTEGRAL_ZONE_RAD: f32 = 0.017_453;
 
-/// A column that has moved no more than one encoder count for this long has stopped, s: with
+/// A column that has moved no more than one encoder count (it is "moving" from 1.5 counts, so
+/// that a column dithering between two counts has stopped wherever it is, and the rounding of
+/// two f32 angles one count apart never decides) for this long has stopped, s: with
 /// the reference resting, what error is left then is a static offset (play, friction) that the
 /// proportional term alone cannot take back, however large, and the integral takes it on.
 /// Longer than a stick-slip pause of the catch-up after a step on the plant with play and
@@ -209,7 +218,7 @@ pub struct ColumnShaper {
     gain_share: f32,
     /// The proportional column term as applied (slew-limited), rad at the motor.
     proportional: f32,
-    /// Where the column was when it last moved by more than one count, rad at the motor.
+    /// Where the column was when it last moved by two counts or more, rad at the motor.
     column_anchor: Option<f32>,
     /// Time since then, s (saturating at [`COLUMN_STILL_S`]).
     column_still_s: f32,
@@ -319,7 +328,7 @@ impl ColumnShaper {
             let count = self.gearing.ratio() * COLUMN_COUNT_RAD;
             if self
                 .column_anchor
-                .is_none_or(|anchor| (column_motor - anchor).abs() > count)
+                .is_none_or(|anchor| (column_motor - anchor).abs() > 1.5 * count)
             {
                 self.column_anchor = Some(column_motor);
                 self.column_still_s = 0.0;
@@ -596,6 +605,70 @@ mod tests {
             c.position_step(0, Some(SteeringRad::from(SteeringDeg(-1.0))));
         }
         assert!(c.setpoint().position.0 > 0.0);
+    }
+
+    /// EPOS4 mode's shaper (one call per SYNC, a SYNC per reference period) after `periods`
+    /// reference samples from `reference(k)` with the column at `column(k)`: the column
+    /// integral's correction, rad at the motor.
+    fn column_integral_after(
+        periods: usize,
+        reference: impl Fn(usize) -> SteeringDeg,
+        column: impl Fn(usize) -> SteeringRad,
+    ) -> f32 {
+        let mut s = ColumnShaper::new(Gearing::PAPER, EcuTuning::PAPER, 1);
+        let start = reference(0);
+        s.reset(Gearing::PAPER.motor_from_steering(SteeringRad::from(start)));
+        for k in 0..periods {
+            s.push_reference(reference(k)).unwrap();
+            s.next_target(Some(column(k)));
+        }
+        s.column_correction
+    }
+
+    /// The reference comes in bits of 0.01 deg at 100 Hz (the protocol's REF_SteeringAngle),
+    /// so a slow one moves a whole bit per period: whether that is resting must not depend on
+    /// where the wheel is. The old threshold (1 deg/s) was exactly one bit per period, and the
+    /// f32 rounding of each difference decided, so the column integral ran at some angles and
+    /// not at others, and a model of the car could not repeat its own run.
+    #[test]
+    fn a_reference_moving_one_bit_per_period_rests_alike_at_every_angle() {
+        let bit = crate::protocol::ANGLE_DEG_PER_BIT;
+        let corrections: heapless::Vec<f32, 16> = [-41.23f32, -7.5, 0.37, 3.0, 12.81, 25.02, 58.6]
+            .iter()
+            .map(|&from| {
+                // 1 s of a reference creeping up one bit per period, the column 0.5 deg short.
+                let raw = (from / bit) as i32;
+                let at = move |k: usize| SteeringDeg((raw + k as i32) as f32 * bit);
+                let column = move |k: usize| SteeringRad::from(SteeringDeg(at(k).0 - 0.5));
+                column_integral_after(100, at, column)
+            })
+            .collect();
+        let first = corrections[0];
+        assert!(first > 0.0, "{corrections:?}");
+        for c in &corrections {
+            assert!((c - first).abs() < 1e-3 * first, "{corrections:?}");
+        }
+    }
+
+    /// A column dithering between two neighbouring counts has not moved (the column encoder's
+    /// last count is noise), wherever it is: with the reference resting and the column more
+    /// than the integral's zone short, the integral runs once it has stood still that long. The
+    /// old test ("more than one count" between two f32 angles a count apart) let the rounding
+    /// decide, so the integral ran at some counts and never at others.
+    #[test]
+    fn a_column_dithering_by_one_count_has_stopped_at_every_count() {
+        let count = COLUMN_COUNT_RAD;
+        let corrections: heapless::Vec<f32, 16> = [-950i32, -523, -3, 0, 41, 777, 990]
+            .iter()
+            .map(|&at| {
+                let resting = (at as f32 * count).to_degrees() + 2.0;
+                let column = move |k: usize| SteeringRad((at + (k % 2) as i32) as f32 * count);
+                column_integral_after(100, move |_| SteeringDeg(resting), column)
+            })
+            .collect();
+        for c in &corrections {
+            assert!(*c > 0.0, "{corrections:?}");
+        }
     }
 
     #[test]
