@@ -148,6 +148,10 @@ pub struct Tried {
     /// position-loop tick (fitted, [`super::drive_clock`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub position_phase_ticks: Option<u32>,
+    /// EPOS4 under the ECU controller: when the ECU's 2 ms column-encoder task samples after
+    /// each reference sample, s (fitted, [`super::drive_clock::fit_encoder_phase`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub encoder_phase_s: Option<f64>,
 }
 
 /// The chosen car run with its reference late, on the head of the log
@@ -199,6 +203,10 @@ pub struct CarChoice {
     /// next position-loop tick (fitted).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub position_phase_ticks: Option<u32>,
+    /// An EPOS4 car under the ECU controller: when the ECU's column-encoder task samples after
+    /// each reference sample, s (fitted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub encoder_phase_s: Option<f64>,
     /// An EPOS4 car whose drive clock the diagnosis fitted again with its best candidate in
     /// the model, and moved ([`super::drive_clock::with_best`]); `sync_after_push_s` and
     /// `position_phase_ticks` are then the moved clock ([`CarChoice::on_the_clock_of`]).
@@ -241,6 +249,16 @@ impl CarChoice {
             line.push_str(&format!(
                 "; the drive's position loop {:.2} ms into each period (fitted)",
                 1e3 * f64::from(p) * SYNC_FINE_STEP_S
+            ));
+        }
+        if let Some(e) = self.encoder_phase_s {
+            let from = match self.readout.and_then(|r| drive_clock::encoder_phase_of(&r)) {
+                Some(_) => "the header's column line",
+                None => "fitted",
+            };
+            line.push_str(&format!(
+                "; the ECU's column encoder sampled {:.2} ms after each reference sample ({from})",
+                1e3 * e
             ));
         }
         if let Some(r) = &self.clock_refitted {
@@ -530,6 +548,9 @@ pub fn choose(
     if let RigModel::Paper(m) = &mut with_column.model {
         m.epos4.readout.column_age_s = says.column_sampled_s.unwrap_or(0.0);
         stated = m.epos4.readout;
+        // The same line places the ECU's encoder task, whose samples ECU mode's column terms
+        // take: every car tried runs it there (the paper controller does not read it).
+        m.epos4.encoder_phase_s = drive_clock::encoder_phase_of(&stated).unwrap_or(0.0);
     }
     let rig = &with_column;
     let drives: Vec<CarDrive> = match drive {
@@ -581,6 +602,7 @@ pub fn choose(
                 gof: fit.gof,
                 readout: None,
                 position_phase_ticks: None,
+                encoder_phase_s: None,
             }
         })
     };
@@ -589,6 +611,27 @@ pub fn choose(
         .iter()
         .map(|t| t.gof)
         .fold(f64::NEG_INFINITY, f64::max);
+    let rig_of = |t: &Tried| {
+        let mut r = with_car(
+            rig,
+            t.drive,
+            t.controller,
+            t.sync_after_push_s.or(t.push_after_s).unwrap_or(0.0),
+        );
+        if let RigModel::Paper(m) = &mut r.model {
+            if let Some(readout) = t.readout {
+                m.epos4.readout = readout;
+            }
+            m.epos4.position_phase_ticks = t.position_phase_ticks.unwrap_or(0);
+            if let Some(e) = t.encoder_phase_s {
+                m.epos4.encoder_phase_s = e;
+            }
+            m.epos4.sync_drift = t.sync_drift.unwrap_or(0.0);
+            m.epos4.clock_from_nominal =
+                t.position_phase_ticks.is_some() && m.epos4.sync_drift == 0.0;
+        }
+        r
+    };
     // The best phase of each EPOS4 car, refined around its best millisecond.
     let mut best_of_car: Vec<Tried> = Vec::new();
     for &d in &drives {
@@ -644,6 +687,9 @@ pub fn choose(
                 let best = match best.sync_after_push_s {
                     Some(s) if readout.column_interpolated => {
                         let car = with_readout(&with_car(rig, d, c, s), s, readout);
+                        // Under the ECU controller, its encoder's phase: convert's header says.
+                        let encoder = drive_clock::encoder_phase_of(&readout)
+                            .filter(|_| c == Controller::Ecu);
                         match drive_clock::fit(
                             &car,
                             &shorts[index_of(k)],
@@ -654,6 +700,7 @@ pub fn choose(
                             Some(f) => Tried {
                                 sync_after_push_s: Some(f.sync_after_push_s),
                                 position_phase_ticks: Some(f.position_phase_ticks),
+                                encoder_phase_s: encoder,
                                 readout: Some(readout),
                                 gof: f.gof,
                                 ..best
@@ -663,28 +710,31 @@ pub fn choose(
                     }
                     _ => best,
                 };
+                // ECU mode's column terms read the ECU's newest encoder sample: when its task
+                // samples is the car's too. Where the header does not say, fitted on the whole
+                // log at the clock found: the ECU controller's column integral makes a car that
+                // repeats its own run only to 93-95 %, and the first 10 s choose the phase
+                // unreliably (on the simulated car's track 0 ms, on the whole log 1.25 ms).
+                let encoder = match best.encoder_phase_s {
+                    None => drive_clock::fit_encoder_phase(
+                        &rig_of(&best),
+                        &records[index_of(k)],
+                        threads,
+                    ),
+                    Some(_) => None,
+                };
+                let best = match encoder {
+                    Some((phase, gof)) => Tried {
+                        encoder_phase_s: Some(phase),
+                        gof,
+                        ..best
+                    },
+                    None => best,
+                };
                 best_of_car.push(best);
             }
         }
     }
-    let rig_of = |t: &Tried| {
-        let mut r = with_car(
-            rig,
-            t.drive,
-            t.controller,
-            t.sync_after_push_s.or(t.push_after_s).unwrap_or(0.0),
-        );
-        if let RigModel::Paper(m) = &mut r.model {
-            if let Some(readout) = t.readout {
-                m.epos4.readout = readout;
-            }
-            m.epos4.position_phase_ticks = t.position_phase_ticks.unwrap_or(0);
-            m.epos4.sync_drift = t.sync_drift.unwrap_or(0.0);
-            m.epos4.clock_from_nominal =
-                t.position_phase_ticks.is_some() && m.epos4.sync_drift == 0.0;
-        }
-        r
-    };
     // The cars compared on the whole log; an EPOS4 car also with its SYNC grid walking as the
     // header says, where that fits the log better.
     let whole = parallel_map(&best_of_car, threads, |t| {
@@ -787,6 +837,7 @@ pub fn choose(
         tried,
         readout: best.readout,
         position_phase_ticks: best.position_phase_ticks,
+        encoder_phase_s: best.encoder_phase_s,
         clock_refitted: None,
     };
     let mut chosen = rig_of(&best);

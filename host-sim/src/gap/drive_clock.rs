@@ -23,6 +23,7 @@ use super::drive::{SYNC_SEARCH_S, head};
 use super::model::{Effects, simulate_epos4};
 use super::rig::{CarDrive, Rig, RigModel};
 use super::{Candidate, Record, Scorer, parallel_map};
+use crate::sim::Controller;
 use steering_ecu::paper_mode::{CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, REFERENCE_HZ};
 
 /// One current-loop tick, s: the grid of the SYNC, the position loop and the column's samples.
@@ -110,6 +111,62 @@ pub fn fit(
     })
 }
 
+/// The ECU's column-encoder task's phases tried against each reference sample, s: its 2 ms
+/// period (`tasks::ENCODER_PERIOD`) in steps of a quarter millisecond.
+const ENCODER_PHASE_STEP_S: f64 = 0.000_25;
+/// The phases in the task's 2 ms period.
+const ENCODER_STEPS: u32 = 8;
+
+/// Where the ECU's 2 ms column-encoder task samples against each reference sample, fitted on
+/// `rec` with the car `rig` (an EPOS4 car under the ECU controller, its SYNC and readout
+/// fitted), and the nominal GoF there; `None` on another car. For a log that does not say
+/// (convert's does: [`encoder_phase_of`]).
+///
+/// ECU mode's column terms take the newest encoder sample at each SYNC, so which sample that
+/// is, up to 2 ms old, is the car's own timing, like the SYNC's: its proportional term and
+/// integral act on it. A model that took it at the reference sample's instant left the
+/// simulated EPOS4 car's effect-free sweep at 97.3 % and its track at 91.8 % (gap/NOTES.md,
+/// "The ECU's column-encoder phase"). The paper controller reads no column, and is left
+/// alone.
+pub fn fit_encoder_phase(rig: &Rig, head: &Record, threads: usize) -> Option<(f64, f64)> {
+    let RigModel::Paper(model) = &rig.model else {
+        return None;
+    };
+    if model.drive != CarDrive::Epos4 || model.controller != Controller::Ecu {
+        return None;
+    }
+    let phases: Vec<f64> = (0..ENCODER_STEPS)
+        .map(|k| f64::from(k) * ENCODER_PHASE_STEP_S)
+        .collect();
+    let scorer = Scorer::new(rig, head);
+    parallel_map(&phases, threads.max(1), |&phase| {
+        let mut m = model.clone();
+        m.epos4.encoder_phase_s = phase;
+        let g = scorer
+            .fit(head, &simulate_epos4(&m, head, &Effects::nominal()))
+            .gof;
+        (phase, if g.is_finite() { g } else { f64::NEG_INFINITY })
+    })
+    .into_iter()
+    .max_by(|a, b| a.1.total_cmp(&b.1))
+}
+
+/// Where the ECU's column-encoder task samples after each reference sample, s, read off
+/// convert's `# column-sampled:` line (`column_age_s` before each row's end, the row ending a
+/// reference period after the sample): each status frame carries one of the task's samples,
+/// so the task samples at that instant, modulo its period. On the simulated car 2.31 ms
+/// before the row's end: 1.69 ms after the reference. `None` without that line.
+pub fn encoder_phase_of(readout: &super::rig::Epos4Readout) -> Option<f64> {
+    let age = readout.column_age_s;
+    // A NaN age is no place either.
+    if !readout.column_interpolated || age.is_nan() || age <= 0.0 {
+        return None;
+    }
+    let period = 1.0 / REFERENCE_HZ as f64;
+    let task = steering_ecu::tasks::ENCODER_PERIOD.as_micros() as f64 * 1e-6;
+    Some((period - age).rem_euclid(task))
+}
+
 /// The share of the nominal model's cost the best single candidate must remove before the
 /// drive's clock is fitted again with it in the model ([`with_best`]). An effect that large
 /// moved the clock fitted without it: on the simulated EPOS4 car's sweep with 100 and 300 N
@@ -167,7 +224,9 @@ pub fn with_best(
     }
     let (sync, phase) = (m.epos4.sync_after_push_s, m.epos4.position_phase_ticks);
     let fx = best.effects_on(rig);
-    let clock = fit(rig, &head(rec, SYNC_SEARCH_S), sync, &fx, threads.max(1))?;
+    let head = head(rec, SYNC_SEARCH_S);
+    let threads = threads.max(1);
+    let clock = fit(rig, &head, sync, &fx, threads)?;
     if (clock.sync_after_push_s, clock.position_phase_ticks) == (sync, phase) {
         return None;
     }

@@ -143,6 +143,23 @@ fn the_epos4_car_under_the_ecu_controller_on_a_sweep_is_none() {
     assert_eq!(choice.controller_from, Source::Fitted);
     assert_eq!(choice.controller, host_sim::sim::Controller::Ecu);
     assert_none_at_95(&d);
+    // ECU mode's column terms take the ECU's newest column-encoder sample, and convert's
+    // column line says when the encoder task samples: the status frames' column 2.31 ms before
+    // each row's end is 1.69 ms after the reference. A model that took the sample at the
+    // reference's instant fitted the SYNC 0.2 ms late to make up for it, at 96.8 %.
+    let phase = choice
+        .encoder_phase_s
+        .expect("the ECU controller's encoder phase");
+    assert!(
+        (1.6e-3..=1.8e-3).contains(&phase),
+        "encoder sampled {:.2} ms after the reference",
+        1e3 * phase
+    );
+    assert!(
+        d.baseline_gof >= 0.985,
+        "nominal GoF {:.1} %",
+        100.0 * d.baseline_gof
+    );
     // The ECU controller feeds the column's counts back: its current's chatter changes phase
     // on a reference moved by 1e-7 of its range, so no model follows it sample for sample.
     // The nominal model gets as close as the car's own chain repeats itself.
