@@ -712,9 +712,8 @@ pub fn choose(
                 };
                 // ECU mode's column terms read the ECU's newest encoder sample: when its task
                 // samples is the car's too. Where the header does not say, fitted on the whole
-                // log at the clock found: the ECU controller's column integral makes a car that
-                // repeats its own run only to 93-95 %, and the first 10 s choose the phase
-                // unreliably (on the simulated car's track 0 ms, on the whole log 1.25 ms).
+                // log at the clock found: a track's first 10 s chose the phase unreliably (on
+                // the simulated car's track 0 ms, on the whole log 1.25 ms).
                 let encoder = match best.encoder_phase_s {
                     None => drive_clock::fit_encoder_phase(
                         &rig_of(&best),
