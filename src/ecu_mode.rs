@@ -36,7 +36,8 @@
 //!    as stiff: 2.38 Hz instead of 1.64 Hz without it; gain 0.5, as 1 overshot a 20 deg step by
 //!    13 %), and a slow integral (time constant
 //!    [`EcuTuning::column_time_constant_s`], clamped to [`EcuTuning::column_authority_rad`] at
-//!    the column) for backlash, friction and gearing offsets.
+//!    the column) for backlash, friction and gearing offsets, also acting only beyond one
+//!    count, so that which of two counts a resting column reads does not wind it.
 //!
 //! Bad input: as paper mode. A non-finite or out-of-range reference is refused; a missing or
 //! non-finite column sample freezes the column integral (the inner loops carry on).
@@ -363,7 +364,7 @@ impl ColumnShaper {
         }
         // The column encoder's 0.088 deg count is 1.75 Hall counts at the motor: proportional
         // action on the last count would chatter the target between two counts at rest, so it
-        // acts only on the error beyond one count (the integral still sees all of it).
+        // acts only on the error beyond one count, as the integral does.
         let dead_band = self.gearing.ratio() * COLUMN_COUNT_RAD;
         let beyond = self.column_error - saturate(self.column_error, dead_band).0;
         // Not during the enable ramp: the column lags the ECU's own ramp, and pushing on that
