@@ -324,9 +324,10 @@ impl ColumnShaper {
         } else {
             0.0
         };
+        // One column-encoder count at the motor: the step of what the column terms read.
+        let count = self.gearing.ratio() * COLUMN_COUNT_RAD;
         if let Some(column) = column.filter(|c| c.is_finite()) {
             let column_motor = self.gearing.motor_from_steering(column).0;
-            let count = self.gearing.ratio() * COLUMN_COUNT_RAD;
             if self
                 .column_anchor
                 .is_none_or(|anchor| (column_motor - anchor).abs() > 1.5 * count)
@@ -343,9 +344,8 @@ impl ColumnShaper {
             // run no model repeats (the simulated EPOS4 car's track: 93.3 % against itself on
             // a reference moved by 1e-7, 99.2 % with this; gap/NOTES.md). What it leaves is
             // under a count at the column, 0.088 deg.
-            let beyond_count = error - saturate(error, self.gearing.ratio() * COLUMN_COUNT_RAD).0;
             let next = self.column_correction
-                + beyond_count * self.dt_s / self.tuning.column_time_constant_s;
+                + beyond(error, count) * self.dt_s / self.tuning.column_time_constant_s;
             // The integral is for static offsets (backlash, friction, gearing): while the
             // reference moves, the column's lag is the feedforward's business, and integrating
             // it would wind up and overshoot when the reference stops (0.7 deg after a 10 deg
@@ -365,8 +365,7 @@ impl ColumnShaper {
         // The column encoder's 0.088 deg count is 1.75 Hall counts at the motor: proportional
         // action on the last count would chatter the target between two counts at rest, so it
         // acts only on the error beyond one count, as the integral does.
-        let dead_band = self.gearing.ratio() * COLUMN_COUNT_RAD;
-        let beyond = self.column_error - saturate(self.column_error, dead_band).0;
+        let beyond_count = beyond(self.column_error, count);
         // Not during the enable ramp: the column lags the ECU's own ramp, and pushing on that
         // lag would make the ramp faster than its documented rate.
         let gain = if self.shaping {
@@ -379,7 +378,7 @@ impl ColumnShaper {
         // at the column: when a ramp hands over, or an encoder sample jumps, the drive sees a
         // ramp, not a step.
         let slew = self.gearing.ratio() * COLUMN_SLEW_RAD_PER_S * self.dt_s;
-        let wanted = gain * beyond;
+        let wanted = gain * beyond_count;
         if wanted.is_finite() {
             self.proportional += saturate(wanted - self.proportional, slew).0;
         }
@@ -397,6 +396,11 @@ impl ColumnShaper {
         self.target.reset_to(here);
         self.plain.reset_to(here);
     }
+}
+
+/// What of `error` lies beyond `band` either side of zero (0 within it).
+fn beyond(error: f32, band: f32) -> f32 {
+    error - saturate(error, band).0
 }
 
 /// The ECU-mode cascade for direct drive: the same call pattern as
