@@ -61,9 +61,9 @@ use core::f32::consts::TAU;
 /// ([`crate::protocol::ANGLE_DEG_PER_BIT`], [`REFERENCE_HZ`]), so its speed between two samples
 /// is a whole number of bits per period, 1 deg/s each: one bit per period (an AS computer's
 /// rounding dithering the last bit) rests, two do not, and the threshold lies halfway between
-/// two speeds the reference can have, where the f32 rounding of a difference cannot decide it.
-/// At exactly one bit per period (1 deg/s, the value before) it did: the integral ran at some
-/// steering angles and not at others, and no model could repeat the car's run.
+/// two speeds the reference can have, where the f32 rounding of a difference cannot decide it
+/// (at exactly one bit per period it would, and the integral would run at some steering angles
+/// and not at others).
 const RESTING_RAD_PER_S: f32 =
     1.5 * crate::protocol::ANGLE_DEG_PER_BIT * REFERENCE_HZ as f32 * (TAU / 360.0);
 
@@ -340,10 +340,9 @@ impl ColumnShaper {
             let authority = self.gearing.ratio() * self.tuning.column_authority_rad;
             // Like the proportional term, the integral takes only the error beyond the
             // encoder's last count: within it the column's reading is quantisation, not an
-            // offset, and integrating which of two counts each sample fell on made a car whose
-            // run no model repeats (the simulated EPOS4 car's track: 93.3 % against itself on
-            // a reference moved by 1e-7, 99.2 % with this; gap/NOTES.md). What it leaves is
-            // under a count at the column, 0.088 deg.
+            // offset, and integrating which of two counts each sample fell on would make a car
+            // whose run no model repeats (gap/NOTES.md, "The ECU controller on the EPOS4 car").
+            // What it leaves is under a count at the column, 0.088 deg.
             let next = self.column_correction
                 + beyond(error, count) * self.dt_s / self.tuning.column_time_constant_s;
             // The integral is for static offsets (backlash, friction, gearing): while the
