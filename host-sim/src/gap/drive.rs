@@ -504,6 +504,7 @@ pub(super) fn head(rec: &Record, seconds: f64) -> Record {
         motor: rec.motor.as_ref().map(|m| m[..n].to_vec()),
         disturbance: rec.disturbance.as_ref().map(|d| d[..n].to_vec()),
         supply_v: rec.supply_v.as_ref().map(|s| s[..n].to_vec()),
+        powered_from: rec.powered_from.min(n),
     }
 }
 

@@ -19,6 +19,7 @@ use crate::sim::{self, RunConfig};
 use steering_ecu::canopen::epos4::PositionScale;
 use steering_ecu::ecu::Ecu;
 use steering_ecu::ecu_mode::{ColumnShaper, EcuTuning};
+use steering_ecu::enable_ramp::EnableRamp;
 use steering_ecu::gearing::Gearing;
 use steering_ecu::paper_mode::{
     CURRENT_LOOP_HZ, POSITION_LOOP_HZ, POSITION_TICKS_PER_REFERENCE, REFERENCE_HZ,
@@ -391,7 +392,20 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
     let Some(scale) = PositionScale::new(HALL_COUNTS_PER_REV) else {
         return Epos4Samples::default();
     };
-    plant.set_at_rest(first.to_radians());
+    // The car's power-up, where the log shows one (`Record::powered_from`): its column where
+    // the log's first row has it, the drive off until its first report, and the ECU's enable
+    // ramp carrying the reference from the column, as the firmware does at every enable. ECU
+    // mode's column integral holds what it gathered while the ramp ended and the column caught
+    // up, and holds it until the column next stands a count off: a model that started at
+    // rest at the reference left the simulated EPOS4 car's track, under the ECU controller,
+    // one motor increment off on 4 % of its targets and at 94 % (gap/NOTES.md, "The car's
+    // power-up").
+    let powered_from = rec.powered_from.min(reference.len());
+    let start = match rec.output.first() {
+        Some(&c) if powered_from > 0 && c.is_finite() => c,
+        _ => first,
+    };
+    plant.set_at_rest(start.to_radians());
     let mut drive = DriveLoop::new(plant).with_position_phase(m.epos4.position_phase_ticks);
     let gains = match m.controller {
         Controller::Paper => m.gains,
@@ -408,7 +422,7 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
     drive.enable();
     let mut shaper = (m.controller == Controller::Ecu).then(|| {
         let mut s = ColumnShaper::new(gearing, EcuTuning::PAPER, 1);
-        s.reset(gearing.motor_from_steering(SteeringRad::from(SteeringDeg(first as f32))));
+        s.reset(gearing.motor_from_steering(SteeringRad::from(SteeringDeg(start as f32))));
         s
     });
     let encoder = ColumnEncoder { zero_raw: 0 };
@@ -450,7 +464,7 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
     } else {
         0
     });
-    let mut target = gearing.motor_from_steering(SteeringRad::from(SteeringDeg(first as f32)));
+    let mut target = gearing.motor_from_steering(SteeringRad::from(SteeringDeg(start as f32)));
     let mut tick: u64 = 0;
     // The ECU's column encoder task samples every 2 ms, on its own phase; the shaper takes the
     // newest sample.
@@ -470,9 +484,38 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
         };
         ((motor / per_motor).to_degrees(), current)
     };
-    for &r in &reference {
+    // The enable ramp steps at each push, `k + 1` periods in (at rest at 0 before the first).
+    // While the car powers up (up to and with the push before the drive's first report, when
+    // the EPOS4 is not yet in Operation enabled) it waits at rest at the column.
+    let period_us = (period * 1e6).round() as u64;
+    let mut ramp = (powered_from > 0).then(|| EnableRamp::at_rest(SteeringDeg(start as f32), 0));
+    // One period past the log's last row, its reference held: the readout reads each row off
+    // samples after its end (the next SYNC's current, a line to the next status frame's
+    // column), which the car had and a run that stopped at the row's end has not. Without
+    // it, the last row of a log's head (what the drive's clock is fitted on) was read off
+    // held samples: 3.6 A off on the simulated car's track, the whole of the head's residual
+    // at the right clock, and enough to pick the wrong one.
+    let past_the_end = reference.last().copied();
+    for (k, &r) in reference.iter().chain(past_the_end.iter()).enumerate() {
         // The ECU takes the sample at the push (tick k * ticks_per_period).
-        let angle = SteeringDeg(r as f32);
+        let mut angle = SteeringDeg(r as f32);
+        let now_us = (k as u64 + 1) * period_us;
+        let ramping = ramp.is_some();
+        if k == powered_from && k > 0 {
+            drive.enable();
+        }
+        if let Some(rp) = &mut ramp {
+            if k <= powered_from {
+                angle = SteeringDeg(encoder_sample as f32);
+                *rp = EnableRamp::at_rest(angle, now_us);
+            } else {
+                match rp.step(now_us, angle, period_us) {
+                    Some(a) => angle = a,
+                    None => ramp = None,
+                }
+            }
+        }
+        let running = k >= powered_from;
         match &mut shaper {
             None => {
                 if let Ok(m) = steering_ecu::paper_mode::reference_at_motor(gearing, angle) {
@@ -480,13 +523,18 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
                 }
             }
             Some(s) => {
-                let _ = s.push_reference(angle);
+                // The ramp's samples, its last included, are not shaped (as the firmware's).
+                let _ = if ramping {
+                    s.push_unshaped(angle)
+                } else {
+                    s.push_reference(angle)
+                };
                 let column = SteeringRad::from(SteeringDeg(encoder_sample as f32));
                 target = s.next_target(Some(column));
             }
         }
         for _ in 0..ticks_per_period {
-            drive.tick(true);
+            drive.tick(running);
             tick += 1;
             // The encoder's reading only where a sample is kept (its quantisation costs).
             let (every_ms, encoder_tick) = (
@@ -522,7 +570,9 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
                 current_s.push(cu);
             }
         }
-        column_rows.push(column_deg(&drive));
+        if k < n {
+            column_rows.push(column_deg(&drive));
+        }
     }
     Epos4Samples {
         at,
@@ -853,8 +903,10 @@ mod sync_drift {
 
     #[test]
     fn on_one_clock_the_syncs_sit_a_period_apart_at_their_phase() {
+        // One a period, and one in the period past the log's end that the readout reads the
+        // last row's current off.
         let at = syncs(0.0, 100);
-        assert_eq!(at.len(), 100);
+        assert_eq!(at.len(), 101);
         for (k, t) in at.iter().enumerate() {
             assert!(
                 (t - (0.003 + 0.01 * k as f64)).abs() < 1e-9,
@@ -957,5 +1009,115 @@ mod column_readout {
         assert_eq!(read(0.0, false), exact);
         // No number for an age: the row's end, not a NaN column.
         assert_eq!(read(f64::NAN, true), exact);
+    }
+}
+
+#[cfg(test)]
+mod epos4_run {
+    use super::{Effects, SimOut, simulate_epos4};
+    use crate::gap::Record;
+    use crate::gap::rig::{CarDrive, Epos4Readout, PaperModel, Rig, RigModel};
+    use crate::sim::Controller;
+
+    /// The paper rig's EPOS4 car under `controller`, read as convert reads it (the status
+    /// frames' column 2.31 ms before each row's end, as on the simulated car).
+    fn car(controller: Controller) -> PaperModel {
+        let RigModel::Paper(mut m) = Rig::paper().model else {
+            unreachable!("the paper rig runs the paper model")
+        };
+        m.drive = CarDrive::Epos4;
+        m.controller = controller;
+        m.epos4.readout = Epos4Readout {
+            column_age_s: 2.31e-3,
+            ..Epos4Readout::CONVERT
+        };
+        m
+    }
+
+    /// `rows` periods of `reference` (deg, of the period's start in s); the column at 0 deg.
+    fn record(rows: usize, reference: impl Fn(f64) -> f64) -> Record {
+        Record {
+            dt: 0.01,
+            reference: (0..rows).map(|k| reference(k as f64 * 0.01)).collect(),
+            output: vec![0.0; rows],
+            effort: vec![0.0; rows],
+            ..Record::default()
+        }
+    }
+
+    fn run(m: &PaperModel, rec: &Record) -> SimOut {
+        simulate_epos4(m, rec, &Effects::nominal())
+    }
+
+    /// Each row is read off samples after its end (the next SYNC's current, a line to the next
+    /// status frame's column): the model runs past a log's last row, so that a head of a log
+    /// (what the drive's clock is fitted on) reads its last row as the whole log does. Stopped
+    /// at the row's end, it read the last row off held samples.
+    #[test]
+    fn a_heads_last_row_is_read_as_the_whole_logs() {
+        for controller in [Controller::Paper, Controller::Ecu] {
+            let m = car(controller);
+            let sine = |t: f64| 10.0 * (std::f64::consts::TAU * 2.0 * t).sin();
+            let whole = run(&m, &record(300, sine));
+            for rows in [97, 150, 233] {
+                let head = run(&m, &record(rows, sine));
+                assert_eq!(head.output.len(), rows);
+                for (what, h, w) in [
+                    ("column", &head.output, &whole.output),
+                    ("current", &head.effort, &whole.effort),
+                    ("motor", &head.motor, &whole.motor),
+                ] {
+                    assert_eq!(
+                        h[..],
+                        w[..rows],
+                        "{controller:?}, the first {rows} rows: the {what}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// A log from the car's power-up (`powered_from` rows before the drive first reported):
+    /// the drive holds still and draws nothing until then, and the ECU's enable ramp then
+    /// carries the reference from the log's first column (1000 deg/s^2 at the wheel: 0.1 deg
+    /// in its first period), not a step of the whole way at the first row.
+    #[test]
+    fn a_log_from_power_up_holds_the_drive_then_ramps_from_the_column() {
+        for controller in [Controller::Paper, Controller::Ecu] {
+            let m = car(controller);
+            let powered_from = 3;
+            let rec = Record {
+                powered_from,
+                ..record(100, |_| 2.0)
+            };
+            let out = run(&m, &rec);
+            for k in 0..=powered_from {
+                assert_eq!(
+                    (out.motor[k], out.effort[k], out.output[k]),
+                    (0.0, 0.0, 0.0),
+                    "{controller:?}, row {k}: the drive not yet running"
+                );
+            }
+            // The first ramp step, 0.1 deg, is pushed at the row after the drive first
+            // reported and moves the motor within that row; a step of the whole 2 deg would
+            // have moved it a degree.
+            let first = out.motor[powered_from + 1];
+            assert!(
+                first > 0.0 && first < 0.3,
+                "{controller:?}: the motor at {first} deg after the first ramp step"
+            );
+            let settled = out.output[99];
+            assert!(
+                (settled - 2.0).abs() < 0.1,
+                "{controller:?}: the column at {settled} deg after a second"
+            );
+            // Without the power-up, the car is taken at rest at the reference.
+            let running = run(&m, &record(100, |_| 2.0));
+            assert!(
+                (running.output[0] - 2.0).abs() < 0.1,
+                "{controller:?}: {}",
+                running.output[0]
+            );
+        }
     }
 }

@@ -23,6 +23,11 @@ pub struct Record {
     pub disturbance: Option<Vec<f64>>,
     /// The measured supply at each step, V; 0 while the drive is off (BAM: torque disabled).
     pub supply_v: Option<Vec<f64>>,
+    /// The steps at the log's start before the car's drive first reported (paper rig: rows
+    /// whose motor and current are both empty, as `steer-can convert` writes the rows before
+    /// the EPOS4's first status frame): the car was powering up, its drive not yet running.
+    /// 0 for a log that starts with the drive running.
+    pub powered_from: usize,
 }
 
 /// What a log's current column holds.
@@ -364,6 +369,7 @@ impl Record {
             motor: motor.map(|m| (0..n).map(|k| interp_at(t, &m, end(k))).collect()),
             disturbance: None,
             supply_v: None,
+            powered_from: 0,
         }
     }
 

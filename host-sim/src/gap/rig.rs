@@ -694,7 +694,13 @@ impl Rig {
             RigModel::Paper(m) => {
                 let per = m.plant.motor_per_pinion();
                 let motor_deg = motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
-                Record::from_samples(&t, &reference, &output, &effort, motor_deg, 0.01, current)
+                let powered_from = powered_from(&table, &self.columns, &t, 0.01);
+                Record {
+                    powered_from,
+                    ..Record::from_samples(
+                        &t, &reference, &output, &effort, motor_deg, 0.01, current,
+                    )
+                }
             }
             RigModel::Emps(_) => Record {
                 dt: self.grid_s(),
@@ -704,6 +710,7 @@ impl Rig {
                 motor: None,
                 disturbance,
                 supply_v: None,
+                powered_from: 0,
             },
             RigModel::Bam(m) => bam_record(
                 m,
@@ -752,6 +759,26 @@ fn longest_hole(t: &[f64], present: &[f64], spacing: f64) -> Option<(f64, f64)> 
 fn one_value(values: &[f64]) -> Option<f64> {
     let first = *values.first()?;
     values.iter().all(|v| *v == first).then_some(first)
+}
+
+/// The steps of the grid (`dt` s each, from the first row) before the first row with a motor
+/// angle or a current (`t` the rows' stamps, as read): the rows a logger wrote while the car's
+/// drive had not yet reported, as `steer-can convert` writes the rows before the EPOS4's first
+/// status frame (its current and position `nan`). A log whose first row has either starts
+/// with the drive running: 0.
+fn powered_from(table: &Table, columns: &Columns, t: &[f64], dt: f64) -> usize {
+    let effort = table.column(&columns.effort);
+    let motor = columns.motor.as_deref().and_then(|c| table.column(c));
+    let reported = |j: usize| {
+        [effort, motor]
+            .iter()
+            .flatten()
+            .any(|v| v.get(j).is_some_and(|x| x.is_finite()))
+    };
+    match (0..t.len()).find(|&j| reported(j)) {
+        Some(j) if j > 0 => ((t[j] - t[0]) / dt + 1e-6).floor().max(0.0) as usize,
+        _ => 0,
+    }
 }
 
 /// A BAM log's columns as read.
@@ -812,6 +839,7 @@ fn bam_record(m: &BamModel, name: &str, c: &BamColumns) -> Result<Record, RigErr
                 .map(|k| if on(held(k)) { at(c.supply, k) } else { 0.0 })
                 .collect(),
         ),
+        powered_from: 0,
     };
     // The gain the log's rows show: duty over error, where the firmware's output is neither
     // saturated nor within a few encoder counts of zero.

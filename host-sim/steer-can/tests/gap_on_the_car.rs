@@ -174,6 +174,42 @@ fn the_epos4_car_under_the_ecu_controller_on_a_sweep_is_none() {
     );
 }
 
+/// A campaign's log starts at the car's power-up: the column where it stood (0 deg, the
+/// track's first sample 0.17 deg), rows without the drive until the EPOS4 first reports, then
+/// the ECU's enable ramp from the column. ECU mode's column integral holds what it gathered
+/// while the column caught up, until the column next stands a count off (55 s on this
+/// track). A model that started at rest at the reference, its drive running from the first
+/// row, held another integral: one motor increment off on 4 % of the targets, 92.6 % on the
+/// whole track with its drive clock fitted on the first 10 s (SYNC 1.80 ms, position loop
+/// 0.35 ms: the head's last row, read off samples the run had not reached, chose it).
+#[test]
+fn the_epos4_car_under_the_ecu_controller_on_a_track_is_none_from_its_power_up() {
+    let track = profile::track(None).unwrap();
+    let first_40_s = Profile::new(
+        "the built-in track's first 40 s".into(),
+        track.samples[..4000].to_vec(),
+        0.0,
+    )
+    .unwrap();
+    let (d, choice) = diagnosed(epos4(ControllerKind::Ecu), first_40_s);
+    assert_eq!(choice.controller, host_sim::sim::Controller::Ecu);
+    assert_none_at_95(&d);
+    assert!(
+        d.baseline_gof >= 0.99,
+        "nominal GoF {:.2} %",
+        100.0 * d.baseline_gof
+    );
+    // The drive's clock the sweeps fit on this car (SYNC 1.85 ms after the reference, the
+    // position loop 5 current ticks, 0.25 ms, into the period).
+    let sync = choice.sync_after_push_s.unwrap();
+    assert!(
+        (sync - 1.85e-3).abs() < 1e-6 && choice.position_phase_ticks == Some(5),
+        "SYNC {:.2} ms, position loop {:?} ticks",
+        1e3 * sync,
+        choice.position_phase_ticks
+    );
+}
+
 /// The direct drive's ECU takes each reference when its frame has crossed the bus (130 us on
 /// the simulated car) at the next tick of its 2 kHz position loop: a tick or two into the
 /// period, not at its start. A nominal model that pushes it at the start leaves the effort
