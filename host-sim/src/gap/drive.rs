@@ -723,12 +723,19 @@ pub fn choose(
                     ),
                     Some(_) => None,
                 };
+                // The phase from the whole log, the car's figure on the head as every other
+                // car's is (`best_nominal` and the late reference compare them).
                 let best = match encoder {
-                    Some((phase, gof)) => Tried {
-                        encoder_phase_s: Some(phase),
-                        gof,
-                        ..best
-                    },
+                    Some((phase, _)) => {
+                        let at_phase = Tried {
+                            encoder_phase_s: Some(phase),
+                            ..best
+                        };
+                        Tried {
+                            gof: nominal_fit(&rig_of(&at_phase), &shorts[index_of(k)]).gof,
+                            ..at_phase
+                        }
+                    }
                     None => best,
                 };
                 best_of_car.push(best);
