@@ -306,10 +306,23 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         summary.push_str(&format!("{}\n", car.describe()));
     }
     summary.push_str(&d.summary());
+    let window = car.as_ref().and_then(|c| c.late_reference_window_ms(&d));
+    if let (Some((from, to)), Some(c)) = (window, &car) {
+        summary.push_str(&format!(
+            "  an EPOS4 car latches a late frame at the first SYNC after it arrives: the log fixes \
+             that latch, {to:.1} ms after each reference sample (the SYNC {:.2} ms plus the \
+             delay fitted), not the frames' own delay, which any arrival after {from:.1} ms and \
+             up to {to:.1} ms gives alike\n",
+            1e3 * c.sync_after_push_s.unwrap_or(f64::NAN)
+        ));
+    }
     print!("{summary}");
     let mut json = d.to_json();
     if let Some(car) = &car {
         json["car"] = serde_json::to_value(car)?;
+    }
+    if let Some((from, to)) = window {
+        json["late_reference_window_ms"] = serde_json::json!([from, to]);
     }
     json["log_timing"] = serde_json::to_value(timing)?;
     if let Some(path) = &args.json {

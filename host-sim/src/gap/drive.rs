@@ -225,6 +225,34 @@ impl CarChoice {
         self
     }
 
+    /// Where the frames of a late reference can have reached the ECU, ms after each reference
+    /// sample (lowest excluded), where the diagnosis `d` named a delay on an EPOS4 car: the
+    /// drive latches a frame at the first SYNC after it arrives, so the log fixes the latch
+    /// (the SYNC phase plus the fitted delay, `sync_after_push_s` on the clock `d` ran), and
+    /// every arrival within the SYNC period before it gives the same log (gap/NOTES.md, "A
+    /// late reference and the SYNC are one thing to the model"). `None` otherwise: a direct
+    /// drive takes each frame at the position tick it lands on, and its delay is the fit's.
+    pub fn late_reference_window_ms(&self, d: &super::Diagnosis) -> Option<(f64, f64)> {
+        if self.drive != CarDrive::Epos4 || !d.verdict.effects.iter().any(|e| e == "delay") {
+            return None;
+        }
+        let sync_ms = 1e3 * self.sync_after_push_s?;
+        let named = d.verdict.effects.join("+");
+        let delay_ms = d
+            .ranking
+            .iter()
+            .find(|c| c.effect == named)?
+            .params
+            .iter()
+            .find(|(k, _)| k.ends_with("delay_ms"))
+            .map(|(_, v)| *v)?;
+        let latch_ms = sync_ms + delay_ms;
+        let period_ms = 1e3 / steering_ecu::paper_mode::REFERENCE_HZ as f64;
+        latch_ms
+            .is_finite()
+            .then_some(((latch_ms - period_ms).max(0.0), latch_ms))
+    }
+
     /// One line for the report.
     pub fn describe(&self) -> String {
         let from = |s: Source| match s {

@@ -324,7 +324,7 @@ fn frames_that_reach_the_ecu_late_are_a_delay_on_either_drive() {
             drive,
             effects: format!("reference_delay_ms={delay_ms}").parse().unwrap(),
         };
-        let (d, _) = diagnosed(car, profile::sweep(Sweep::PAPER).unwrap());
+        let (d, choice) = diagnosed(car, profile::sweep(Sweep::PAPER).unwrap());
         let best = &d.ranking[0];
         println!(
             "{drive:?}, frames {delay_ms} ms late: {:?} {:?}, GoF {:.1} -> {:.1} % (repeatability {:.1} %), fitted {:?}",
@@ -342,6 +342,19 @@ fn frames_that_reach_the_ecu_late_are_a_delay_on_either_drive() {
             100.0 * d.verdict.gof_after,
             100.0 * d.repeatability.gof
         );
+        // The EPOS4 car's log fixes when its drive latched the frames, not when they
+        // arrived: the window printed holds the frames' delay and spans one SYNC period.
+        let window = choice.late_reference_window_ms(&d);
+        match drive {
+            SimDrive::Epos4 => {
+                let (from, to) = window.expect("a window on the EPOS4 car");
+                assert!(
+                    from < delay_ms && delay_ms <= to && (to - from - 10.0).abs() < 1e-9,
+                    "frames {delay_ms} ms late, the window {from:.2}-{to:.2} ms"
+                );
+            }
+            SimDrive::Direct => assert_eq!(window, None),
+        }
     }
 }
 
