@@ -556,3 +556,50 @@ fn a_thousand_hertz_log_that_lost_rows_reads_each_steps_own_reference() {
         );
     }
 }
+
+/// The rows a log starts with before the car's drive first reported (motor and current both
+/// empty, as `steer-can convert` writes the rows before the EPOS4's first status frame) are
+/// counted as the car's power-up, in steps of the grid; a log whose first row has either
+/// starts with the drive running, and a hole later in a log is no power-up.
+#[test]
+fn the_rows_before_the_drives_first_report_are_the_cars_power_up() {
+    let powered_from = |rows_hz: u32, missing: &dyn Fn(usize) -> (bool, bool)| -> usize {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("log.csv");
+        let mut text = String::from("t,ref_sw_deg,sw_deg,motor_rad,current_a\n");
+        let dt = 1.0 / f64::from(rows_hz);
+        for j in 0..(2 * rows_hz as usize) {
+            let t = (j + 1) as f64 * dt;
+            let (no_motor, no_current) = missing(j);
+            let cell = |none: bool, v: f64| {
+                if none {
+                    "nan".to_string()
+                } else {
+                    format!("{v}")
+                }
+            };
+            text.push_str(&format!(
+                "{t:.6},{:.2},{:.4},{},{}\n",
+                5.0 * (3.0 * t).sin(),
+                4.9 * (3.0 * t - 0.1).sin(),
+                cell(no_motor, 500.0 * (3.0 * t).sin()),
+                cell(no_current, (3.0 * t).cos()),
+            ));
+        }
+        std::fs::write(&path, text).unwrap();
+        Rig::paper().load_log(&path).unwrap().record.powered_from
+    };
+    // convert's two rows without the drive, at 100 Hz.
+    assert_eq!(powered_from(100, &|j| (j < 2, j < 2)), 2);
+    // At 1 kHz, 25 rows: two whole steps of 10 ms before the first report.
+    assert_eq!(powered_from(1000, &|j| (j < 25, j < 25)), 2);
+    // Either signal in the first row: the drive was running.
+    assert_eq!(powered_from(100, &|j| (j < 2, false)), 0);
+    assert_eq!(powered_from(100, &|j| (false, j < 2)), 0);
+    // Every row, or a hole later on.
+    assert_eq!(powered_from(100, &|_| (false, false)), 0);
+    assert_eq!(
+        powered_from(100, &|j| ((50..53).contains(&j), (50..53).contains(&j))),
+        0
+    );
+}
