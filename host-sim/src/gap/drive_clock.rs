@@ -128,7 +128,7 @@ const ENCODER_STEPS: u32 = 8;
 /// simulated EPOS4 car's effect-free sweep at 97.3 % and its track at 91.8 % (gap/NOTES.md,
 /// "The ECU's column-encoder phase"). The paper controller reads no column, and is left
 /// alone.
-pub fn fit_encoder_phase(rig: &Rig, head: &Record, threads: usize) -> Option<(f64, f64)> {
+pub fn fit_encoder_phase(rig: &Rig, rec: &Record, threads: usize) -> Option<(f64, f64)> {
     let RigModel::Paper(model) = &rig.model else {
         return None;
     };
@@ -138,12 +138,12 @@ pub fn fit_encoder_phase(rig: &Rig, head: &Record, threads: usize) -> Option<(f6
     let phases: Vec<f64> = (0..ENCODER_STEPS)
         .map(|k| f64::from(k) * ENCODER_PHASE_STEP_S)
         .collect();
-    let scorer = Scorer::new(rig, head);
+    let scorer = Scorer::new(rig, rec);
     parallel_map(&phases, threads.max(1), |&phase| {
         let mut m = model.clone();
         m.epos4.encoder_phase_s = phase;
         let g = scorer
-            .fit(head, &simulate_epos4(&m, head, &Effects::nominal()))
+            .fit(rec, &simulate_epos4(&m, rec, &Effects::nominal()))
             .gof;
         (phase, if g.is_finite() { g } else { f64::NEG_INFINITY })
     })
@@ -224,9 +224,7 @@ pub fn with_best(
     }
     let (sync, phase) = (m.epos4.sync_after_push_s, m.epos4.position_phase_ticks);
     let fx = best.effects_on(rig);
-    let head = head(rec, SYNC_SEARCH_S);
-    let threads = threads.max(1);
-    let clock = fit(rig, &head, sync, &fx, threads)?;
+    let clock = fit(rig, &head(rec, SYNC_SEARCH_S), sync, &fx, threads.max(1))?;
     if (clock.sync_after_push_s, clock.position_phase_ticks) == (sync, phase) {
         return None;
     }

@@ -396,10 +396,10 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
     // the log's first row has it, the drive off until its first report, and the ECU's enable
     // ramp carrying the reference from the column, as the firmware does at every enable. ECU
     // mode's column integral holds what it gathered while the ramp ended and the column caught
-    // up, and holds it until the column next stands a count off: a model that started at
-    // rest at the reference left the simulated EPOS4 car's track, under the ECU controller,
-    // one motor increment off on 4 % of its targets and at 94 % (gap/NOTES.md, "The car's
-    // power-up").
+    // up, and holds it until the column next stands a count off: started at rest at the
+    // reference instead, the model of the simulated EPOS4 car's track under the ECU controller
+    // is one motor increment off on 5.5 % of its targets, 94.1 % at the car's clock
+    // (gap/NOTES.md, "The car's power-up").
     let powered_from = rec.powered_from.min(reference.len());
     let start = match rec.output.first() {
         Some(&c) if powered_from > 0 && c.is_finite() => c,
@@ -419,7 +419,6 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
     } else {
         m.supply_v
     });
-    drive.enable();
     let mut shaper = (m.controller == Controller::Ecu).then(|| {
         let mut s = ColumnShaper::new(gearing, EcuTuning::PAPER, 1);
         s.reset(gearing.motor_from_steering(SteeringRad::from(SteeringDeg(start as f32))));
@@ -501,7 +500,8 @@ pub fn epos4_samples(m: &PaperModel, rec: &Record, fx: &Effects) -> Epos4Samples
         let mut angle = SteeringDeg(r as f32);
         let now_us = (k as u64 + 1) * period_us;
         let ramping = ramp.is_some();
-        if k == powered_from && k > 0 {
+        // The drive enters Operation enabled at its first report (at once without a power-up).
+        if k == powered_from {
             drive.enable();
         }
         if let Some(rp) = &mut ramp {

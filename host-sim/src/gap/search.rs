@@ -220,7 +220,7 @@ pub(super) fn fit_window(
         motor: rec.motor.as_ref().map(|m| m[a..b].to_vec()),
         disturbance: rec.disturbance.as_ref().map(|d| d[a..b].to_vec()),
         supply_v: rec.supply_v.as_ref().map(|d| d[a..b].to_vec()),
-        // A window from within the log starts with the drive running.
+        // What of the power-up the window holds; one from past it starts with the drive running.
         powered_from: rec.powered_from.saturating_sub(a).min(b - a),
     })
 }
