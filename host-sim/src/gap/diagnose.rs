@@ -11,6 +11,7 @@ use super::model::{Effects, SimOut};
 use super::pairs;
 use super::refits::{self, Refits};
 use super::rig::{CarDrive, Rig, RigModel};
+use super::ripple;
 use super::score::{cost, effort_offset, effort_scale, repeatability, simulate};
 use super::search::{FitOut, Progress, fit_effects, fit_window, make_candidate, parallel_map};
 use super::signature::{self, Signature};
@@ -121,6 +122,15 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let repeat = repeatability(rig, rec, &scorer, &sim0);
     let offset = effort_offset(rec, &sim0, scorer.skip());
     let scale = effort_scale(rec, &sim0, scorer.skip());
+    let ripple = match &rig.model {
+        RigModel::Paper(m) => ripple::motor_ripple(
+            rec,
+            &sim0.effort,
+            m.plant.motor_per_pinion().to_radians(),
+            scorer.skip(),
+        ),
+        _ => None,
+    };
     let signature = log_signature(rig, rec, &sim0, opts);
     let (effects, mut findings) = rule_out(rig, signature.as_ref(), &opts.effects);
     // A long log is fitted on the window where the nominal residual is largest (the figures
@@ -270,6 +280,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         repeatability: repeat,
         effort_offset: offset,
         effort_scale: scale,
+        motor_ripple: ripple,
         signature,
         verdict,
         ranking,
@@ -338,7 +349,17 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             standard_error: scale.standard_error,
         });
     }
-    let unexplained = far_above_floor || offset_left || scale_left;
+    // And a torque that repeats with the rotor's turn.
+    let ripple_left = verdict_candidate.is_none() && ripple.is_some_and(|r| r.stands_out());
+    if let (true, Some(r), RigModel::Paper(m)) = (ripple_left, &ripple, &rig.model) {
+        findings.push(Finding::MotorRipple {
+            periods_per_rev: r.periods_per_rev,
+            amplitude: r.amplitude,
+            ratio: r.ratio(),
+            torque_nm: r.amplitude * m.plant.kt,
+        });
+    }
+    let unexplained = far_above_floor || offset_left || scale_left || ripple_left;
     if unexplained {
         findings.push(Finding::TryElse);
     }

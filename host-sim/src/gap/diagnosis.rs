@@ -89,6 +89,10 @@ pub struct Diagnosis {
     pub effort_offset: Offset,
     /// How many times the nominal model's effort the log's is (`score::effort_scale`).
     pub effort_scale: Scale,
+    /// The strongest line the effort residual keeps against the motor's angle
+    /// (`ripple::motor_ripple`), on the paper rig with a motor column.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motor_ripple: Option<super::ripple::MotorRipple>,
     /// What the log says of play in the belt and Coulomb friction at the rack, by itself or
     /// against the nominal model's own balance on an EPOS4 car
     /// (`gap::signature`), on the paper rig with a motor column; the candidates it rules out
@@ -249,6 +253,21 @@ impl Diagnosis {
             100.0 * o.share_of_effort(),
             o.effort_rms
         );
+        if let Some(m) = &self.motor_ripple {
+            let _ = writeln!(
+                s,
+                "against the motor's angle (the {} rows where it was slow): strongest line {:.3} at {} periods a turn, {:.1} times the other orders' median{}",
+                m.rows,
+                m.amplitude,
+                m.periods_per_rev,
+                m.ratio(),
+                if m.stands_out() {
+                    ": a torque that depends on where the rotor stands"
+                } else {
+                    ", no more than the residual gives any order"
+                }
+            );
+        }
         if let Some(b) = &self.signature {
             let _ = writeln!(
                 s,

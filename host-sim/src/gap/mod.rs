@@ -35,6 +35,7 @@ pub mod plots;
 mod record;
 mod refits;
 pub mod rig;
+pub mod ripple;
 pub mod rng;
 mod score;
 mod search;

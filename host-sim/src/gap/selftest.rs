@@ -244,6 +244,9 @@ pub struct CaseResult {
     pub effort_offset: super::Offset,
     /// How many times the nominal model's effort the log's is.
     pub effort_scale: super::Scale,
+    /// The strongest line in the effort residual against the motor's angle.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motor_ripple: Option<super::ripple::MotorRipple>,
     /// The log's torque balance, read without the model ([`super::signature`]): the second
     /// reading of play and rack friction beside the verdict; `None` where it cannot be read.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -332,6 +335,7 @@ fn diagnosed(
         parameters: d.parameters,
         effort_offset: d.effort_offset,
         effort_scale: d.effort_scale,
+        motor_ripple: d.motor_ripple,
         signature: d.signature,
         case,
         logger,
