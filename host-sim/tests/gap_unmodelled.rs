@@ -62,6 +62,24 @@ fn each_unmodelled_effect_shows_in_the_log() {
         rms(&diff)
     );
     assert!(rms(&diff) > 0.1, "{} A", rms(&diff));
+    // The column encoder's zero 5 counts off: every row's column reads 5 counts high.
+    let zeroed = logged(Unmodelled {
+        column_zero_counts: 5,
+        ..Unmodelled::NONE
+    });
+    let count = 360.0 / 4096.0;
+    let shifts: Vec<f64> = zeroed
+        .output
+        .iter()
+        .zip(&clean.output)
+        .map(|(a, b)| (a - b) / count)
+        .collect();
+    println!(
+        "column zero 5 counts: the column moved {:.2}-{:.2} counts",
+        shifts.iter().cloned().fold(f64::INFINITY, f64::min),
+        shifts.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+    );
+    assert!(shifts.iter().all(|d| (d - 5.0).abs() < 1e-3));
 }
 
 #[test]
@@ -92,6 +110,7 @@ fn an_unmodelled_car_is_the_worlds_case_with_its_effects_replaced() {
             u.torque_constant_factor != 1.0,
             u.current_offset_a != 0.0,
             u.cogging_nm != 0.0,
+            u.column_zero_counts != 0,
         ];
         assert_eq!(set.iter().filter(|s| **s).count(), 1, "{u:?}");
         // Table 4 off by up to 10 %, as every car of the world.
@@ -112,17 +131,18 @@ fn table_factors(plant: &host_sim::plant::PlantParams) -> Vec<(&'static str, f64
         .collect()
 }
 
-/// Three of the world's unmodelled cars on seed 1 (as `gap selftest --unmodelled --case
-/// 4,7,15`): the torque constant x0.77, the current sensor 0.31 A low, and the torque constant
-/// x1.36. None may be named an effect, nor `none`: the first is a car off Table 4 to the fits,
-/// the second a constant left in the current, the third a current 0.72 times the model's
-/// throughout (before that scale was read, `none` at a nominal GoF of 68.7 %: the refit of
-/// Table 4 within x1.5 left 2.8 times the floor).
+/// Four of the world's unmodelled cars on seed 1 (as `gap selftest --unmodelled --case
+/// 7,15,22,26`): the current sensor 0.31 A low, the torque constant x1.36, the column encoder's
+/// zero 3 counts (0.26 deg) high, and the torque constant x0.72. None may be named an effect,
+/// nor `none`: the first is a constant left in the current, the second a current 0.72 times the
+/// model's throughout (before that scale was read, `none` at a nominal GoF of 68.7 %: the refit
+/// of Table 4 within x1.5 left 2.8 times the floor), the third a constant left in the column
+/// (before it was read, `none` at 91.7 %), the fourth a car off Table 4 to the fits.
 #[test]
 fn a_car_with_an_effect_no_candidate_has_is_answered_unexplained_or_parameters() {
     let mut opts = selftest::default_options();
     opts.threads = 2;
-    let report = selftest::run(World::Unmodelled, &[4, 7, 15], 1, 12.0, &opts, &|_| {});
+    let report = selftest::run(World::Unmodelled, &[7, 15, 22, 26], 1, 12.0, &opts, &|_| {});
     for r in &report.cases {
         println!(
             "case {} {}: {:?}, {}",
@@ -143,18 +163,28 @@ fn a_car_with_an_effect_no_candidate_has_is_answered_unexplained_or_parameters()
     assert!(selftest::right(&hidden, &["parameters".to_string()]));
 }
 
-/// The world's cogging track on seed 1 (as `gap selftest --unmodelled --case 44`): 0.026 Nm
+/// The world's unmodelled car `case` of seed 1, diagnosed as `gap selftest --unmodelled --case`
+/// diagnoses it.
+fn diagnosed(case: usize) -> selftest::CaseResult {
+    let mut opts = selftest::default_options();
+    opts.threads = 2;
+    let mut report = selftest::run(World::Unmodelled, &[case], 1, 12.0, &opts, &|_| {});
+    let r = report.cases.remove(0);
+    println!(
+        "case {case} {}: {:?}, {}",
+        r.case.scenario, r.named, r.reason
+    );
+    r
+}
+
+/// The world's cogging track on seed 1 (as `gap selftest --unmodelled --case 39`): 0.027 Nm
 /// at 24 periods a motor turn, logged at 100 Hz. Its nominal GoF (88.9 %) and a refit of
 /// Table 4 within x1.5 leave no more than an effect-free car's, so it was `none`; where the
 /// motor is slow the current keeps the cogging against the rotor's angle, a line no candidate
 /// effect makes, and the car is `unexplained` with that line named.
 #[test]
 fn a_cogging_motor_is_read_from_the_current_against_the_rotors_angle() {
-    let mut opts = selftest::default_options();
-    opts.threads = 2;
-    let report = selftest::run(World::Unmodelled, &[44], 1, 12.0, &opts, &|_| {});
-    let r = &report.cases[0];
-    println!("case 44 {}: {:?}, {}", r.case.scenario, r.named, r.reason);
+    let r = &diagnosed(39);
     assert!(r.case.scenario.contains("cogging"), "{}", r.case.scenario);
     assert_eq!(r.named, ["unexplained"]);
     let line = r.motor_ripple.expect("a motor column and slow rows");
@@ -162,4 +192,26 @@ fn a_cogging_motor_is_read_from_the_current_against_the_rotors_angle() {
     assert_eq!(line.periods_per_rev, 24);
     assert!(line.stands_out());
     assert!(r.reason.contains("24 periods a motor turn"), "{}", r.reason);
+}
+
+/// The column encoder's zero 3 counts (0.26 deg) high, the smallest the world draws, on a
+/// 1 kHz sweep (`--unmodelled --case 22`): the column's residual keeps it throughout, and the
+/// car is `unexplained` with the offset read within a count.
+#[test]
+fn a_column_whose_zero_is_off_is_unexplained_with_the_offset_read() {
+    let r = &diagnosed(22);
+    assert!(
+        r.case.scenario.contains("column zero +0.26"),
+        "{}",
+        r.case.scenario
+    );
+    assert_eq!(r.named, ["unexplained"]);
+    let zero = r.output_offset;
+    println!("{zero:?}");
+    assert!(zero.stands_out());
+    assert!(
+        (zero.mean - 3.0 * 360.0 / 4096.0).abs() < 360.0 / 4096.0,
+        "{zero:?}"
+    );
+    assert!(r.reason.contains("a sensor's zero off"), "{}", r.reason);
 }

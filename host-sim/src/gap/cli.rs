@@ -65,7 +65,8 @@ pub struct GapArgs {
     pub model_world: bool,
     /// selftest: the independent world's cars with an effect no candidate has (the torque
     /// constant x0.7-0.8 or x1.25-1.4, a current sensor offset of 0.3-0.6 A, cogging of
-    /// 0.01-0.03 Nm), each right when answered `unexplained` or `parameters`.
+    /// 0.01-0.03 Nm, the column encoder's zero 0.26-0.97 deg off), each right when answered
+    /// `unexplained` or `parameters`.
     #[arg(long, conflicts_with = "model_world")]
     pub unmodelled: bool,
     /// selftest: diagnose each car from the files of these loggers, as `gap FILE` reads them

@@ -6,13 +6,13 @@ use super::diagnosis::{
     MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, Options, UNEXPLAINED_BELOW_GOF,
     UNEXPLAINED_RATIO, Verdict, VerdictKind,
 };
-use super::finding::{self, BestSingle, Finding, Shortfall};
+use super::finding::{self, BestSingle, Finding, OffsetOf, Shortfall};
 use super::model::{Effects, SimOut};
 use super::pairs;
 use super::refits::{self, Refits};
 use super::rig::{CarDrive, Rig, RigModel};
 use super::ripple;
-use super::score::{cost, effort_offset, effort_scale, repeatability, simulate};
+use super::score::{cost, effort_offset, effort_scale, output_offset, repeatability, simulate};
 use super::search::{FitOut, Progress, fit_effects, fit_window, make_candidate, parallel_map};
 use super::signature::{self, Signature};
 use super::{EffectKind, Fit, Record, Scorer, identify, locate};
@@ -121,6 +121,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let fit0 = scorer.fit(rec, &sim0);
     let repeat = repeatability(rig, rec, &scorer, &sim0);
     let offset = effort_offset(rec, &sim0, scorer.skip());
+    let zero = output_offset(rec, &sim0, scorer.skip());
     let scale = effort_scale(rec, &sim0, scorer.skip());
     let ripple = match &rig.model {
         RigModel::Paper(m) => ripple::motor_ripple(
@@ -279,6 +280,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         noise: scorer.noise(),
         repeatability: repeat,
         effort_offset: offset,
+        output_offset: zero,
         effort_scale: scale,
         motor_ripple: ripple,
         signature,
@@ -329,15 +331,19 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let far_above_floor = verdict_candidate.is_none()
         && left > UNEXPLAINED_RATIO * floor
         && fit0.gof < UNEXPLAINED_BELOW_GOF;
-    // A constant left in the effort is no noise and no car the table describes, whatever the
-    // GoF: a log near the nominal one with it is not `none`.
-    let offset_left = verdict_candidate.is_none() && offset.stands_out();
-    if offset_left {
-        findings.push(Finding::EffortOffset {
-            mean: offset.mean,
-            standard_error: offset.standard_error,
-            share_pct: 100.0 * offset.share_of_effort(),
-        });
+    // A constant left in the effort or the output is no noise and no car the table describes,
+    // whatever the GoF: a log near the nominal one with it is not `none`.
+    let mut offset_left = false;
+    for (signal, o) in [(OffsetOf::Effort, &offset), (OffsetOf::Output, &zero)] {
+        if verdict_candidate.is_none() && o.stands_out() {
+            offset_left = true;
+            findings.push(Finding::Offset {
+                signal,
+                mean: o.mean,
+                standard_error: o.standard_error,
+                share_pct: 100.0 * o.share_of_signal(),
+            });
+        }
     }
     // So is a current the log keeps at a share off the model's throughout: a torque constant
     // off Table 1, or a current scaled wrong, which a refit of Table 4 mimics only by moving

@@ -87,6 +87,8 @@ pub struct Diagnosis {
     pub repeatability: Fit,
     /// The constant part of the nominal model's effort residual (`score::effort_offset`).
     pub effort_offset: Offset,
+    /// The constant part of the nominal model's output residual (`score::output_offset`).
+    pub output_offset: Offset,
     /// How many times the nominal model's effort the log's is (`score::effort_scale`).
     pub effort_scale: Scale,
     /// The strongest line the effort residual keeps against the motor's angle
@@ -244,15 +246,19 @@ impl Diagnosis {
             "effort scale: x{:.3} the nominal model's (standard error {:.3})",
             sc.factor, sc.standard_error
         );
-        let o = &self.effort_offset;
-        let _ = writeln!(
-            s,
-            "effort offset: {:+.3} (standard error {:.3}; {:.1} % of the effort's RMS {:.3}), in the effort's unit",
-            o.mean,
-            o.standard_error,
-            100.0 * o.share_of_effort(),
-            o.effort_rms
-        );
+        for (name, o) in [
+            ("effort", &self.effort_offset),
+            ("output", &self.output_offset),
+        ] {
+            let _ = writeln!(
+                s,
+                "{name} offset: {:+.3} (standard error {:.3}; {:.1} % of the {name}'s RMS {:.3}), in the {name}'s unit",
+                o.mean,
+                o.standard_error,
+                100.0 * o.share_of_signal(),
+                o.signal_rms
+            );
+        }
         if let Some(m) = &self.motor_ripple {
             let _ = writeln!(
                 s,

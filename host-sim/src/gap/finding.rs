@@ -44,6 +44,13 @@ pub struct BestSingle {
 
 /// One step's finding. Costs are the fits' (each residual sample over its noise, summed);
 /// `share` and `gain_pct` fields are per cent of what the text says.
+/// The signal a constant is left in ([`Finding::Offset`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OffsetOf {
+    Effort,
+    Output,
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub enum Finding {
     /// The best single effect removes enough to be named.
@@ -178,13 +185,16 @@ pub enum Finding {
     RefitWorse(Shortfall),
     /// The named effect, refused by the GoF.
     EffectWorse { effect: String, why: Shortfall },
-    /// The effort's residual keeps a constant part that no effect and no Table 4 parameter
-    /// makes (a current sensor's offset, a logger's zero): the log is not the nominal car.
-    EffortOffset {
-        /// The intercept, the effort's unit.
+    /// A signal's residual keeps a constant part that no effect and no Table 4 parameter
+    /// makes (`score::effort_offset`, `score::output_offset`): a sensor's zero off, a logger's
+    /// zero. The log is not the nominal car.
+    Offset {
+        /// Which signal keeps it.
+        signal: OffsetOf,
+        /// The intercept, the signal's unit.
         mean: f64,
         standard_error: f64,
-        /// Of the logged effort's RMS, %.
+        /// Of the logged signal's RMS, %.
         share_pct: f64,
     },
     /// The log's effort is a share off the nominal model's throughout (`score::effort_scale`):
@@ -466,17 +476,27 @@ impl fmt::Display for Finding {
                 )
             }
             Finding::EffectWorse { effect, why } => write!(f, "{effect} {why}: not named"),
-            Finding::EffortOffset {
+            Finding::Offset {
+                signal,
                 mean,
                 standard_error,
                 share_pct,
-            } => write!(
-                f,
-                "the effort's residual keeps a constant {mean:+.3} ({:.0} standard errors, \
-                 {share_pct:.1} % of the effort's RMS) that no candidate effect and no Table 4 \
-                 parameter makes: a current sensor's offset, or a logger's zero",
-                mean.abs() / standard_error.max(1e-12)
-            ),
+            } => {
+                let (name, cause) = match signal {
+                    OffsetOf::Effort => ("effort", "a current sensor's offset, or a logger's zero"),
+                    OffsetOf::Output => (
+                        "output",
+                        "a sensor's zero off (the column encoder's, on the paper rig)",
+                    ),
+                };
+                write!(
+                    f,
+                    "the {name}'s residual keeps a constant {mean:+.3} ({:.0} standard errors, \
+                     {share_pct:.1} % of the {name}'s RMS) that no candidate effect and no \
+                     Table 4 parameter makes: {cause}",
+                    mean.abs() / standard_error.max(1e-12)
+                )
+            }
             Finding::EffortScale {
                 factor,
                 standard_error,

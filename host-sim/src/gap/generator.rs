@@ -32,7 +32,9 @@ use steering_ecu::gearing::Gearing;
 use steering_ecu::paper_mode::{
     CURRENT_LOOP_HZ, CURRENT_TICKS_PER_POSITION_TICK, Cascade, POSITION_TICKS_PER_REFERENCE,
 };
-use steering_ecu::sensors::{ColumnEncoder, hall_from_motor, motor_from_hall};
+use steering_ecu::sensors::{
+    COLUMN_ENCODER_COUNTS, ColumnEncoder, hall_from_motor, motor_from_hall,
+};
 use steering_ecu::units::{Amps, SteeringDeg, Volts};
 
 /// What the world hides, in its own forms and units.
@@ -69,6 +71,9 @@ pub struct Unmodelled {
     /// Cogging torque at the motor shaft, Nm: a sine of [`COGGING_PERIODS_PER_REV`] periods
     /// per motor turn.
     pub cogging_nm: f64,
+    /// The column encoder's zero set at bring-up off the rack's centre, counts of 360/4096 deg:
+    /// the ECU reads the column this many counts high, and logs what it reads.
+    pub column_zero_counts: i32,
 }
 
 impl Truth {
@@ -92,7 +97,17 @@ impl Unmodelled {
         torque_constant_factor: 1.0,
         current_offset_a: 0.0,
         cogging_nm: 0.0,
+        column_zero_counts: 0,
     };
+
+    /// The ECU's column encoder: its zero word [`Unmodelled::column_zero_counts`] off the one
+    /// that reads the rack's centre as straight ahead (the sensor's own word, zero 0).
+    pub fn column_encoder(&self) -> ColumnEncoder {
+        let counts = i64::from(COLUMN_ENCODER_COUNTS);
+        ColumnEncoder {
+            zero_raw: (-i64::from(self.column_zero_counts)).rem_euclid(counts) as u16,
+        }
+    }
 }
 
 /// Cogging periods per motor turn: the least common multiple of a 12-slot, 8-pole motor's
@@ -390,7 +405,8 @@ pub fn draw(seed: u64, index: usize, sweep_s: f64) -> GenCase {
 /// Case `index` of the world's cars with an effect no candidate has: the scenario, log rate,
 /// stamping lag and logger of [`draw`]'s case `index`, Table 4 off by up to 10 % again, and one
 /// of: the torque constant x0.7-0.8 or x1.25-1.4, a current sensor offset of 0.3-0.6 A either
-/// way, or 0.01-0.03 Nm of cogging at the motor (0.2-0.6 A of Table 1's torque constant).
+/// way, 0.01-0.03 Nm of cogging at the motor (0.2-0.6 A of Table 1's torque constant), or the
+/// column encoder's zero 3-11 counts (0.26-0.97 deg) off either way.
 /// Labelled `unmodelled`. Its own stream: the world's case `index` is unchanged.
 pub fn draw_unmodelled(seed: u64, index: usize, sweep_s: f64) -> GenCase {
     let mut case = draw(seed, index, sweep_s);
@@ -401,7 +417,7 @@ pub fn draw_unmodelled(seed: u64, index: usize, sweep_s: f64) -> GenCase {
     let plant = within_ten_percent(&mut rng);
     let either_way = |rng: &mut rng::Rng, v: f64| if rng.unit() < 0.5 { v } else { -v };
     let mut unmodelled = Unmodelled::NONE;
-    let what = match rng.next_u64() % 3 {
+    let what = match rng.next_u64() % 4 {
         0 => {
             let f = if rng.unit() < 0.5 {
                 rng.range(0.7, 0.8)
@@ -416,9 +432,18 @@ pub fn draw_unmodelled(seed: u64, index: usize, sweep_s: f64) -> GenCase {
             unmodelled.current_offset_a = either_way(&mut rng, a);
             format!("current offset {:+.2} A", unmodelled.current_offset_a)
         }
-        _ => {
+        2 => {
             unmodelled.cogging_nm = rng.range(0.01, 0.03);
             format!("cogging {:.3} Nm", unmodelled.cogging_nm)
+        }
+        _ => {
+            // 3-11 counts (0.26-0.97 deg) either way.
+            let counts = 3 + (rng.next_u64() % 9) as i32;
+            unmodelled.column_zero_counts = if rng.unit() < 0.5 { counts } else { -counts };
+            format!(
+                "column zero {:+.2} deg",
+                f64::from(unmodelled.column_zero_counts) * 360.0 / f64::from(COLUMN_ENCODER_COUNTS)
+            )
         }
     };
     case.truth = Truth {
@@ -646,7 +671,8 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
     let mut x = at_rest(&p, first.to_radians());
     cascade.reset(hall_from_motor(x[1]));
     let mut rng = rng::seeded(seed ^ (case.index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
-    let encoder = ColumnEncoder { zero_raw: 0 };
+    let sensor = ColumnEncoder { zero_raw: 0 };
+    let encoder = truth.unmodelled.column_encoder();
     let h = 1.0 / CURRENT_LOOP_HZ as f64;
     let ticks_per_row = CURRENT_LOOP_HZ as u64 / logger.rate_hz.max(1) as u64;
     // Which reference a row holds: the one of the half row interval before its stamp
@@ -698,7 +724,7 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
                 // section 3.2), not at the steering wheel.
                 let col =
                     x[3] * p.screw_to_pinion() + (ANGLE_NOISE_DEG * rng.normal()).to_radians();
-                let sw = encoder.angle(encoder.raw_from_angle(col));
+                let sw = encoder.angle(sensor.raw_from_angle(col));
                 let span = (tick - tick_at_last_row).max(1) as f64 * h;
                 let mean_current = (current_integral - integral_at_last_row) / span;
                 integral_at_last_row = current_integral;

@@ -329,7 +329,8 @@ fn run(case: &GenCase, seed: u64, drift: f64) -> Traffic {
     let rpdo = tick_of(FRAME_S);
     let mut x: State = at_rest(&p, first.to_radians());
     let mut noise = rng::seeded(seed ^ (case.index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
-    let encoder = ColumnEncoder { zero_raw: 0 };
+    let sensor = ColumnEncoder { zero_raw: 0 };
+    let encoder = truth.unmodelled.column_encoder();
     let mut drive = Drive::new(&gains, target_of(first).unwrap_or(x[1]));
     let mut target = target_of(first).unwrap_or(x[1]);
     // Targets on their way to the drive: (tick it has it, motor rad).
@@ -370,7 +371,7 @@ fn run(case: &GenCase, seed: u64, drift: f64) -> Traffic {
         if encoder_grid.due(n) {
             // The encoder sits at the pinion end of the torsion bar (delta_P, section 3.2).
             let col = x[3] * p.screw_to_pinion() + (ANGLE_NOISE_DEG * noise.normal()).to_radians();
-            column_sample = f64::from(encoder.angle(encoder.raw_from_angle(col)).0).to_degrees();
+            column_sample = f64::from(encoder.angle(sensor.raw_from_angle(col)).0).to_degrees();
         }
         if n.is_multiple_of(ticks_per_position) {
             drive.position_step(x[1]);

@@ -203,10 +203,11 @@ pub const OFFSET_BLOCKS: usize = 16;
 /// the motion, so a sweep or a track averages it out, but for a gain (the torque constant, a
 /// transmission ratio off the table), whose residual follows the current: a track that turns
 /// one way more than the other leaves it a mean. So the offset is the intercept of the residual
-/// regressed on the model's effort, not the residual's plain mean.
+/// regressed on the model's effort, not the residual's plain mean. The same reading of the
+/// output is a sensor's zero off ([`output_offset`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct Offset {
-    /// The intercept, in the effort's unit (A on the paper rig).
+    /// The intercept, in the signal's unit (A or deg on the paper rig).
     pub mean: f64,
     /// Its standard error, from the scatter of the intercept over `OFFSET_BLOCKS` (16)
     /// contiguous blocks (the residual is far from white: a block's mean carries its
@@ -214,8 +215,8 @@ pub struct Offset {
     pub standard_error: f64,
     /// The residual's RMS about zero, in the effort's unit.
     pub residual_rms: f64,
-    /// The logged effort's RMS about zero, in its unit.
-    pub effort_rms: f64,
+    /// The logged signal's RMS about zero, in its unit.
+    pub signal_rms: f64,
 }
 
 impl Offset {
@@ -224,9 +225,9 @@ impl Offset {
         self.mean.abs() / self.standard_error.max(1e-12)
     }
 
-    /// The intercept's size as a share of the logged effort's RMS, a fraction.
-    pub fn share_of_effort(&self) -> f64 {
-        self.mean.abs() / self.effort_rms.max(1e-12)
+    /// The intercept's size as a share of the logged signal's RMS, a fraction.
+    pub fn share_of_signal(&self) -> f64 {
+        self.mean.abs() / self.signal_rms.max(1e-12)
     }
 
     /// A constant no noise and no car the table describes leaves: beyond
@@ -234,7 +235,7 @@ impl Offset {
     pub fn stands_out(&self) -> bool {
         stands_out(
             self.significance(),
-            self.share_of_effort(),
+            self.share_of_signal(),
             OFFSET_MIN_SHARE,
         )
     }
@@ -248,10 +249,24 @@ fn stands_out(significance: f64, share: f64, min_share: f64) -> bool {
 
 /// The effort's [`Offset`] of `sim` against `rec`, from `skip` on.
 pub fn effort_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
-    let n = rec.len().min(sim.effort.len());
+    offset_of(&rec.effort, &sim.effort, skip)
+}
+
+/// The output's [`Offset`] of `sim` against `rec`, from `skip` on: on the paper rig, a column
+/// encoder whose zero is not the rack's centre. The model's column follows its reference as
+/// the car's does; where the loop closes on the motor (the paper controller), the log's column
+/// then keeps the zero's error throughout.
+pub fn output_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
+    offset_of(&rec.output, &sim.output, skip)
+}
+
+/// The intercept of `log - model` regressed on `model`, from `skip` on.
+fn offset_of(log: &[f64], model: &[f64], skip: usize) -> Offset {
+    let n = log.len().min(model.len());
     let s = skip.min(n);
-    let model = &sim.effort[s..n];
-    let r: Vec<f64> = (s..n).map(|k| rec.effort[k] - sim.effort[k]).collect();
+    let model = &model[s..n];
+    let log = &log[s..n];
+    let r: Vec<f64> = log.iter().zip(model).map(|(y, x)| y - x).collect();
     let len = r.len() / OFFSET_BLOCKS;
     if len < 2 {
         return Offset::default();
@@ -278,7 +293,7 @@ pub fn effort_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
         mean,
         standard_error: (var / k).sqrt(),
         residual_rms: rms(&r),
-        effort_rms: rms(&rec.effort[s..n]),
+        signal_rms: rms(log),
     }
 }
 
@@ -489,7 +504,7 @@ mod tests {
         });
         let o = effort_offset(&rec, &sim, 0);
         assert!(o.significance() < 3.0, "{o:?}");
-        assert!(o.mean.abs() < 0.01 * o.effort_rms, "{o:?}");
+        assert!(o.mean.abs() < 0.01 * o.signal_rms, "{o:?}");
     }
 
     #[test]
@@ -498,5 +513,30 @@ mod tests {
         rec.effort.truncate(2 * OFFSET_BLOCKS - 1);
         sim.effort.truncate(2 * OFFSET_BLOCKS - 1);
         assert_eq!(effort_offset(&rec, &sim, 0), Offset::default());
+    }
+
+    #[test]
+    fn the_output_offset_reads_the_output_and_not_the_effort() {
+        // A column that reads 0.35 deg high on a sweep whose model lags it a little, and an
+        // effort with no constant: only the output keeps one.
+        let (mut rec, mut sim) = record_and_model(|t| {
+            let i = 5.0 * (2.0 * std::f64::consts::PI * 0.7 * t).sin();
+            (i, i)
+        });
+        let angle = |t: f64| 8.0 * (2.0 * std::f64::consts::PI * 0.7 * t).sin();
+        rec.output = (0..rec.len())
+            .map(|k| angle(k as f64 * 1e-3) + 0.35)
+            .collect();
+        sim.output = (0..rec.len())
+            .map(|k| 0.98 * angle(k as f64 * 1e-3 - 0.002))
+            .collect();
+        let zero = output_offset(&rec, &sim, 0);
+        assert!((zero.mean - 0.35).abs() < 0.01, "{zero:?}");
+        assert!(zero.stands_out(), "{zero:?}");
+        let effort = effort_offset(&rec, &sim, 0);
+        assert!(!effort.stands_out(), "{effort:?}");
+        // Without it, none.
+        rec.output.iter_mut().for_each(|y| *y -= 0.35);
+        assert!(!output_offset(&rec, &sim, 0).stands_out());
     }
 }

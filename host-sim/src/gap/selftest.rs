@@ -242,6 +242,8 @@ pub struct CaseResult {
     pub parameters: Option<super::identify::Identified>,
     /// The constant and the scale the log's effort keeps against the nominal model's.
     pub effort_offset: super::Offset,
+    /// The constant the log's output keeps against the nominal model's.
+    pub output_offset: super::Offset,
     /// How many times the nominal model's effort the log's is.
     pub effort_scale: super::Scale,
     /// The strongest line in the effort residual against the motor's angle.
@@ -334,6 +336,7 @@ fn diagnosed(
         ranking: d.ranking,
         parameters: d.parameters,
         effort_offset: d.effort_offset,
+        output_offset: d.output_offset,
         effort_scale: d.effort_scale,
         motor_ripple: d.motor_ripple,
         signature: d.signature,
