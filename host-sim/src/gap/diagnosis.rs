@@ -153,6 +153,13 @@ pub const OFFSET_SIGNIFICANCE: f64 = 6.0;
 /// rounding of the drive's current (effect-free cars: at most 0.1 %; a 0.3 A offset: 2.4-3.4 %
 /// of sweeps of 9-12 A RMS).
 pub const OFFSET_MIN_SHARE: f64 = 0.01;
+/// The output's offset (`score::output_offset`) stands out beyond this share of the logged
+/// output's RMS: a track's column (about 28 deg RMS) then needs 0.07 deg, under one count of
+/// the column encoder (0.088 deg), so a zero a few counts off is read on a track as on a sweep.
+/// The significance is what keeps cars without one out: the independent world's cars (the
+/// first 60, effect-free or not; the EPOS4 car's first 40 under four loggers) and the
+/// simulated car's eight logs at most 2.0 standard errors; zeros of 3-11 counts 10.9 or more.
+pub const OUTPUT_OFFSET_MIN_SHARE: f64 = 0.0025;
 /// With nothing named, a log whose effort is more than this share off the nominal model's
 /// throughout (`score::effort_scale`, by [`OFFSET_SIGNIFICANCE`] standard errors or more) is
 /// not the nominal car: a torque constant or a current scale off. Effect-free cars of the

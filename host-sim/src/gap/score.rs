@@ -2,7 +2,9 @@
 //! cost the fits minimise ([`Scorer`]) and the floors it is judged against.
 
 use super::Record;
-use super::diagnosis::{OFFSET_MIN_SHARE, OFFSET_SIGNIFICANCE, SCALE_MIN_SHARE};
+use super::diagnosis::{
+    OFFSET_MIN_SHARE, OFFSET_SIGNIFICANCE, OUTPUT_OFFSET_MIN_SHARE, SCALE_MIN_SHARE,
+};
 use super::model::{self, Effects, SimOut};
 use super::rig::{Rig, RigModel};
 
@@ -217,6 +219,9 @@ pub struct Offset {
     pub residual_rms: f64,
     /// The logged signal's RMS about zero, in its unit.
     pub signal_rms: f64,
+    /// The share of `signal_rms` it must reach to stand out, a fraction: `OFFSET_MIN_SHARE` for
+    /// the effort, `OUTPUT_OFFSET_MIN_SHARE` for the output.
+    pub min_share: f64,
 }
 
 impl Offset {
@@ -231,13 +236,9 @@ impl Offset {
     }
 
     /// A constant no noise and no car the table describes leaves: beyond
-    /// `OFFSET_SIGNIFICANCE` (6) standard errors and `OFFSET_MIN_SHARE` (1 %) of the effort.
+    /// `OFFSET_SIGNIFICANCE` (6) standard errors and `min_share` of the signal.
     pub fn stands_out(&self) -> bool {
-        stands_out(
-            self.significance(),
-            self.share_of_signal(),
-            OFFSET_MIN_SHARE,
-        )
+        stands_out(self.significance(), self.share_of_signal(), self.min_share)
     }
 }
 
@@ -249,7 +250,7 @@ fn stands_out(significance: f64, share: f64, min_share: f64) -> bool {
 
 /// The effort's [`Offset`] of `sim` against `rec`, from `skip` on.
 pub fn effort_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
-    offset_of(&rec.effort, &sim.effort, skip)
+    offset_of(&rec.effort, &sim.effort, skip, OFFSET_MIN_SHARE)
 }
 
 /// The output's [`Offset`] of `sim` against `rec`, from `skip` on: on the paper rig, a column
@@ -257,11 +258,12 @@ pub fn effort_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
 /// the car's does; where the loop closes on the motor (the paper controller), the log's column
 /// then keeps the zero's error throughout.
 pub fn output_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
-    offset_of(&rec.output, &sim.output, skip)
+    offset_of(&rec.output, &sim.output, skip, OUTPUT_OFFSET_MIN_SHARE)
 }
 
-/// The intercept of `log - model` regressed on `model`, from `skip` on.
-fn offset_of(log: &[f64], model: &[f64], skip: usize) -> Offset {
+/// The intercept of `log - model` regressed on `model`, from `skip` on, to stand out beyond
+/// `min_share` of the log's RMS.
+fn offset_of(log: &[f64], model: &[f64], skip: usize, min_share: f64) -> Offset {
     let n = log.len().min(model.len());
     let s = skip.min(n);
     let model = &model[s..n];
@@ -294,6 +296,7 @@ fn offset_of(log: &[f64], model: &[f64], skip: usize) -> Offset {
         standard_error: (var / k).sqrt(),
         residual_rms: rms(&r),
         signal_rms: rms(log),
+        min_share,
     }
 }
 
@@ -538,5 +541,17 @@ mod tests {
         // Without it, none.
         rec.output.iter_mut().for_each(|y| *y -= 0.35);
         assert!(!output_offset(&rec, &sim, 0).stands_out());
+        // A track turns the column 40 deg each way (28 deg RMS): three encoder counts
+        // (0.26 deg) are under 1 % of it, and still a zero off.
+        let angle = |t: f64| 40.0 * (2.0 * std::f64::consts::PI * 0.7 * t).sin();
+        rec.output = (0..rec.len())
+            .map(|k| angle(k as f64 * 1e-3) + 3.0 * 360.0 / 4096.0)
+            .collect();
+        sim.output = (0..rec.len())
+            .map(|k| 0.99 * angle(k as f64 * 1e-3 - 0.0002))
+            .collect();
+        let zero = output_offset(&rec, &sim, 0);
+        assert!(zero.share_of_signal() < 0.01, "{zero:?}");
+        assert!(zero.stands_out(), "{zero:?}");
     }
 }
