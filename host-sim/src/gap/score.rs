@@ -206,7 +206,7 @@ pub const OFFSET_BLOCKS: usize = 16;
 /// transmission ratio off the table), whose residual follows the current: a track that turns
 /// one way more than the other leaves it a mean. So the offset is the intercept of the residual
 /// regressed on the model's effort, not the residual's plain mean. The same reading of the
-/// output is a sensor's zero off ([`output_offset`]).
+/// output is a sensor's zero off (`score::output_offset`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct Offset {
     /// The intercept, in the signal's unit (A or deg on the paper rig).
