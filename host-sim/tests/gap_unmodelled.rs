@@ -137,12 +137,10 @@ fn table_factors(plant: &host_sim::plant::PlantParams) -> Vec<(&'static str, f64
 /// nor `none`: the first is a constant left in the current, the second a current 0.72 times the
 /// model's throughout (before that scale was read, `none` at a nominal GoF of 68.7 %: the refit
 /// of Table 4 within x1.5 left 2.8 times the floor), the third a constant left in the column
-/// (before it was read, `none` at 91.7 %), the fourth a car off Table 4 to the fits.
+/// (unread, it would be `none` at 91.7 %), the fourth a car off Table 4 to the fits.
 #[test]
 fn a_car_with_an_effect_no_candidate_has_is_answered_unexplained_or_parameters() {
-    let mut opts = selftest::default_options();
-    opts.threads = 2;
-    let report = selftest::run(World::Unmodelled, &[7, 15, 22, 26], 1, 12.0, &opts, &|_| {});
+    let report = unmodelled(&[7, 15, 22, 26]);
     for r in &report.cases {
         println!(
             "case {} {}: {:?}, {}",
@@ -163,13 +161,17 @@ fn a_car_with_an_effect_no_candidate_has_is_answered_unexplained_or_parameters()
     assert!(selftest::right(&hidden, &["parameters".to_string()]));
 }
 
-/// The world's unmodelled car `case` of seed 1, diagnosed as `gap selftest --unmodelled --case`
-/// diagnoses it.
-fn diagnosed(case: usize) -> selftest::CaseResult {
+/// The world's unmodelled cars `cases` of seed 1, diagnosed as `gap selftest --unmodelled
+/// --case` diagnoses them.
+fn unmodelled(cases: &[usize]) -> selftest::SelftestReport {
     let mut opts = selftest::default_options();
     opts.threads = 2;
-    let mut report = selftest::run(World::Unmodelled, &[case], 1, 12.0, &opts, &|_| {});
-    let r = report.cases.remove(0);
+    selftest::run(World::Unmodelled, cases, 1, 12.0, &opts, &|_| {})
+}
+
+/// One of them, with its verdict printed.
+fn diagnosed(case: usize) -> selftest::CaseResult {
+    let r = unmodelled(&[case]).cases.remove(0);
     println!(
         "case {case} {}: {:?}, {}",
         r.case.scenario, r.named, r.reason
@@ -179,9 +181,9 @@ fn diagnosed(case: usize) -> selftest::CaseResult {
 
 /// The world's cogging track on seed 1 (as `gap selftest --unmodelled --case 39`): 0.027 Nm
 /// at 24 periods a motor turn, logged at 100 Hz. Its nominal GoF (88.9 %) and a refit of
-/// Table 4 within x1.5 leave no more than an effect-free car's, so it was `none`; where the
-/// motor is slow the current keeps the cogging against the rotor's angle, a line no candidate
-/// effect makes, and the car is `unexplained` with that line named.
+/// Table 4 within x1.5 leave no more than an effect-free car's, so those alone say `none`; where
+/// the motor is slow the current keeps the cogging against the rotor's angle, a line no
+/// candidate effect makes, and the car is `unexplained` with that line named.
 #[test]
 fn a_cogging_motor_is_read_from_the_current_against_the_rotors_angle() {
     let r = &diagnosed(39);

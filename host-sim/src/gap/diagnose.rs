@@ -128,6 +128,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             rec,
             &sim0.effort,
             m.plant.motor_per_pinion().to_radians(),
+            m.plant.kt,
             scorer.skip(),
         ),
         _ => None,
@@ -357,13 +358,8 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     }
     // And a torque that repeats with the rotor's turn.
     let ripple_left = verdict_candidate.is_none() && ripple.is_some_and(|r| r.stands_out());
-    if let (true, Some(r), RigModel::Paper(m)) = (ripple_left, &ripple, &rig.model) {
-        findings.push(Finding::MotorRipple {
-            periods_per_rev: r.periods_per_rev,
-            amplitude: r.amplitude,
-            ratio: r.ratio(),
-            torque_nm: r.amplitude * m.plant.kt,
-        });
+    if let (true, Some(r)) = (ripple_left, ripple) {
+        findings.push(Finding::MotorRipple(r));
     }
     let unexplained = far_above_floor || offset_left || scale_left || ripple_left;
     if unexplained {

@@ -203,15 +203,7 @@ pub enum Finding {
     /// The effort's residual keeps a line at a whole number of periods a motor turn
     /// (`ripple::motor_ripple`): a torque that depends on where the rotor stands (cogging, a
     /// torque ripple), which no candidate effect and no Table 4 parameter makes.
-    MotorRipple {
-        periods_per_rev: u32,
-        /// The line's amplitude, A.
-        amplitude: f64,
-        /// Its amplitude over the other orders' median.
-        ratio: f64,
-        /// The torque it takes at Table 1's torque constant, Nm.
-        torque_nm: f64,
-    },
+    MotorRipple(super::ripple::MotorRipple),
     /// The log's own torque balance (`gap::signature`) shows less of what this candidate
     /// models than half the smallest size it is named at: it is not fitted, so it cannot
     /// stand in for another effect.
@@ -507,19 +499,17 @@ impl fmt::Display for Finding {
                  Table 1, or the current logged in another scale",
                 (factor - 1.0).abs() / standard_error.max(1e-12)
             ),
-            Finding::MotorRipple {
-                periods_per_rev,
-                amplitude,
-                ratio,
-                torque_nm,
-            } => write!(
+            Finding::MotorRipple(line) => write!(
                 f,
-                "where the motor is slow, the effort's residual keeps {amplitude:.2} A at \
-                 {periods_per_rev} periods a motor turn ({ratio:.1} times the other orders' \
-                 median; at least {torque_nm:.3} Nm at Table 1's torque constant, as the loop \
-                 counters only part of it where the motor moves): a torque that \
-                 depends on where the rotor stands (cogging, a torque ripple), which no \
-                 candidate effect and no Table 4 parameter makes"
+                "where the motor is slow, the effort's residual keeps {:.2} A at {} periods a \
+                 motor turn ({:.1} times the other orders' median; at least {:.3} Nm at Table \
+                 1's torque constant, as the loop counters only part of it where the motor \
+                 moves): a torque that depends on where the rotor stands (cogging, a torque \
+                 ripple), which no candidate effect and no Table 4 parameter makes",
+                line.amplitude,
+                line.periods_per_rev,
+                line.ratio(),
+                line.torque_nm
             ),
             Finding::RuledOutByLog {
                 effect,

@@ -13,19 +13,24 @@
 //! median of the others, the residual's own level at an order that nothing in the car makes.
 
 use super::Record;
+use steering_ecu::sensors::HALL_COUNTS_PER_REV;
 
 /// The orders scanned, periods per motor turn. The lowest orders follow the column's angle
-/// (the motor turns 85 times for the column once, so a spring or a tyre error that grows with the
-/// steering angle gives them a share); the highest is half the 84 Hall counts a turn that a
-/// log's motor angle may be quantised to (an order `n` and `84 - n` read the same on them).
-pub const ORDERS: std::ops::RangeInclusive<u32> = 4..=41;
+/// (the motor turns 85 times for the column once, so a spring or a tyre error that grows with
+/// the steering angle gives them a share); the highest is under half the Hall counts a turn
+/// (84) that a log's motor angle may be quantised to: on them an order `n` and `84 - n` read
+/// the same, and 42 reads nothing.
+pub const ORDERS: std::ops::RangeInclusive<u32> = 4..=(HALL_COUNTS_PER_REV / 2 - 1);
 
 /// A row is slow when the motor turned less than this share of the shortest period scanned.
 const SLOW_SHARE_OF_PERIOD: f64 = 0.5;
 
-/// A line stands out at this many times the other orders' median (TBD).
+/// A line stands out at this many times the other orders' median: tracks without a torque of
+/// the rotor's angle (the independent world's, either drive and every logger, and the
+/// simulated car's) read at most 4.6; the world's cogging tracks (0.010-0.028 Nm) 7.8 or more.
 pub const MIN_RATIO: f64 = 6.0;
-/// ...and at least this amplitude, A (TBD).
+/// ...and at least this amplitude, A: 2.6 mNm at Table 1's torque constant, a quarter of the
+/// smallest cogging the world draws (the simulated car's tracks read at most 0.038 A).
 pub const MIN_AMPLITUDE_A: f64 = 0.05;
 
 /// Fewest slow rows to read a line on.
@@ -42,6 +47,9 @@ pub struct MotorRipple {
     pub median_other: f64,
     /// The rows slow enough to read it on.
     pub rows: usize,
+    /// The torque the amplitude takes at the motor's torque constant, Nm: a lower bound, as the
+    /// loop counters only part of such a torque where the motor moves.
+    pub torque_nm: f64,
 }
 
 impl MotorRipple {
@@ -58,11 +66,13 @@ impl MotorRipple {
 
 /// The line, from the log's motor column (output units through the rigid gearing, as
 /// [`Record::motor`]), `motor_per_output` motor radians per output unit, and the nominal
-/// model's effort; `None` without a motor column or with too few slow rows.
+/// model's effort; its torque at `torque_constant` Nm per effort unit. `None` without a motor
+/// column or with too few slow rows.
 pub fn motor_ripple(
     rec: &Record,
     model_effort: &[f64],
     motor_per_output: f64,
+    torque_constant: f64,
     skip: usize,
 ) -> Option<MotorRipple> {
     let motor = rec.motor.as_ref()?;
@@ -95,6 +105,7 @@ pub fn motor_ripple(
         amplitude: peak,
         median_other: others[others.len() / 2],
         rows: rows.len(),
+        torque_nm: peak * torque_constant,
     })
 }
 
@@ -142,7 +153,7 @@ fn solve3(m: [[f64; 3]; 3], v: [f64; 3]) -> Option<[f64; 3]> {
 mod tests {
     use super::*;
 
-    /// A motor that steps between standstills over `turns` turns, the residual a line of
+    /// A motor that steps between standstills over 3.3 turns, the residual a line of
     /// `amplitude` A at `order` periods a turn and a seeded noise of `noise` A; the motor
     /// column in motor radians.
     fn stepping(order: f64, amplitude: f64, noise: f64) -> (Record, Vec<f64>) {
@@ -171,7 +182,7 @@ mod tests {
     #[test]
     fn a_line_at_24_periods_a_turn_is_read_with_its_size() {
         let (rec, model) = stepping(24.0, 0.3, 0.2);
-        let r = motor_ripple(&rec, &model, 1.0, 0).expect("read");
+        let r = motor_ripple(&rec, &model, 1.0, 0.05, 0).expect("read");
         assert_eq!(r.periods_per_rev, 24);
         assert!((r.amplitude - 0.3).abs() < 0.03, "{r:?}");
         assert!(r.stands_out(), "{r:?}");
@@ -180,7 +191,7 @@ mod tests {
     #[test]
     fn noise_alone_does_not_stand_out() {
         let (rec, model) = stepping(24.0, 0.0, 0.2);
-        let r = motor_ripple(&rec, &model, 1.0, 0).expect("read");
+        let r = motor_ripple(&rec, &model, 1.0, 0.05, 0).expect("read");
         assert!(r.ratio() < MIN_RATIO, "{r:?}");
         assert!(!r.stands_out(), "{r:?}");
     }
@@ -188,7 +199,7 @@ mod tests {
     #[test]
     fn a_line_too_small_to_matter_is_not_named() {
         let (rec, model) = stepping(24.0, 0.5 * MIN_AMPLITUDE_A, 0.0);
-        let r = motor_ripple(&rec, &model, 1.0, 0).expect("read");
+        let r = motor_ripple(&rec, &model, 1.0, 0.05, 0).expect("read");
         assert!(r.ratio() > MIN_RATIO, "{r:?}");
         assert!(!r.stands_out(), "{r:?}");
     }
@@ -198,9 +209,9 @@ mod tests {
         let (mut rec, model) = stepping(24.0, 0.3, 0.0);
         let fast: Vec<f64> = (0..rec.len()).map(|k| k as f64 * 0.5).collect();
         rec.motor = Some(fast);
-        assert_eq!(motor_ripple(&rec, &model, 1.0, 0), None);
+        assert_eq!(motor_ripple(&rec, &model, 1.0, 0.05, 0), None);
         rec.motor = None;
-        assert_eq!(motor_ripple(&rec, &model, 1.0, 0), None);
+        assert_eq!(motor_ripple(&rec, &model, 1.0, 0.05, 0), None);
     }
 
     #[test]
@@ -212,7 +223,7 @@ mod tests {
         if let Some(m) = rec.motor.as_mut() {
             m[100] = f64::INFINITY;
         }
-        let r = motor_ripple(&rec, &model, 1.0, 0).expect("read");
+        let r = motor_ripple(&rec, &model, 1.0, 0.05, 0).expect("read");
         assert_eq!(r.periods_per_rev, 24);
         assert!(r.amplitude.is_finite() && r.stands_out(), "{r:?}");
     }
