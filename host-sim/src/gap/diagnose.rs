@@ -2,9 +2,9 @@
 //! Table 4 refit checks ([`super::refits`]) and the verdict, in that order.
 
 use super::diagnosis::{
-    Candidate, Diagnosis, MAX_FIT_S, MIN_IMPROVEMENT, MIN_PAIR_IMPROVEMENT,
-    MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, Options, UNEXPLAINED_BELOW_GOF,
-    UNEXPLAINED_RATIO, Verdict, VerdictKind,
+    Candidate, Diagnosis, FRICTION_FOR_SCALE_SIGNIFICANCE, MAX_FIT_S, MIN_IMPROVEMENT,
+    MIN_PAIR_IMPROVEMENT, MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, Options,
+    SCALE_MIN_SHARE, UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict, VerdictKind,
 };
 use super::finding::{self, BestSingle, Finding, OffsetOf, Shortfall};
 use super::model::{Effects, SimOut};
@@ -12,10 +12,13 @@ use super::pairs;
 use super::refits::{self, Refits};
 use super::rig::{CarDrive, Rig, RigModel};
 use super::ripple;
-use super::score::{cost, effort_offset, effort_scale, output_offset, repeatability, simulate};
+use super::score::{
+    cost, effort_offset, effort_scale, effort_scale_beside_friction, output_offset, repeatability,
+    simulate,
+};
 use super::search::{FitOut, Progress, fit_effects, fit_window, make_candidate, parallel_map};
 use super::signature::{self, Signature};
-use super::{EffectKind, Fit, Record, Scorer, identify, locate};
+use super::{EffectKind, Fit, Record, Scale, Scorer, identify, locate};
 
 /// What every step of one diagnosis reads: the log and the window its fits run on, their
 /// scorers, the nominal model's cost on that window and the window's noise floor.
@@ -123,6 +126,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let offset = effort_offset(rec, &sim0, scorer.skip());
     let zero = output_offset(rec, &sim0, scorer.skip());
     let scale = effort_scale(rec, &sim0, scorer.skip());
+    let scale_beside = effort_scale_beside_friction(rec, &sim0, scorer.skip());
     let ripple = match &rig.model {
         RigModel::Paper(m) => ripple::motor_ripple(
             rec,
@@ -283,6 +287,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         effort_offset: offset,
         output_offset: zero,
         effort_scale: scale,
+        effort_scale_beside_friction: scale_beside,
         motor_ripple: ripple,
         signature,
         verdict,
@@ -325,6 +330,22 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         });
         verdict_candidate = None;
     }
+    // Friction adds a current of the motion's sign; it cannot make one a share larger
+    // throughout. Named while the log's current keeps such a share beside it, and the share
+    // holds in every part of the log, it stands in for a torque constant off Table 1.
+    if let Some(c) = &verdict_candidate
+        && c.kinds
+            .iter()
+            .any(|k| matches!(k, EffectKind::CoulombFriction | EffectKind::RackFriction))
+        && friction_for_scale(&scale, &scale_beside)
+    {
+        findings.push(Finding::FrictionForScale {
+            effect: c.effect.clone(),
+            factor: scale_beside.factor,
+            standard_error: scale_beside.standard_error,
+        });
+        verdict_candidate = None;
+    }
     let parameter_simulations = parameters.as_ref().map_or(0, |(id, _, _)| id.simulations);
     // What the best explanation leaves: the nominal model, or the table refitted within its
     // tolerance (a car a few per cent off the table is no gap).
@@ -349,11 +370,12 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // So is a current the log keeps at a share off the model's throughout: a torque constant
     // off Table 1, or a current scaled wrong, which a refit of Table 4 mimics only by moving
     // every inertia, damping and stiffness together, and often does not reach.
-    let scale_left = verdict_candidate.is_none() && scale.stands_out();
-    if scale_left {
+    let scale_read = [scale, scale_beside].into_iter().find(|s| s.stands_out());
+    let scale_left = verdict_candidate.is_none() && scale_read.is_some();
+    if let (true, Some(s)) = (scale_left, scale_read) {
         findings.push(Finding::EffortScale {
-            factor: scale.factor,
-            standard_error: scale.standard_error,
+            factor: s.factor,
+            standard_error: s.standard_error,
         });
     }
     // And a torque that repeats with the rotor's turn.
@@ -561,4 +583,39 @@ fn rule_out(
         }
     }
     (kept, findings)
+}
+
+/// A current a share above the model's that friction does not make: beside a friction of the
+/// motion's sign the log's current is still more than `SCALE_MIN_SHARE` (15 %) above the
+/// model's, and read alone the share holds in every block of the log, at
+/// [`FRICTION_FOR_SCALE_SIGNIFICANCE`] standard errors or more.
+fn friction_for_scale(alone: &Scale, beside: &Scale) -> bool {
+    beside.factor > 1.0 + SCALE_MIN_SHARE
+        && alone.factor > 1.0 + SCALE_MIN_SHARE
+        && alone.significance() >= FRICTION_FOR_SCALE_SIGNIFICANCE
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scale(factor: f64, significance: f64) -> Scale {
+        Scale {
+            factor,
+            standard_error: (factor - 1.0).abs() / significance,
+        }
+    }
+
+    #[test]
+    fn a_friction_stands_in_for_a_scale_only_where_the_share_holds_beside_it_and_throughout() {
+        // The world's torque constant x0.71 (unmodelled case 57), as the team's logger wrote it.
+        assert!(friction_for_scale(&scale(1.404, 47.5), &scale(1.289, 6.3)));
+        // Its friction car that reads most alike (case 27): the share alone is 1.41, but it
+        // changes from block to block.
+        assert!(!friction_for_scale(&scale(1.412, 5.4), &scale(1.158, 2.8)));
+        // A share that holds throughout but goes beside the motion's sign is friction's.
+        assert!(!friction_for_scale(&scale(1.30, 40.0), &scale(1.05, 2.0)));
+        // A current below the model's is no friction's stand-in.
+        assert!(!friction_for_scale(&scale(0.71, 150.0), &scale(0.74, 31.0)));
+    }
 }

@@ -200,6 +200,15 @@ pub enum Finding {
     /// The log's effort is a share off the nominal model's throughout (`score::effort_scale`):
     /// a torque constant or a current scale off, which no effect makes.
     EffortScale { factor: f64, standard_error: f64 },
+    /// The named effect has friction, but the log's current is a share above the model's
+    /// throughout even beside a friction of the motion's sign
+    /// (`score::effort_scale_beside_friction`): friction adds a fixed current, it does not
+    /// scale it, so the friction stands in for a torque constant off.
+    FrictionForScale {
+        effect: String,
+        factor: f64,
+        standard_error: f64,
+    },
     /// The effort's residual keeps a line at a whole number of periods a motor turn
     /// (`ripple::motor_ripple`): a torque that depends on where the rotor stands (cogging, a
     /// torque ripple), which no candidate effect and no Table 4 parameter makes.
@@ -497,6 +506,18 @@ impl fmt::Display for Finding {
                 "the effort is x{factor:.2} the nominal model's throughout ({:.0} standard \
                  errors), which no candidate effect makes: the motor's torque constant off \
                  Table 1, or the current logged in another scale",
+                (factor - 1.0).abs() / standard_error.max(1e-12)
+            ),
+            Finding::FrictionForScale {
+                effect,
+                factor,
+                standard_error,
+            } => write!(
+                f,
+                "beside a friction of the motion's sign the effort is still x{factor:.2} the \
+                 nominal model's ({:.0} standard errors): friction adds a current of a fixed \
+                 size and does not scale it, so {effect} stands in for a torque constant off: \
+                 not named",
                 (factor - 1.0).abs() / standard_error.max(1e-12)
             ),
             Finding::MotorRipple(line) => write!(

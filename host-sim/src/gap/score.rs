@@ -347,7 +347,47 @@ const SCALE_SMOOTHING_S: f64 = 0.05;
 /// controller over an EPOS4: 0.3 A RMS that does not repeat), the same linear mean on both
 /// leaves the slope of what they share.
 pub fn effort_scale(rec: &Record, sim: &SimOut, skip: usize) -> Scale {
-    let n = rec.len().min(sim.effort.len());
+    scale_of(rec, sim, skip, None)
+}
+
+/// The effort's [`Scale`] with a Coulomb friction's current fitted beside it: the slope on the
+/// model's effort of a least-squares fit that also has the sign of the model's motion (its
+/// motor, else its output) and an intercept, through the same moving mean.
+///
+/// A friction the model lacks adds a current of the motion's sign and a fixed size; a torque
+/// constant off Table 1 scales all of the current. Read alone, the slope takes the friction's
+/// share where the damping's current and the motion's sign go together (the world's friction
+/// cars read x1.2-1.4 at 4-6 standard errors); beside the sign it is left with what scales.
+pub fn effort_scale_beside_friction(rec: &Record, sim: &SimOut, skip: usize) -> Scale {
+    let motion = if sim.motor.len() >= sim.effort.len() {
+        &sim.motor
+    } else {
+        &sim.output
+    };
+    let sign: Vec<f64> = (0..sim.effort.len())
+        .map(|k| {
+            let v = motion.get(k).copied().unwrap_or(0.0)
+                - motion.get(k.saturating_sub(1)).copied().unwrap_or(0.0);
+            if v > 0.0 {
+                1.0
+            } else if v < 0.0 {
+                -1.0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    scale_of(rec, sim, skip, Some(&sign))
+}
+
+/// The slope of the log's effort on the model's, with an intercept and, if given, a second
+/// regressor beside it; all through a moving mean of `SCALE_SMOOTHING_S`, its standard error
+/// by a jackknife over `OFFSET_BLOCKS` blocks.
+fn scale_of(rec: &Record, sim: &SimOut, skip: usize, beside: Option<&[f64]>) -> Scale {
+    let n = rec
+        .len()
+        .min(sim.effort.len())
+        .min(beside.map_or(usize::MAX, <[f64]>::len));
     let s = skip.min(n);
     let w = ((SCALE_SMOOTHING_S / rec.dt.max(1e-9)).round() as usize).max(1);
     let smooth = |v: &[f64]| -> Vec<f64> {
@@ -357,31 +397,49 @@ pub fn effort_scale(rec: &Record, sim: &SimOut, skip: usize) -> Scale {
     };
     let x = smooth(&sim.effort[s..n]);
     let y = smooth(&rec.effort[s..n]);
+    let z = beside.map_or_else(|| vec![0.0; x.len()], |b| smooth(&b[s..n]));
     let len = x.len() / OFFSET_BLOCKS;
     if len < 2 {
         return Scale::UNREAD;
     }
-    // Each block's sums, so the slope without any one block is cheap.
-    let sums: Vec<[f64; 5]> = x
-        .chunks_exact(len)
-        .zip(y.chunks_exact(len))
-        .take(OFFSET_BLOCKS)
-        .map(|(xb, yb)| {
-            xb.iter().zip(yb).fold([0.0; 5], |a, (x, y)| {
-                [a[0] + 1.0, a[1] + x, a[2] + y, a[3] + x * x, a[4] + x * y]
+    // Each block's sums [1, x, z, y, xx, xz, zz, xy, zy], so the slope without any one block
+    // is cheap.
+    let sums: Vec<[f64; 9]> = (0..OFFSET_BLOCKS)
+        .map(|b| {
+            (b * len..(b + 1) * len).fold([0.0; 9], |a, k| {
+                let (x, z, y) = (x[k], z[k], y[k]);
+                [
+                    a[0] + 1.0,
+                    a[1] + x,
+                    a[2] + z,
+                    a[3] + y,
+                    a[4] + x * x,
+                    a[5] + x * z,
+                    a[6] + z * z,
+                    a[7] + x * y,
+                    a[8] + z * y,
+                ]
             })
         })
         .collect();
-    let slope = |t: [f64; 5]| {
-        let sxx = t[3] - t[1] * t[1] / t[0];
-        if sxx > 0.0 {
-            (t[4] - t[1] * t[2] / t[0]) / sxx
+    let two = beside.is_some();
+    let slope = |t: [f64; 9]| {
+        // Centred sums: xx, xz, zz, xy, zy.
+        let c = |a: usize, b: usize, ab: usize| t[ab] - t[a] * t[b] / t[0];
+        let (sxx, sxz, szz, sxy, szy) =
+            (c(1, 1, 4), c(1, 2, 5), c(2, 2, 6), c(1, 3, 7), c(2, 3, 8));
+        if !two {
+            return if sxx > 0.0 { sxy / sxx } else { f64::NAN };
+        }
+        let det = sxx * szz - sxz * sxz;
+        if det > 1e-12 * sxx * szz && sxx > 0.0 {
+            (sxy * szz - sxz * szy) / det
         } else {
             f64::NAN
         }
     };
-    let add = |a: [f64; 5], b: &[f64; 5]| std::array::from_fn(|i| a[i] + b[i]);
-    let total = sums.iter().fold([0.0; 5], add);
+    let add = |a: [f64; 9], b: &[f64; 9]| std::array::from_fn(|i| a[i] + b[i]);
+    let total = sums.iter().fold([0.0; 9], add);
     let factor = slope(total);
     let k = sums.len() as f64;
     let without: Vec<f64> = sums
@@ -483,6 +541,67 @@ mod tests {
         });
         let sc = effort_scale(&rec, &sim, 0);
         assert!((sc.factor - 1.0).abs() < 0.01, "{sc:?}");
+    }
+
+    /// A chirp's motion (1-4 Hz over 8 s at 1 kHz): the model's current is its inertia's and
+    /// damping's, the car's `car(current, sign of the motion)`.
+    fn chirp_with(car: impl Fn(f64, f64) -> f64) -> (Record, SimOut) {
+        let n = 8000;
+        let tau = std::f64::consts::TAU;
+        let phase = |t: f64| tau * (t + 0.1875 * t * t);
+        let (mut output, mut model, mut logged) = (vec![], vec![], vec![]);
+        for k in 0..n {
+            let t = k as f64 * 1e-3;
+            let w = tau * (1.0 + 0.375 * t);
+            let (p, v, a) = (phase(t).sin(), w * phase(t).cos(), -w * w * phase(t).sin());
+            let i = 0.005 * a + 0.3 * v;
+            output.push(p);
+            model.push(i);
+            logged.push(car(i, v.signum()));
+        }
+        let rec = Record {
+            dt: 1e-3,
+            reference: output.clone(),
+            output: output.clone(),
+            effort: logged,
+            ..Record::default()
+        };
+        let sim = SimOut {
+            output,
+            effort: model,
+            motor: vec![],
+        };
+        (rec, sim)
+    }
+
+    #[test]
+    fn friction_reads_as_a_scale_alone_but_not_beside_the_motions_sign() {
+        // 2 A of friction: the damping's current goes with the motion's sign, so the plain
+        // slope takes a share of it.
+        let (rec, sim) = chirp_with(|i, sign| i + 2.0 * sign);
+        let alone = effort_scale(&rec, &sim, 0);
+        assert!(alone.factor > 1.15, "{alone:?}");
+        let beside = effort_scale_beside_friction(&rec, &sim, 0);
+        assert!((beside.factor - 1.0).abs() < 0.03, "{beside:?}");
+        assert!(!beside.stands_out(), "{beside:?}");
+        // A torque constant x0.74: the current is x1.35 throughout, beside the sign or not.
+        let (rec, sim) = chirp_with(|i, _| 1.35 * i);
+        let beside = effort_scale_beside_friction(&rec, &sim, 0);
+        assert!((beside.factor - 1.35).abs() < 0.03, "{beside:?}");
+        assert!(beside.stands_out(), "{beside:?}");
+        // Both: the scale is still read.
+        let (rec, sim) = chirp_with(|i, sign| 1.35 * i + 2.0 * sign);
+        let beside = effort_scale_beside_friction(&rec, &sim, 0);
+        assert!((beside.factor - 1.35).abs() < 0.03, "{beside:?}");
+    }
+
+    #[test]
+    fn a_motion_of_one_sign_gives_no_scale_beside_friction() {
+        // The sign never changes: the friction and the intercept are one, nothing is read.
+        let (mut rec, mut sim) = chirp_with(|i, _| 1.35 * i);
+        sim.output = (0..sim.output.len()).map(|k| k as f64).collect();
+        rec.output = sim.output.clone();
+        assert_eq!(effort_scale_beside_friction(&rec, &sim, 0), Scale::UNREAD);
     }
 
     #[test]

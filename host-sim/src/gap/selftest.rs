@@ -246,6 +246,8 @@ pub struct CaseResult {
     pub output_offset: super::Offset,
     /// How many times the nominal model's effort the log's is.
     pub effort_scale: super::Scale,
+    /// The same with a friction of the motion's sign fitted beside it.
+    pub effort_scale_beside_friction: super::Scale,
     /// The strongest line in the effort residual against the motor's angle.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motor_ripple: Option<super::ripple::MotorRipple>,
@@ -338,6 +340,7 @@ fn diagnosed(
         effort_offset: d.effort_offset,
         output_offset: d.output_offset,
         effort_scale: d.effort_scale,
+        effort_scale_beside_friction: d.effort_scale_beside_friction,
         motor_ripple: d.motor_ripple,
         signature: d.signature,
         case,
