@@ -124,7 +124,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     let fit0 = scorer.fit(rec, &sim0);
     let repeat = repeatability(rig, rec, &scorer, &sim0);
     let offset = effort_offset(rec, &sim0, scorer.skip());
-    let zero = output_offset(rec, &sim0, scorer.skip());
+    let zero = output_offset(rec, &sim0, scorer.skip(), rig.output_count());
     let scale = effort_scale(rec, &sim0, scorer.skip());
     let scale_beside = effort_scale_beside_friction(rec, &sim0, scorer.skip());
     let ripple = match &rig.model {

@@ -513,6 +513,17 @@ impl Rig {
         })
     }
 
+    /// One count of the output's position sensor, in the output's unit: the column encoder's
+    /// (deg) on the paper rig, the servo's encoder (rad) on BAM; 0 where the log does not say
+    /// (EMPS).
+    pub fn output_count(&self) -> f64 {
+        match &self.model {
+            RigModel::Paper(_) => 360.0 / f64::from(steering_ecu::sensors::COLUMN_ENCODER_COUNTS),
+            RigModel::Emps(_) => 0.0,
+            RigModel::Bam(m) => std::f64::consts::TAU / m.encoder_counts,
+        }
+    }
+
     /// Seconds per sample of the diagnosis grid.
     pub fn grid_s(&self) -> f64 {
         match &self.model {

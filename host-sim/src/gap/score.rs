@@ -3,7 +3,8 @@
 
 use super::Record;
 use super::diagnosis::{
-    OFFSET_MIN_SHARE, OFFSET_SIGNIFICANCE, OUTPUT_OFFSET_MIN_SHARE, SCALE_MIN_SHARE,
+    OFFSET_MIN_SHARE, OFFSET_SIGNIFICANCE, OUTPUT_OFFSET_MIN_COUNTS, OUTPUT_OFFSET_MIN_SHARE,
+    SCALE_MIN_SHARE,
 };
 use super::model::{self, Effects, SimOut};
 use super::rig::{Rig, RigModel};
@@ -222,6 +223,10 @@ pub struct Offset {
     /// The share of `signal_rms` it must reach to stand out, a fraction: `OFFSET_MIN_SHARE` for
     /// the effort, `OUTPUT_OFFSET_MIN_SHARE` for the output.
     pub min_share: f64,
+    /// The size it must pass to stand out, in the signal's unit: 0 for the effort;
+    /// `OUTPUT_OFFSET_MIN_COUNTS` of the rig's position sensor's count for the output (a car at
+    /// rest reads the count it stands in, not where in the count it stands).
+    pub min_abs: f64,
 }
 
 impl Offset {
@@ -236,9 +241,10 @@ impl Offset {
     }
 
     /// A constant no noise and no car the table describes leaves: beyond
-    /// `OFFSET_SIGNIFICANCE` (6) standard errors and `min_share` of the signal.
+    /// `OFFSET_SIGNIFICANCE` (6) standard errors, `min_share` of the signal and `min_abs`.
     pub fn stands_out(&self) -> bool {
         stands_out(self.significance(), self.share_of_signal(), self.min_share)
+            && self.mean.abs() > self.min_abs
     }
 }
 
@@ -250,20 +256,32 @@ fn stands_out(significance: f64, share: f64, min_share: f64) -> bool {
 
 /// The effort's [`Offset`] of `sim` against `rec`, from `skip` on.
 pub fn effort_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
-    offset_of(&rec.effort, &sim.effort, skip, OFFSET_MIN_SHARE)
+    offset_of(&rec.effort, &sim.effort, skip, OFFSET_MIN_SHARE, 0.0)
 }
 
 /// The output's [`Offset`] of `sim` against `rec`, from `skip` on: on the paper rig, a column
 /// encoder whose zero is not the rack's centre. The model's column follows its reference as
 /// the car's does; where the loop closes on the motor (the paper controller), the log's column
 /// then keeps the zero's error throughout.
-pub fn output_offset(rec: &Record, sim: &SimOut, skip: usize) -> Offset {
-    offset_of(&rec.output, &sim.output, skip, OUTPUT_OFFSET_MIN_SHARE)
+///
+/// It keeps as well where in its first count the car stood: the model starts at the count
+/// the log's first row reads, the car anywhere within it, and a loop on the motor holds that
+/// part of a count through the log (the simulated EPOS4 car started 0.03, 0.05 and 0.08 deg
+/// above a count reads 0.028, 0.049 and 0.077 deg). So an offset stands out only beyond
+/// `OUTPUT_OFFSET_MIN_COUNTS` of `count`, the position sensor's count in the output's unit.
+pub fn output_offset(rec: &Record, sim: &SimOut, skip: usize, count: f64) -> Offset {
+    offset_of(
+        &rec.output,
+        &sim.output,
+        skip,
+        OUTPUT_OFFSET_MIN_SHARE,
+        OUTPUT_OFFSET_MIN_COUNTS * count,
+    )
 }
 
 /// The intercept of `log - model` regressed on `model`, from `skip` on, to stand out beyond
 /// `min_share` of the log's RMS.
-fn offset_of(log: &[f64], model: &[f64], skip: usize, min_share: f64) -> Offset {
+fn offset_of(log: &[f64], model: &[f64], skip: usize, min_share: f64, min_abs: f64) -> Offset {
     let n = log.len().min(model.len());
     let s = skip.min(n);
     let model = &model[s..n];
@@ -297,6 +315,7 @@ fn offset_of(log: &[f64], model: &[f64], skip: usize, min_share: f64) -> Offset 
         residual_rms: rms(&r),
         signal_rms: rms(log),
         min_share,
+        min_abs,
     }
 }
 
@@ -652,14 +671,23 @@ mod tests {
         sim.output = (0..rec.len())
             .map(|k| 0.98 * angle(k as f64 * 1e-3 - 0.002))
             .collect();
-        let zero = output_offset(&rec, &sim, 0);
+        let count = 360.0 / 4096.0;
+        let zero = output_offset(&rec, &sim, 0, count);
         assert!((zero.mean - 0.35).abs() < 0.01, "{zero:?}");
         assert!(zero.stands_out(), "{zero:?}");
         let effort = effort_offset(&rec, &sim, 0);
         assert!(!effort.stands_out(), "{effort:?}");
         // Without it, none.
         rec.output.iter_mut().for_each(|y| *y -= 0.35);
-        assert!(!output_offset(&rec, &sim, 0).stands_out());
+        assert!(!output_offset(&rec, &sim, 0, count).stands_out());
+        // Nor where the car stood within its first count: 0.08 deg, under one count.
+        rec.output.iter_mut().for_each(|y| *y += 0.08);
+        let within = output_offset(&rec, &sim, 0, count);
+        assert!((within.mean - 0.08).abs() < 0.01, "{within:?}");
+        assert!(
+            within.significance() > 6.0 && !within.stands_out(),
+            "{within:?}"
+        );
         // A track turns the column 40 deg each way (28 deg RMS): three encoder counts
         // (0.26 deg) are under 1 % of it, and still a zero off.
         let angle = |t: f64| 40.0 * (2.0 * std::f64::consts::PI * 0.7 * t).sin();
@@ -669,7 +697,7 @@ mod tests {
         sim.output = (0..rec.len())
             .map(|k| 0.99 * angle(k as f64 * 1e-3 - 0.0002))
             .collect();
-        let zero = output_offset(&rec, &sim, 0);
+        let zero = output_offset(&rec, &sim, 0, count);
         assert!(zero.share_of_signal() < 0.01, "{zero:?}");
         assert!(zero.stands_out(), "{zero:?}");
     }

@@ -132,6 +132,35 @@ fn the_default_epos4_car_on_a_sweep_is_none_against_its_own_chain() {
     );
 }
 
+/// A car stands where its last move left it, anywhere within the column encoder's count it
+/// reads (0.088 deg). The model starts at that count; the paper controller closes its loop on
+/// the motor, so the car keeps the part of a count through the log, and the column's residual
+/// keeps it as a constant. It is where the car stood, not a zero off: `none`, the part read.
+#[test]
+fn the_default_epos4_car_started_within_a_count_is_none() {
+    let count = 360.0 / 4096.0;
+    for start_deg in [0.03, 0.05, 0.08, 1.0] {
+        let car = SimCar {
+            column_deg: start_deg,
+            ..epos4(ControllerKind::Paper)
+        };
+        let (d, _) = diagnosed(car, profile::sweep(Sweep::PAPER).unwrap());
+        let within = f64::rem_euclid(start_deg, count);
+        println!(
+            "started at {start_deg} deg ({within:.3} deg into its count): {:?}, GoF {:.1} %, {:?}",
+            d.verdict.kind,
+            100.0 * d.baseline_gof,
+            d.output_offset
+        );
+        assert_none_at_95(&d);
+        assert!(
+            (d.output_offset.mean - within).abs() < 0.2 * count,
+            "{:?}",
+            d.output_offset
+        );
+    }
+}
+
 #[test]
 fn the_epos4_car_under_the_ecu_controller_on_a_sweep_is_none() {
     let (d, choice) = diagnosed(

@@ -5,6 +5,9 @@
 #![cfg(feature = "sim")]
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
+#[path = "../../tests/support/gap_file.rs"]
+mod gap_file;
+
 use std::process::{Command, Stdio};
 
 /// The inline `steer-can ...` commands of the README's bring-up section from its numbered
@@ -84,6 +87,24 @@ fn rehearse_runs_the_readme_first_day_and_every_step_passes() {
     }
     let log = host_io::logfmt::Log::load(&dir.path().join("log.csv")).unwrap();
     assert!(!log.is_empty());
+    // Step 8: the sweep diagnosed as `host-sim gap sweep.csv.gz` diagnoses it. The car
+    // is exactly Table 4 and has moved before the sweep (the step, the timeout), so it stands
+    // within a count of where the model starts it: `none`.
+    let (d, choice) = gap_file::diagnose_file(&dir.path().join("sweep.csv.gz"), None, None);
+    println!(
+        "sweep: {:?} ({}), GoF {:.1} %, output offset {:?}; {}",
+        d.verdict.kind,
+        choice.describe(),
+        100.0 * d.baseline_gof,
+        d.output_offset,
+        d.verdict.reason
+    );
+    assert_eq!(
+        d.verdict.kind,
+        host_sim::gap::VerdictKind::None,
+        "{}",
+        d.verdict.reason
+    );
 }
 
 /// A rehearsal on the car's interface is refused: it drives the simulated car only.
