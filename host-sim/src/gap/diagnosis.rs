@@ -165,10 +165,10 @@ pub const OFFSET_MIN_SHARE: f64 = 0.01;
 pub const OUTPUT_OFFSET_MIN_SHARE: f64 = 0.0025;
 /// ...and beyond this many counts of the position sensor (the column encoder's on the paper
 /// rig, 0.088 deg): a car at rest reads the count it stands in, and the model starts at that
-/// count, so up to one count is where the car stood, not a zero (the simulated EPOS4 car
-/// started 0.03-0.08 deg above a count reads 0.028-0.077 deg throughout its sweep); half a
-/// count more for the reading's own scatter. The world's zeros, 3-11 counts, read within 0.3
-/// counts of what they are.
+/// count, so about a count is where the car stood, not a zero (the simulated cars started
+/// 0.03-0.08 deg above a count read 0.028-0.098 deg throughout their sweeps, up to 1.1 counts
+/// under the ECU controller, 0.3-0.9 standard errors of scatter beside it); half a count more
+/// for that. The world's zeros, 3-11 counts, read within 0.3 counts of what they are.
 pub const OUTPUT_OFFSET_MIN_COUNTS: f64 = 1.5;
 /// With nothing named, a log whose effort is more than this share off the nominal model's
 /// throughout (`score::effort_scale`, or `score::effort_scale_beside_friction`, by
