@@ -370,12 +370,15 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     // So is a current the log keeps at a share off the model's throughout: a torque constant
     // off Table 1, or a current scaled wrong, which a refit of Table 4 mimics only by moving
     // every inertia, damping and stiffness together, and often does not reach.
-    let scale_read = [scale, scale_beside].into_iter().find(|s| s.stands_out());
+    let scale_read = [(scale, false), (scale_beside, true)]
+        .into_iter()
+        .find(|(s, _)| s.stands_out());
     let scale_left = verdict_candidate.is_none() && scale_read.is_some();
-    if let (true, Some(s)) = (scale_left, scale_read) {
+    if let (true, Some((s, beside_friction))) = (scale_left, scale_read) {
         findings.push(Finding::EffortScale {
             factor: s.factor,
             standard_error: s.standard_error,
+            beside_friction,
         });
     }
     // And a torque that repeats with the rotor's turn.

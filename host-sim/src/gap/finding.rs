@@ -199,7 +199,13 @@ pub enum Finding {
     },
     /// The log's effort is a share off the nominal model's throughout (`score::effort_scale`):
     /// a torque constant or a current scale off, which no effect makes.
-    EffortScale { factor: f64, standard_error: f64 },
+    EffortScale {
+        factor: f64,
+        standard_error: f64,
+        /// Read with a friction of the motion's sign fitted beside it
+        /// (`score::effort_scale_beside_friction`), where the plain slope fell short.
+        beside_friction: bool,
+    },
     /// The named effect has friction, but the log's current is a share above the model's
     /// throughout even beside a friction of the motion's sign
     /// (`score::effort_scale_beside_friction`): friction adds a fixed current, it does not
@@ -501,12 +507,18 @@ impl fmt::Display for Finding {
             Finding::EffortScale {
                 factor,
                 standard_error,
+                beside_friction,
             } => write!(
                 f,
                 "the effort is x{factor:.2} the nominal model's throughout ({:.0} standard \
-                 errors), which no candidate effect makes: the motor's torque constant off \
+                 errors{}), which no candidate effect makes: the motor's torque constant off \
                  Table 1, or the current logged in another scale",
-                (factor - 1.0).abs() / standard_error.max(1e-12)
+                (factor - 1.0).abs() / standard_error.max(1e-12),
+                if *beside_friction {
+                    ", with a friction of the motion's sign fitted beside it"
+                } else {
+                    ""
+                }
             ),
             Finding::FrictionForScale {
                 effect,
