@@ -280,7 +280,7 @@ pub fn output_offset(rec: &Record, sim: &SimOut, skip: usize, count: f64) -> Off
 }
 
 /// The intercept of `log - model` regressed on `model`, from `skip` on, to stand out beyond
-/// `min_share` of the log's RMS.
+/// `min_share` of the log's RMS and beyond `min_abs`.
 fn offset_of(log: &[f64], model: &[f64], skip: usize, min_share: f64, min_abs: f64) -> Offset {
     let n = log.len().min(model.len());
     let s = skip.min(n);
