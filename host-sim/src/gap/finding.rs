@@ -206,10 +206,10 @@ pub enum Finding {
         /// (`score::effort_scale_beside_friction`), where the plain slope fell short.
         beside_friction: bool,
     },
-    /// The named effect has friction, but the log's current is a share above the model's
-    /// throughout even beside a friction of the motion's sign
-    /// (`score::effort_scale_beside_friction`): friction adds a fixed current, it does not
-    /// scale it, so the friction stands in for a torque constant off.
+    /// The named effect has friction, but the log's current is a share above the model's in
+    /// every part of the log (`score::effort_scale`, `FRICTION_FOR_SCALE_SIGNIFICANCE`):
+    /// friction adds a fixed current, it does not scale it, so the friction stands in for a
+    /// torque constant off.
     FrictionForScale {
         effect: String,
         factor: f64,
@@ -526,10 +526,10 @@ impl fmt::Display for Finding {
                 standard_error,
             } => write!(
                 f,
-                "beside a friction of the motion's sign the effort is still x{factor:.2} the \
-                 nominal model's ({:.0} standard errors): friction adds a current of a fixed \
-                 size and does not scale it, so {effect} stands in for a torque constant off: \
-                 not named",
+                "the effort is x{factor:.2} the nominal model's in every part of the log ({:.0} \
+                 standard errors; a friction's share changes from one part to the next): \
+                 friction adds a current of a fixed size and does not scale it, so {effect} \
+                 stands in for a torque constant off: not named",
                 (factor - 1.0).abs() / standard_error.max(1e-12)
             ),
             Finding::MotorRipple(line) => write!(
