@@ -4,7 +4,8 @@
 use super::diagnosis::{
     Candidate, Diagnosis, FRICTION_FOR_SCALE_SIGNIFICANCE, MAX_FIT_S, MIN_IMPROVEMENT,
     MIN_PAIR_IMPROVEMENT, MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, Options,
-    SCALE_MIN_SHARE, UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict, VerdictKind,
+    SCALE_LEFT_BESIDE_FRICTION, SCALE_MIN_SHARE, UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict,
+    VerdictKind,
 };
 use super::finding::{self, BestSingle, Finding, OffsetOf, Shortfall};
 use super::model::{Effects, SimOut};
@@ -337,7 +338,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
         && c.kinds
             .iter()
             .any(|k| matches!(k, EffectKind::CoulombFriction | EffectKind::RackFriction))
-        && friction_for_scale(&scale)
+        && friction_for_scale(&scale, &scale_beside)
     {
         findings.push(Finding::FrictionForScale {
             effect: c.effect.clone(),
@@ -589,12 +590,17 @@ fn rule_out(
 }
 
 /// A current a share above the model's that friction does not make: more than
-/// `SCALE_MIN_SHARE` (15 %) above the model's, and the same share in every block of the log,
-/// at [`FRICTION_FOR_SCALE_SIGNIFICANCE`] standard errors or more. A friction's share of the
-/// slope rides on the damping's current, which goes with the motion's sign, and changes from
-/// one block to the next.
-fn friction_for_scale(scale: &Scale) -> bool {
-    scale.factor > 1.0 + SCALE_MIN_SHARE && scale.significance() >= FRICTION_FOR_SCALE_SIGNIFICANCE
+/// `SCALE_MIN_SHARE` (15 %) above the model's, the same share in every block of the log (at
+/// [`FRICTION_FOR_SCALE_SIGNIFICANCE`] standard errors or more), and at least
+/// [`SCALE_LEFT_BESIDE_FRICTION`] of it still there with a friction of the motion's sign
+/// fitted beside it. A friction at the rack rides on the damping's current and changes its
+/// share from one block to the next; a friction at the motor keeps a steady share, but it is
+/// the motion's sign, and beside the sign almost none of it is left.
+fn friction_for_scale(alone: &Scale, beside: &Scale) -> bool {
+    let share = alone.factor - 1.0;
+    share > SCALE_MIN_SHARE
+        && alone.significance() >= FRICTION_FOR_SCALE_SIGNIFICANCE
+        && beside.factor - 1.0 >= SCALE_LEFT_BESIDE_FRICTION * share
 }
 
 #[cfg(test)]
@@ -612,14 +618,17 @@ mod tests {
     fn a_friction_stands_in_for_a_scale_only_where_the_share_holds_throughout() {
         // The world's torque constant x0.71 (unmodelled case 57), as the team's logger wrote
         // it, and x0.74 (case 34) on the EPOS4 car as a row per TPDO on a drifting clock.
-        assert!(friction_for_scale(&scale(1.404, 47.5)));
-        assert!(friction_for_scale(&scale(1.218, 92.9)));
-        // The friction car that reads most alike (case 27): the share is 1.43, but it
+        assert!(friction_for_scale(&scale(1.404, 47.5), &scale(1.289, 6.3)));
+        assert!(friction_for_scale(&scale(1.218, 92.9), &scale(1.148, 7.3)));
+        // The rack friction car that reads most alike (case 27): the share is 1.43, but it
         // changes from block to block.
-        assert!(!friction_for_scale(&scale(1.43, 5.9)));
+        assert!(!friction_for_scale(&scale(1.43, 5.9), &scale(1.25, 3.0)));
+        // 0.15 Nm at the motor (gap_core's friction log): a steady share, but beside the
+        // motion's sign a ninth of it is left.
+        assert!(!friction_for_scale(&scale(1.622, 16.8), &scale(1.068, 2.3)));
         // A share that holds throughout but is small is a car a few per cent off the table.
-        assert!(!friction_for_scale(&scale(1.06, 56.6)));
+        assert!(!friction_for_scale(&scale(1.06, 56.6), &scale(1.06, 9.0)));
         // A current below the model's is no friction's stand-in.
-        assert!(!friction_for_scale(&scale(0.71, 150.0)));
+        assert!(!friction_for_scale(&scale(0.71, 150.0), &scale(0.74, 31.0)));
     }
 }

@@ -179,17 +179,22 @@ pub const OUTPUT_OFFSET_MIN_COUNTS: f64 = 1.5;
 /// (a x0.80 read 14 % alone under a team's logger, and 17 % beside).
 pub const SCALE_MIN_SHARE: f64 = 0.15;
 /// A friction is not named where the log's current stands a share above the model's
-/// (`SCALE_MIN_SHARE`) at this many standard errors or more: a friction's share of the slope
-/// changes with the band a sweep is in and from one part of a track to the next (it rides on
-/// the damping's current, which goes with the motion's sign), a torque constant's does not, and
-/// a longer log does not raise it. The independent world's cars named friction, sweeps and
-/// 120 s tracks, either drive and every logger (the 200, the EPOS4 car's 40 under its four
-/// loggers, the first 60 under the drawn ones), read at most 6.0 standard errors (x1.07-1.43);
-/// its torque constants x0.71-0.74 that friction fitted alone stood in for, 42-93. Beside a
-/// friction of the motion's sign (`score::effort_scale_beside_friction`) the two overlap
-/// (friction cars up to x1.26, a torque constant x0.74 on the EPOS4 car x1.15), so that
-/// reading does not decide.
+/// (`SCALE_MIN_SHARE`) at this many standard errors or more (and keeps
+/// [`SCALE_LEFT_BESIDE_FRICTION`] of it beside the motion's sign): a rack friction's share of
+/// the slope changes with the band a sweep is in and from one part of a track to the next (it
+/// rides on the damping's current, which goes with the motion's sign), a torque constant's does
+/// not, and a longer log does not raise it. The independent world's cars named friction,
+/// sweeps and 120 s tracks, either drive and every logger (the 200, the EPOS4 car's 40 under
+/// its four loggers, the first 60 under the drawn ones), read at most 6.0 standard errors
+/// (x1.07-1.43); its torque constants x0.71-0.74 that friction fitted alone stood in for,
+/// 42-93.
 pub const FRICTION_FOR_SCALE_SIGNIFICANCE: f64 = 12.0;
+/// ...and where at least this share of that share is left with a friction of the motion's sign
+/// fitted beside it (`score::effort_scale_beside_friction`): a friction at the motor is the
+/// motion's sign, and keeps a steady share (0.15 Nm on the model's own car: x1.62 at 17
+/// standard errors) of which a ninth is left beside the sign (x1.07); the world's torque
+/// constants x0.7-0.8 read at 12 standard errors or more keep 0.36-1.14 of theirs.
+pub const SCALE_LEFT_BESIDE_FRICTION: f64 = 0.25;
 pub const PARAMETER_ITERATIONS: usize = 6;
 /// The refit is the verdict when its cost is below this share of the best effect
 /// verdict's (or of the nominal cost), besides removing what an effect must remove...
