@@ -169,6 +169,22 @@ fn unmodelled(cases: &[usize]) -> selftest::SelftestReport {
     selftest::run(World::Unmodelled, cases, 1, 12.0, &opts, &|_| {})
 }
 
+/// The world's unmodelled car `case` of seed 1 from our logger's file and from `logger`'s, as
+/// `gap selftest --unmodelled --case CASE --loggers LOGGER` diagnoses them (the car read from
+/// each file).
+fn unmodelled_under(case: usize, logger: selftest::LoggerKind) -> selftest::LoggersReport {
+    let mut opts = selftest::default_options();
+    opts.threads = 2;
+    let cars = selftest::Cars {
+        world: World::Unmodelled,
+        cases: &[case],
+        seed: 1,
+        duration_s: 12.0,
+    };
+    selftest::run_loggers(&[logger], (None, None), cars, &opts, &|_| {})
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// One of them, with its verdict printed.
 fn diagnosed(case: usize) -> selftest::CaseResult {
     let r = unmodelled(&[case]).cases.remove(0);
@@ -227,22 +243,7 @@ fn a_column_whose_zero_is_off_is_unexplained_with_the_offset_read() {
 /// most 6): the car is `unexplained`, never `coulomb_friction`.
 #[test]
 fn a_weak_torque_constant_is_not_named_friction_under_either_logger() {
-    let mut opts = selftest::default_options();
-    opts.threads = 2;
-    let cars = selftest::Cars {
-        world: World::Unmodelled,
-        cases: &[57],
-        seed: 1,
-        duration_s: 12.0,
-    };
-    let report = selftest::run_loggers(
-        &[selftest::LoggerKind::Drawn],
-        (None, None),
-        cars,
-        &opts,
-        &|_| {},
-    )
-    .unwrap();
+    let report = unmodelled_under(57, selftest::LoggerKind::Drawn);
     assert_eq!(report.loggers.len(), 2);
     for l in &report.loggers {
         let r = &l.report.cases[0];
@@ -282,16 +283,8 @@ fn a_weak_torque_constant_is_not_named_friction_under_either_logger() {
 /// only x1.15, but alone it is x1.22 the model's at 93 standard errors: `unexplained`.
 #[test]
 fn a_weak_torque_constant_on_the_epos4_car_is_not_named_friction() {
-    let mut opts = selftest::default_options();
-    opts.threads = 2;
-    let cars = selftest::Cars {
-        world: World::Unmodelled,
-        cases: &[34],
-        seed: 1,
-        duration_s: 12.0,
-    };
     let team = selftest::LoggerKind::parse("epos4-status-drift").unwrap();
-    let report = selftest::run_loggers(&[team], (None, None), cars, &opts, &|_| {}).unwrap();
+    let report = unmodelled_under(34, team);
     let r = &report.loggers[1].report.cases[0];
     println!(
         "{}: {:?}, scale {:?}; {}",

@@ -616,11 +616,11 @@ mod tests {
 
     #[test]
     fn a_friction_stands_in_for_a_scale_only_where_the_share_holds_throughout() {
-        // The world's torque constant x0.71 (unmodelled case 57), as the team's logger wrote
-        // it, and x0.74 (case 34) on the EPOS4 car as a row per TPDO on a drifting clock.
+        // The world's torque constant x0.71 as a team's logger wrote it, and x0.74 on the
+        // EPOS4 car as a row per TPDO on a drifting clock.
         assert!(friction_for_scale(&scale(1.404, 47.5), &scale(1.289, 6.3)));
         assert!(friction_for_scale(&scale(1.218, 92.9), &scale(1.148, 7.3)));
-        // The rack friction car that reads most alike (case 27): the share is 1.43, but it
+        // The world's rack friction car that reads most alike: the share is 1.43, but it
         // changes from block to block.
         assert!(!friction_for_scale(&scale(1.43, 5.9), &scale(1.25, 3.0)));
         // 0.15 Nm at the motor (gap_core's friction log): a steady share, but beside the

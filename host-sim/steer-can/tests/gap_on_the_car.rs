@@ -136,8 +136,6 @@ fn the_default_epos4_car_on_a_sweep_is_none_against_its_own_chain() {
 /// reads (0.088 deg). The model starts at that count; the paper controller closes its loop on
 /// the motor, so the car keeps the part of a count through the log, and the column's residual
 /// keeps it as a constant. It is where the car stood, not a zero off: `none`, the part read.
-/// On the code of 6 December each of these was `unexplained`, the part of a count read as a
-/// zero.
 #[test]
 fn the_default_epos4_car_started_within_a_count_is_none() {
     let count = 360.0 / 4096.0;
