@@ -148,7 +148,7 @@ fn two_cars_under_two_loggers() {
         seed: 1,
         duration_s: 12.0,
     };
-    let report = selftest::run_loggers(&[team], car, cars, &opts, &|_| {}).unwrap();
+    let report = selftest::run_loggers(&[team], car, cars, &opts, None, &|_| {}).unwrap();
     print!("{}", report.table());
     let kinds: Vec<&str> = report.loggers.iter().map(|l| l.kind.as_str()).collect();
     assert_eq!(kinds, ["ours", "starting-100-jitter-drop"]);

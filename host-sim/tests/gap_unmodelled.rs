@@ -181,7 +181,7 @@ fn unmodelled_under(case: usize, logger: selftest::LoggerKind) -> selftest::Logg
         seed: 1,
         duration_s: 12.0,
     };
-    selftest::run_loggers(&[logger], (None, None), cars, &opts, &|_| {})
+    selftest::run_loggers(&[logger], (None, None), cars, &opts, None, &|_| {})
         .unwrap_or_else(|e| panic!("{e}"))
 }
 

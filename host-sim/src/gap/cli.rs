@@ -80,6 +80,10 @@ pub struct GapArgs {
     /// confusion matrix. With `--drive` / `--controller` the car is given, as to `gap FILE`.
     #[arg(long, value_delimiter = ',', num_args = 0.., default_missing_value = "drawn", value_name = "LIST")]
     pub loggers: Option<Vec<String>>,
+    /// selftest with `--loggers`: keep each logger's file of each case in this directory
+    /// (`case16-epos4-status-drift.csv`), to look at a miss again with `gap FILE`.
+    #[arg(long, value_name = "DIR", requires = "loggers")]
+    pub keep_logs: Option<PathBuf>,
     /// The car's drive (paper rig): an EPOS4 over CANopen, or the ECU's own bridge. Default:
     /// the log's `# drive:` line, else the drive whose nominal model the log supports.
     #[arg(long, value_name = "epos4|direct")]
@@ -214,6 +218,7 @@ fn print_help(selftest: bool) -> Result<()> {
         "model_world",
         "unmodelled",
         "loggers",
+        "keep_logs",
         "drive",
         "controller",
         "threads",
@@ -275,10 +280,22 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         .and_then(|c| c.reference_shift_rows)
         .unwrap_or(0);
     let val = val.map(|v| super::drive::shifted_reference(&v, shift));
+    // A row per SYNC whose convention was fitted: the validation log's own stretches where
+    // its column is a row off the drive's latch (its crossings are its own).
+    let (val, val_windows) = match (val, &car) {
+        (Some(v), Some(c)) if c.drive == CarDrive::Epos4 && c.reference_shift_rows.is_some() => {
+            let (v, w) = super::reference_window::fit(&rig, &v, opts.threads);
+            (Some(v), w)
+        }
+        (v, _) => (v, Vec::new()),
+    };
     // What the diagnosis took the car and the log to be: printed first, and on the page.
     let mut preamble = String::new();
     if let Some(car) = &car {
         preamble.push_str(&format!("{}\n", car.describe()));
+    }
+    for w in &val_windows {
+        preamble.push_str(&format!("validation log: {}\n", w.describe()));
     }
     preamble.push_str(&format!(
         "log timing: {} rows {:.2} ms apart, stamp jitter {:.2} ms RMS, {} rows missing\n",
@@ -485,6 +502,7 @@ fn selftest_cmd(args: &GapArgs) -> Result<()> {
                 duration_s: args.duration_s,
             },
             &opts,
+            args.keep_logs.as_deref(),
             &print_case,
         )?;
         (report.table(), serde_json::to_value(&report)?)

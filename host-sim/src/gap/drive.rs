@@ -12,6 +12,7 @@
 
 use super::drive_clock::{self, ClockRefit};
 use super::model::{Effects, MAX_SYNC_DRIFT};
+use super::reference_window::{self, ReferenceWindow};
 use super::rig::{CarDrive, Epos4Readout, Rig, RigModel};
 use super::{Fit, Record, Scorer, parallel_map, simulate};
 use crate::sim::Controller;
@@ -212,6 +213,11 @@ pub struct CarChoice {
     /// `position_phase_ticks` are then the moved clock ([`CarChoice::on_the_clock_of`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub clock_refitted: Option<ClockRefit>,
+    /// An EPOS4 car logged a row per SYNC: the stretches where the reference column is a row
+    /// off what the drive latched, the SYNC walking through the frames on a clock of its own
+    /// ([`super::reference_window`]); the record the diagnosis runs has them moved.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub reference_windows: Vec<ReferenceWindow>,
 }
 
 impl CarChoice {
@@ -350,6 +356,9 @@ impl CarChoice {
                  header does not say)"
             )),
             None => {}
+        }
+        for w in &self.reference_windows {
+            line.push_str(&format!("; {}", w.describe()));
         }
         if let Some(l) = &self.compared_late {
             line.push_str(&format!(
@@ -874,12 +883,25 @@ pub fn choose(
         position_phase_ticks: best.position_phase_ticks,
         encoder_phase_s: best.encoder_phase_s,
         clock_refitted: None,
+        reference_windows: Vec::new(),
     };
     let mut chosen = rig_of(&best);
     if let RigModel::Paper(m) = &mut chosen.model {
         m.timing_bound_s = timing_bound_s;
     }
     let record = records[index_of(best.reference_shift_rows)].clone();
+    // A row per SYNC whose reference convention no header states: where the SYNC walked
+    // through the frames, the column is a row off the drive's target for a stretch.
+    let (record, reference_windows) =
+        if best.drive == CarDrive::Epos4 && !says.reference_stated && at_reference_rate {
+            reference_window::fit(&chosen, &record, threads)
+        } else {
+            (record, Vec::new())
+        };
+    let choice = CarChoice {
+        reference_windows,
+        ..choice
+    };
     (chosen, record, Some(choice))
 }
 

@@ -74,6 +74,9 @@ struct Traffic {
     tpdo1: Vec<(f64, f64)>,
     /// TPDO2: sent, the current the drive sampled at the SYNC (A, whole mA).
     tpdo2: Vec<(f64, f64)>,
+    /// At each SYNC (in the order of `tpdo1`/`tpdo2`): the reference frame whose target the
+    /// drive latched (its index in `references`).
+    latched: Vec<usize>,
 }
 
 /// The drive's cyclic synchronous position mode: the interpolated set-point, the position PID
@@ -333,8 +336,9 @@ fn run(case: &GenCase, seed: u64, drift: f64) -> Traffic {
     let encoder = truth.unmodelled.column_encoder();
     let mut drive = Drive::new(&gains, target_of(first).unwrap_or(x[1]));
     let mut target = target_of(first).unwrap_or(x[1]);
-    // Targets on their way to the drive: (tick it has it, motor rad).
-    let mut in_flight: std::collections::VecDeque<(u64, f64)> = Default::default();
+    let mut target_frame = 0usize;
+    // Targets on their way to the drive: (tick it has it, motor rad, reference frame).
+    let mut in_flight: std::collections::VecDeque<(u64, f64, usize)> = Default::default();
     let mut column_sample = first;
     let periods = case.reference.len() as u64;
     for n in 0..periods * ticks_per_period {
@@ -347,18 +351,20 @@ fn run(case: &GenCase, seed: u64, drift: f64) -> Traffic {
         if n >= arrive && (n - arrive).is_multiple_of(ticks_per_period) {
             let m = ((n - arrive) / ticks_per_period) as usize;
             if let Some(tg) = case.reference.get(m).and_then(|&r| target_of(r)) {
-                in_flight.push_back((n + rpdo, tg));
+                in_flight.push_back((n + rpdo, tg, m));
             }
         }
-        while in_flight.front().is_some_and(|&(at, _)| at <= n) {
-            if let Some((_, tg)) = in_flight.pop_front() {
+        while in_flight.front().is_some_and(|&(at, _, _)| at <= n) {
+            if let Some((_, tg, m)) = in_flight.pop_front() {
                 target = tg;
+                target_frame = m;
             }
         }
         let measured =
             x[0] + truth.unmodelled.current_offset_a + CURRENT_SENSOR_NOISE_A * noise.normal();
         if sync_grid.due(n) {
             drive.latch(target);
+            traffic.latched.push(target_frame);
             let position = (x[1] / inc_rad).round() * inc_rad;
             traffic.tpdo1.push((t + TPDO1_AFTER_SYNC_S, position));
             traffic
@@ -396,6 +402,38 @@ fn at(series: &[(f64, f64)], at: f64) -> Option<f64> {
 fn last_before(series: &[(f64, f64)], t: f64) -> Option<f64> {
     let j = series.partition_point(|&(s, _)| s <= t);
     (j > 0).then(|| series[j - 1].1)
+}
+
+/// The rows of the case's log under a row-per-TPDO `logger` ([`LoggedCar::Epos4StatusFrame`])
+/// whose reference column holds another frame than the one the drive latched at that row's
+/// SYNC, with how many frames later the column's is (the world's truth for
+/// `gap::reference_window`; empty under other loggers). Rows as [`rows_logged`] writes them,
+/// before the logger's own stamping and losses.
+pub fn column_off_the_latch(case: &GenCase, seed: u64, logger: &Logger) -> Vec<(usize, i64)> {
+    if logger.car != LoggedCar::Epos4StatusFrame {
+        return Vec::new();
+    }
+    let traffic = run(case, seed, ecu_clock_drift(case, seed, logger));
+    let mut off = Vec::new();
+    let mut row = 0usize;
+    for (&(sent, _), &latched) in traffic.tpdo2.iter().zip(&traffic.latched) {
+        let t = sent + FRAME_S;
+        let seen = traffic
+            .references
+            .partition_point(|&(s, _)| s <= t - FRAME_S);
+        if seen == 0
+            || last_before(&traffic.tpdo1, t - FRAME_S).is_none()
+            || last_before(&traffic.status, t - FRAME_S).is_none()
+        {
+            continue;
+        }
+        let column = (seen - 1) as i64;
+        if column != latched as i64 {
+            off.push((row, column - latched as i64));
+        }
+        row += 1;
+    }
+    off
 }
 
 /// The case's EPOS4 car logged by `logger` (its `car` is one of the EPOS4 loggers).

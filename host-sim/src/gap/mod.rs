@@ -33,6 +33,7 @@ pub mod model;
 mod pairs;
 pub mod plots;
 mod record;
+pub mod reference_window;
 mod refits;
 pub mod rig;
 pub mod ripple;

@@ -495,12 +495,14 @@ pub struct Cars<'a> {
 /// always, first) into a file and diagnosed as `host-sim gap FILE` diagnoses it: the file
 /// read by the rig's reader, the car (drive, controller) given in `car` as `--drive` and
 /// `--controller` give it, else from the file's header lines, else fitted, and so the
-/// reference convention ([`super::drive::choose_for_log`]).
+/// reference convention ([`super::drive::choose_for_log`]). The files are kept in `keep_logs`
+/// where given, else removed once diagnosed.
 pub fn run_loggers(
     kinds: &[LoggerKind],
     car: (Option<CarDrive>, Option<Controller>),
     cars: Cars,
     opts: &Options,
+    keep_logs: Option<&std::path::Path>,
     on_case: &(dyn Fn(&CaseResult) + Sync),
 ) -> Result<LoggersReport, String> {
     let kinds: Vec<LoggerKind> = std::iter::once(LoggerKind::Ours)
@@ -526,13 +528,20 @@ pub fn run_loggers(
         .iter()
         .flat_map(|&i| (0..kinds.len()).map(move |k| (i, k)))
         .collect();
-    // The files live only while their case is diagnosed, in a directory of this process.
-    let dir = std::env::temp_dir().join(format!("host-sim-gap-loggers-{}", std::process::id()));
+    // The files live only while their case is diagnosed, in a directory of this process;
+    // or they are kept where `keep_logs` says, named by case and logger.
+    let dir = match keep_logs {
+        Some(d) => d.to_path_buf(),
+        None => std::env::temp_dir().join(format!("host-sim-gap-loggers-{}", std::process::id())),
+    };
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let results = parallel_map(&jobs, opts.threads.max(1), |&(i, k)| {
         let case = world_case(world, seed, i, duration_s);
         let logger = kinds[k].logger_for(&case);
-        let path = dir.join(format!("case{i}-logger{k}.csv"));
+        let path = match keep_logs {
+            Some(_) => dir.join(format!("case{i}-{}.csv", kinds[k].name())),
+            None => dir.join(format!("case{i}-logger{k}.csv")),
+        };
         let loaded = generator::log_of(&case, seed, &logger)
             .save(&path)
             .map_err(|e| e.to_string())
@@ -542,7 +551,9 @@ pub fn run_loggers(
                     .map(|h| (l, h))
                     .map_err(|e| format!("{}: {e}", path.display()))
             });
-        let _ = std::fs::remove_file(&path);
+        if keep_logs.is_none() {
+            let _ = std::fs::remove_file(&path);
+        }
         let (loaded, header) = loaded?;
         let (car_rig, rec, car) = super::drive::choose_for_log(
             &rig,
@@ -569,7 +580,9 @@ pub fn run_loggers(
         on_case(&r);
         Ok::<_, String>((k, r))
     });
-    let _ = std::fs::remove_dir(&dir);
+    if keep_logs.is_none() {
+        let _ = std::fs::remove_dir(&dir);
+    }
     let mut per_kind: Vec<Vec<CaseResult>> = vec![Vec::new(); kinds.len()];
     for r in results {
         let (k, r) = r?;
