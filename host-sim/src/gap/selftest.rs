@@ -834,17 +834,11 @@ fn balance_line(
     s
 }
 
-/// The options the selftest uses by default: the paper rig's candidates, cheap fits.
+/// The options the selftest uses by default: those `host-sim gap FILE` diagnoses a log of the
+/// paper rig with (its candidates, its fits), so the selftest's figures are the tool's.
 pub fn default_options() -> Options {
     Options {
         effects: EffectKind::PAPER.to_vec(),
-        fit: super::fit::FitOptions {
-            scan: 5,
-            iterations: 5,
-            polish: 2,
-            jacobian_threads: 1,
-            hold_at_bounds: false,
-        },
         ..Options::default()
     }
 }
