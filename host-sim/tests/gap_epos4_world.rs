@@ -349,3 +349,42 @@ fn a_row_per_tpdo_on_a_drifting_clock_has_its_column_moved_where_the_drive_latch
         );
     }
 }
+
+/// `gap LOG --validate LOG2` finds the validation log's own stretch (a second log from the same
+/// logger has its own crossings): here the same drifting row-per-TPDO track of the world's
+/// effect-free case 2 as both, through the binary.
+#[test]
+fn the_validation_log_gets_its_own_stretch() {
+    let case = host_sim::gap::generator::draw(1, 2, 12.0);
+    let logger = Logger {
+        drifting_clock: true,
+        ..logger(LoggedCar::Epos4StatusFrame)
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("car.csv");
+    log_of(&case, 1, &logger).save(&path).unwrap();
+    let p = path.to_str().unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args([
+            "gap",
+            p,
+            "--validate",
+            p,
+            "--effects",
+            "delay",
+            "--threads",
+            "2",
+        ])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    let car = text.lines().find(|l| l.starts_with("car:")).unwrap();
+    let val = text
+        .lines()
+        .find(|l| l.starts_with("validation log: the reference column"))
+        .unwrap_or_else(|| panic!("{text}"));
+    // The same stretch, said of each.
+    let stretch = |l: &str| l.split("over ").nth(1).map(|s| s[..13].to_string());
+    assert_eq!(stretch(val), stretch(car), "{car}\n{val}");
+}
