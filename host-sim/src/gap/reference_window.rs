@@ -83,14 +83,14 @@ impl ReferenceWindow {
 }
 
 /// A crossing's stretch is kept when it takes at least this share off the nominal model's
-/// residual (the norm eq. 11 divides by). On the independent world's drifting row-per-TPDO
+/// residual (1 - GoF, eq. 11). On the independent world's drifting row-per-TPDO
 /// tracks the stretch takes 1.1-40 % off (least where an effect leaves most of the residual:
 /// 1.1 % on rack friction at a nominal 70 %, 0.6 % on a tyre at 65 %, not kept).
 pub const MIN_RESIDUAL_SHARE: f64 = 0.01;
 /// Rows either side of a row that [`crossings`] fits its cubics to.
 pub const HALF_SPAN: usize = 4;
 /// A crossing's cubic leaves at most this share of the plain cubic's residual (RMS): the
-/// independent world's drifting logger's crossings leave 0.1-8 %.
+/// independent world's drifting logger's crossings leave 0.05-8 %.
 pub const CROSSING_RESIDUAL_SHARE: f64 = 0.25;
 /// The plain cubic's residual (RMS) must be at least this many of the column's resolution.
 pub const MIN_RESIDUAL_QUANTA: f64 = 2.0;
