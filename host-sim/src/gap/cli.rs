@@ -280,10 +280,10 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         .and_then(|c| c.reference_shift_rows)
         .unwrap_or(0);
     let val = val.map(|v| super::drive::shifted_reference(&v, shift));
-    // A row per SYNC whose convention was fitted: the validation log's own stretches where
-    // its column is a row off the drive's latch (its crossings are its own).
+    // The validation log's own stretches where its column is a row off the drive's latch (its
+    // crossings are its own).
     let (val, val_windows) = match (val, &car) {
-        (Some(v), Some(c)) if c.drive == CarDrive::Epos4 && c.reference_shift_rows.is_some() => {
+        (Some(v), Some(c)) if c.may_lead_the_latch() => {
             let (v, w) = super::reference_window::fit(&rig, &v, opts.threads);
             (Some(v), w)
         }

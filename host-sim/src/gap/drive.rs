@@ -221,6 +221,14 @@ pub struct CarChoice {
 }
 
 impl CarChoice {
+    /// Whether a log of this car can hold stretches where its reference column is a row off
+    /// the drive's latch ([`super::reference_window`]): an EPOS4 car at the reference rate
+    /// whose reference convention no header states (so was fitted), as a team's row-per-SYNC
+    /// logger writes it.
+    pub fn may_lead_the_latch(&self) -> bool {
+        self.drive == CarDrive::Epos4 && self.reference_shift_rows.is_some()
+    }
+
     /// This car on the clock `d` was diagnosed on, where the diagnosis moved it.
     pub fn on_the_clock_of(mut self, d: &super::Diagnosis) -> CarChoice {
         if let Some(r) = &d.clock_refit {
@@ -512,7 +520,8 @@ fn fit_with(rig: &Rig, rec: &Record, fx: &Effects) -> Fit {
     }
 }
 
-fn nominal_fit(rig: &Rig, rec: &Record) -> Fit {
+/// The nominal model of `rig` on `rec`, a run that blew up ranking last.
+pub(super) fn nominal_fit(rig: &Rig, rec: &Record) -> Fit {
     fit_with(rig, rec, &Effects::nominal())
 }
 
@@ -890,14 +899,13 @@ pub fn choose(
         m.timing_bound_s = timing_bound_s;
     }
     let record = records[index_of(best.reference_shift_rows)].clone();
-    // A row per SYNC whose reference convention no header states: where the SYNC walked
-    // through the frames, the column is a row off the drive's target for a stretch.
-    let (record, reference_windows) =
-        if best.drive == CarDrive::Epos4 && !says.reference_stated && at_reference_rate {
-            reference_window::fit(&chosen, &record, threads)
-        } else {
-            (record, Vec::new())
-        };
+    // Where the SYNC walked through the frames, the column is a row off the drive's target
+    // for a stretch.
+    let (record, reference_windows) = if choice.may_lead_the_latch() {
+        reference_window::fit(&chosen, &record, threads)
+    } else {
+        (record, Vec::new())
+    };
     let choice = CarChoice {
         reference_windows,
         ..choice

@@ -404,6 +404,50 @@ fn last_before(series: &[(f64, f64)], t: f64) -> Option<f64> {
     (j > 0).then(|| series[j - 1].1)
 }
 
+/// One row of a logger that writes a row as each TPDO2 arrives ([`LoggedCar::Epos4StatusFrame`]).
+struct StatusRow {
+    /// The SYNC it answers (its index in `tpdo2` and `latched`).
+    sync: usize,
+    /// Stamped on arrival, s.
+    t: f64,
+    /// The reference frame last sent before it (its index in `references`) and its angle.
+    frame: usize,
+    reference: f64,
+    /// The column of the ECU's last status frame, the position and current of that SYNC.
+    sw: f64,
+    motor: f64,
+    current: f64,
+}
+
+/// The rows such a logger writes off `traffic`: one per TPDO2 from the first it can fill (a
+/// position, a column and a reference already on the bus).
+fn status_frame_rows(traffic: &Traffic) -> Vec<StatusRow> {
+    let mut rows = Vec::with_capacity(traffic.tpdo2.len());
+    for (sync, &(sent, current)) in traffic.tpdo2.iter().enumerate() {
+        let t = sent + FRAME_S;
+        let seen = traffic
+            .references
+            .partition_point(|&(s, _)| s <= t - FRAME_S);
+        let (Some(frame), Some(motor), Some(sw)) = (
+            seen.checked_sub(1),
+            last_before(&traffic.tpdo1, t - FRAME_S),
+            last_before(&traffic.status, t - FRAME_S),
+        ) else {
+            continue;
+        };
+        rows.push(StatusRow {
+            sync,
+            t,
+            frame,
+            reference: traffic.references[frame].1,
+            sw,
+            motor,
+            current,
+        });
+    }
+    rows
+}
+
 /// The rows of the case's log under a row-per-TPDO `logger` ([`LoggedCar::Epos4StatusFrame`])
 /// whose reference column holds another frame than the one the drive latched at that row's
 /// SYNC, with how many frames later the column's is (the world's truth for
@@ -414,26 +458,14 @@ pub fn column_off_the_latch(case: &GenCase, seed: u64, logger: &Logger) -> Vec<(
         return Vec::new();
     }
     let traffic = run(case, seed, ecu_clock_drift(case, seed, logger));
-    let mut off = Vec::new();
-    let mut row = 0usize;
-    for (&(sent, _), &latched) in traffic.tpdo2.iter().zip(&traffic.latched) {
-        let t = sent + FRAME_S;
-        let seen = traffic
-            .references
-            .partition_point(|&(s, _)| s <= t - FRAME_S);
-        if seen == 0
-            || last_before(&traffic.tpdo1, t - FRAME_S).is_none()
-            || last_before(&traffic.status, t - FRAME_S).is_none()
-        {
-            continue;
-        }
-        let column = (seen - 1) as i64;
-        if column != latched as i64 {
-            off.push((row, column - latched as i64));
-        }
-        row += 1;
-    }
-    off
+    status_frame_rows(&traffic)
+        .iter()
+        .enumerate()
+        .filter_map(|(row, r)| {
+            let latched = *traffic.latched.get(r.sync)?;
+            (r.frame != latched).then(|| (row, r.frame as i64 - latched as i64))
+        })
+        .collect()
 }
 
 /// The case's EPOS4 car logged by `logger` (its `car` is one of the EPOS4 loggers).
@@ -442,16 +474,8 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
     let mut rows = Rows::default();
     match logger.car {
         LoggedCar::Epos4StatusFrame => {
-            for &(sent, current) in &traffic.tpdo2 {
-                let t = sent + FRAME_S;
-                let (Some(motor), Some(sw), Some(reference)) = (
-                    last_before(&traffic.tpdo1, t - FRAME_S),
-                    last_before(&traffic.status, t - FRAME_S),
-                    last_before(&traffic.references, t - FRAME_S),
-                ) else {
-                    continue;
-                };
-                rows.push(t, reference, sw, motor, current);
+            for r in status_frame_rows(&traffic) {
+                rows.push(r.t, r.reference, r.sw, r.motor, r.current);
             }
         }
         LoggedCar::Direct | LoggedCar::Epos4Convert => {

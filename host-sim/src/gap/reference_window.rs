@@ -19,9 +19,8 @@
 //! lifts the nominal GoF by [`MIN_RESIDUAL_SHARE`] of its residual, the column stays as
 //! logged.
 
-use super::model::Effects;
 use super::rig::Rig;
-use super::{Record, Scorer, parallel_map, simulate};
+use super::{Record, parallel_map};
 
 /// What the column does at a logger's crossing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -108,9 +107,8 @@ const SHORT_HALVINGS: i32 = 5;
 /// out. A crossing is where one of the last two leaves at most [`CROSSING_RESIDUAL_SHARE`] of
 /// the first's residual, and the first's is [`MIN_RESIDUAL_QUANTA`] or more of the column's
 /// written resolution (a slow column written to a few decimals repeats and doubles its steps
-/// by itself). A repeat at a
-/// reversal, where the steps around it nearly vanish, shows in this where the steps alone do
-/// not.
+/// by itself). A repeat at a reversal, where the steps around it nearly vanish, shows in this
+/// where the steps alone do not.
 pub fn crossings(reference: &[f64]) -> Vec<(usize, Crossing)> {
     if reference.iter().any(|v| !v.is_finite()) {
         return Vec::new();
@@ -210,16 +208,14 @@ fn moved(reference: &[f64], start: usize, end: usize, rows_later: i8) -> Vec<f64
     out
 }
 
-/// The nominal model's GoF on `rec` with its reference `reference`; one that is not finite
-/// ranks last.
+/// The nominal model's GoF on `rec` with its reference `reference` (a run that blew up ranks
+/// last, as the cars do).
 fn gof_with(rig: &Rig, rec: &Record, reference: Vec<f64>) -> f64 {
     let rec = Record {
         reference,
         ..rec.clone()
     };
-    let sim = simulate(rig, &rec, &Effects::nominal());
-    let g = Scorer::new(rig, &rec).fit(&rec, &sim).gof;
-    if g.is_finite() { g } else { f64::NEG_INFINITY }
+    super::drive::nominal_fit(rig, &rec).gof
 }
 
 /// One side of a crossing: the stretch's rows for a length `w`, and the way it moves.
@@ -281,7 +277,9 @@ fn best_stretch(
     let (best_job, _) = gofs.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
     let (i, w0) = jobs[best_job];
     let side = sides[i];
-    let tried: Vec<(usize, f64)> = jobs
+    // Every length run on this side, so the section's points that fall on one run before
+    // are not run again.
+    let mut tried: Vec<(usize, f64)> = jobs
         .iter()
         .zip(&gofs)
         .filter(|((j, _), _)| *j == i)
@@ -291,11 +289,15 @@ fn best_stretch(
     let mut lo = if pos == 0 { 1 } else { tried[pos - 1].0 };
     let mut hi = tried.get(pos + 1).map_or(w0, |t| t.0);
     let mut best = (w0, gofs[best_job]);
-    let eval = |w: usize, best: &mut (usize, f64)| {
-        let g = tried
-            .iter()
-            .find(|(x, _)| *x == w)
-            .map_or_else(|| at(&side, w), |t| t.1);
+    let mut eval = |w: usize, best: &mut (usize, f64)| {
+        let g = match tried.iter().find(|(x, _)| *x == w) {
+            Some(&(_, g)) => g,
+            None => {
+                let g = at(&side, w);
+                tried.push((w, g));
+                g
+            }
+        };
         if g > best.1 {
             *best = (w, g);
         }
