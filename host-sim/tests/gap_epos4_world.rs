@@ -305,7 +305,7 @@ fn within(truth: &[(usize, i64)], start: usize, end: usize) -> usize {
 /// its drive latched says where it was. Two of the selftest world's 120 s tracks: case 2, no
 /// effect, whose column leaves a sample out 8 s before its end (with the column as logged the
 /// nominal model left 92.2 %); case 16, the wheel's inertia and damping x2.6, whose column
-/// repeats one at 26 s after 7 s ahead of the drive (91.1 %, and the log was called `none`).
+/// repeats one at 26 s after 7 s ahead of the drive (with the column as logged, 91.1 %).
 #[test]
 fn a_row_per_tpdo_on_a_drifting_clock_has_its_column_moved_where_the_drive_latched_a_frame_earlier()
 {
