@@ -71,7 +71,8 @@ pub struct GapArgs {
     pub unmodelled: bool,
     /// selftest: diagnose each car from the files of these loggers, as `gap FILE` reads them
     /// (ours always, first): `ours`, `drawn` (a team's logger drawn with each case), or
-    /// `ending|starting-100|200|1000[-jitter][-drop]`; or the world's EPOS4 car (its own drive
+    /// `ending|starting-RATE[-jitter][-drop]` (RATE in Hz, 100-1000, dividing 20000); or the
+    /// world's EPOS4 car (its own drive
     /// at 25 kHz / 2.5 kHz) as `epos4-convert` (steer-can convert's rows and header) or
     /// `epos4-status[-jitter][-drop]` (a row as each TPDO arrives, no header), either with
     /// `-drift` after `epos4-convert`/`epos4-status` (the car's ECU on a clock of its own,

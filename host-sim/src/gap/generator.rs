@@ -213,6 +213,12 @@ pub enum LoggedCar {
     Epos4StatusFrame,
 }
 
+/// A logger of the direct drive can write at `rate_hz`: 100 Hz (the reference's rate) to
+/// 1 kHz, a whole number of the plant's current-loop ticks a row.
+pub fn logs_at(rate_hz: u32) -> bool {
+    (100..=1000).contains(&rate_hz) && CURRENT_LOOP_HZ.is_multiple_of(rate_hz)
+}
+
 /// The jitter a jittery logger draws, s: +-1 ms, a receiver's stamping on a loaded host.
 pub const LOGGER_JITTER_S: f64 = 1e-3;
 /// The share of rows a lossy logger drops.

@@ -361,8 +361,9 @@ pub enum LoggerKind {
 }
 
 impl LoggerKind {
-    /// `ours`, `drawn`, or `ending|starting-100|200|1000[-jitter][-drop]`: a team's logger
-    /// with that reference convention and rate, stamps +-1 ms if `jitter`, 1 % of rows lost
+    /// `ours`, `drawn`, or `ending|starting-RATE[-jitter][-drop]`: a team's logger with that
+    /// reference convention and rate (Hz, 100-1000, a whole number of the plant's 20 kHz
+    /// ticks a row: 100, 200, 250, 400, 500, 1000, ...), stamps +-1 ms if `jitter`, 1 % of rows lost
     /// if `drop`, no header lines.
     pub fn parse(name: &str) -> Result<LoggerKind, String> {
         let name = name.trim();
@@ -373,8 +374,9 @@ impl LoggerKind {
         }
         let bad = || {
             format!(
-                "logger {name:?}: expected `ours`, `drawn`, ending|starting-100|200|1000[-jitter][-drop] \
-                 (e.g. starting-100-jitter-drop), or the EPOS4 car's \
+                "logger {name:?}: expected `ours`, `drawn`, ending|starting-RATE[-jitter][-drop] \
+                 with RATE in Hz, 100-1000, dividing 20000 (e.g. starting-100-jitter-drop, \
+                 ending-250), or the EPOS4 car's \
                  epos4-convert[-drift]|epos4-status[-drift][-jitter][-drop]"
             )
         };
@@ -399,10 +401,8 @@ impl LoggerKind {
                     Some("starting") => ReferenceConvention::PeriodStarting,
                     _ => return Err(bad()),
                 },
-                rate_hz: match parts.next() {
-                    Some("100") => 100,
-                    Some("200") => 200,
-                    Some("1000") => 1000,
+                rate_hz: match parts.next().and_then(|r| r.parse::<u32>().ok()) {
+                    Some(r) if generator::logs_at(r) => r,
                     _ => return Err(bad()),
                 },
                 jitter_s: 0.0,
