@@ -192,6 +192,111 @@ fn places_by_order(t: &[f64], spacing: f64) -> Option<Vec<u64>> {
         .then_some(placed)
 }
 
+/// Where the reference's periods start within the record's steps, s after each step's
+/// start (`origin` + k `step`), from the rows where the reference changes: each such change
+/// with no row lost before it puts a period's start between the two rows, and the phase is
+/// the circular mean of those intervals' middles (within half a row of the start: at 250 Hz
+/// the starts fall on a row and between two rows by turns).
+/// `None` where the reference never changes between two neighbouring rows.
+fn boundary_phase(
+    t: &[f64],
+    reference: &[f64],
+    origin: f64,
+    step: f64,
+    row_dt: f64,
+) -> Option<f64> {
+    let (mut c, mut s, mut count) = (0.0, 0.0, 0usize);
+    for i in 1..t.len() {
+        let gap = t[i] - t[i - 1];
+        if reference[i] == reference[i - 1] || gap > 1.5 * row_dt {
+            continue;
+        }
+        // The middle of the interval the start lies in (which end is closed is the
+        // convention's; the middle serves both).
+        let middle = 0.5 * (t[i - 1] + t[i]) - origin;
+        let angle = std::f64::consts::TAU * middle / step;
+        c += angle.cos();
+        s += angle.sin();
+        count += 1;
+    }
+    (count > 0).then(|| (s.atan2(c) / std::f64::consts::TAU).rem_euclid(1.0) * step)
+}
+
+/// How far the steps of `step` from `origin` must move for their starts to sit on the
+/// reference's period starts, s: zero where they already do. Each change of the reference
+/// between two neighbouring rows puts a period start in the closed interval between them
+/// (which end is the logger's convention). Where the steps' start lies in at least half of
+/// those intervals (modulo the step, within a quarter row), it stays: a row on a step's
+/// boundary is then read by the convention the rows show. Otherwise it moves to the nearest
+/// phase that lies in the most of them. A reference that reaches the car with a jitter of
+/// its own moves some changes by a row or two, so the phase is the one most changes agree
+/// on, not one all of them allow. Zero where the reference never changes between
+/// neighbouring rows.
+fn period_alignment(t: &[f64], reference: &[f64], origin: f64, step: f64, row_dt: f64) -> f64 {
+    let Some(centre) = boundary_phase(t, reference, origin, step, row_dt) else {
+        return 0.0;
+    };
+    // A time's phase against the centre, within half a step of it.
+    let wrap = |d: f64| d - step * (d / step).round();
+    let rel = |x: f64| wrap(x - origin - centre);
+    let tolerance = 0.25 * row_dt;
+    let (mut lows, mut highs) = (Vec::new(), Vec::new());
+    for i in 1..t.len() {
+        if reference[i] != reference[i - 1] && t[i] - t[i - 1] <= 1.5 * row_dt {
+            lows.push(rel(t[i - 1]) - tolerance);
+            highs.push(rel(t[i]) + tolerance);
+        }
+    }
+    lows.sort_by(f64::total_cmp);
+    highs.sort_by(f64::total_cmp);
+    // How many intervals hold phase `x`.
+    let holding = |x: f64| lows.partition_point(|&l| l <= x) - highs.partition_point(|&h| h < x);
+    let start = wrap(-centre);
+    if 2 * holding(start) >= lows.len() {
+        return 0.0;
+    }
+    // The intervals' own ends, without the tolerance.
+    let ends = lows
+        .iter()
+        .map(|l| l + tolerance)
+        .chain(highs.iter().map(|h| h - tolerance));
+    let best = ends.map(|x| (holding(x), x)).max_by(|a, b| {
+        a.0.cmp(&b.0)
+            .then_with(|| (b.1 - start).abs().total_cmp(&(a.1 - start).abs()))
+    });
+    best.map_or(0.0, |(_, x)| x - start)
+}
+
+/// Which of rows `j - 1` and `j`, with rows lost between them, holds the sample of the
+/// reference period that the step whose middle is `mid` reads: the two hold the same sample,
+/// or exactly one period start (at `phase`, [`boundary_phase`]) falls between them and `mid`
+/// lies on that row's side of it. `None` where the gap holds two or more starts (a whole
+/// period's rows lost) or the phase is not known.
+fn side_of_the_boundary(
+    t: &[f64],
+    reference: &[f64],
+    j: usize,
+    mid: f64,
+    origin: f64,
+    step: f64,
+    phase: Option<f64>,
+) -> Option<usize> {
+    if j == 0 {
+        return None;
+    }
+    if reference[j - 1] == reference[j] {
+        return Some(j);
+    }
+    let phase = phase?;
+    let first = ((t[j - 1] - origin - phase) / step).ceil();
+    let last = ((t[j] - origin - phase) / step).floor();
+    if first != last {
+        return None;
+    }
+    let start = origin + phase + first * step;
+    Some(if mid < start { j - 1 } else { j })
+}
+
 impl LogTiming {
     /// From a log's (increasing) stamps. Each row is placed on the grid by its gap to the row
     /// before (so a clock a little off the nominal rate does not drift the count), and the
@@ -369,6 +474,16 @@ impl Record {
         } else {
             1e-6 * row_dt
         };
+        // With several rows a period, the steps are moved to the reference's period starts
+        // where they fall inside a period (the grid's origin is one spacing before the first
+        // row, so a first row lost moves it by a row: 2.5 ms at 400 Hz, the steps' middles
+        // then on the period starts, and a step whose middle row was lost took either
+        // neighbour's sample).
+        let origin = if several_rows {
+            origin + period_alignment(t, reference, origin, step, row_dt)
+        } else {
+            origin
+        };
         let n = (((last - origin + near) / step + 1e-6).floor() as usize).max(1);
         let end = |k: usize| origin + (k + 1) as f64 * step;
         // The row stamped at `at`, within a quarter of a row spacing.
@@ -398,6 +513,9 @@ impl Record {
             }
             starting > ending
         };
+        let phase = several_rows
+            .then(|| boundary_phase(t, reference, origin, step, row_dt))
+            .flatten();
         let reference = (0..n)
             .map(|k| {
                 // The row whose interval holds the middle of the step.
@@ -434,6 +552,11 @@ impl Record {
                     reference[i]
                 } else if mid_lost && let Some(b) = row_at(boundary) {
                     reference[b]
+                } else if let Some(side) = (several_rows && missing)
+                    .then(|| side_of_the_boundary(t, reference, j, mid, origin, step, phase))
+                    .flatten()
+                {
+                    reference[side]
                 } else if missing {
                     let lo = j.saturating_sub(2);
                     let hi = (j + 1).min(t.len() - 1);
