@@ -75,20 +75,27 @@ pub struct LogTiming {
     pub on_grid: bool,
 }
 
-/// Rows on each side of a row that [`places_by_order`] averages over to see a lost row: at
-/// +-1 ms of jitter on 2.5 ms rows a lost row stands 15 standard errors above the average's
-/// noise, and a 0.1 % error of the first spacing adds 0.03 rows.
+/// Rows on each side of a row that [`places_by_order`] averages over to see a lost row, at
+/// least: at +-1 ms of jitter on 2.5 ms rows a lost row stands 15 standard errors above the
+/// average's noise, and the first spacing's error (0.5 %) adds 0.15 spacings.
 const ORDER_WINDOW: usize = 30;
 
-/// The largest jitter (RMS, in spacings) the rows' order places rows under: +-1 ms on a
-/// 500 Hz grid reads 0.37 (its median absolute deviation x 1.48), +-1 ms at 1 kHz 0.74.
-const ORDER_MAX_JITTER: f64 = 0.45;
+/// The noise, in spacings, that the average over the rows [`places_by_order`] reads a lost
+/// row from is held under: a tenth of a spacing, so that a lost row's whole spacing stands
+/// five times its noise above the half a spacing it is taken at. The stamps' own scatter
+/// sets the window: 30 rows at 400-500 Hz and +-1 ms, 80 at 1 kHz.
+const ORDER_NOISE: f64 = 0.1;
 
-/// The step of the mean of `sum`'s values (its running sums) between the [`ORDER_WINDOW`]
-/// rows before row `j` and as many from `j` on.
-fn order_step(sum: &[f64], j: usize) -> f64 {
+/// The largest jitter (RMS, in spacings) the rows' order places rows under: +-1 ms reads
+/// 0.37 on a 500 Hz grid (its median absolute deviation x 1.48) and 0.64-0.74 at 1 kHz,
+/// where the rows kept in order pull the stamps in.
+const ORDER_MAX_JITTER: f64 = 0.8;
+
+/// The step of the mean of `sum`'s values (its running sums) between the `w` rows before
+/// row `j` and as many from `j` on.
+fn order_step(sum: &[f64], j: usize, w: usize) -> f64 {
     let n = sum.len() - 1;
-    let (a, b) = (j.saturating_sub(ORDER_WINDOW), (j + ORDER_WINDOW).min(n));
+    let (a, b) = (j.saturating_sub(w), (j + w).min(n));
     (sum[b] - sum[j]) / (b - j) as f64 - (sum[j] - sum[a]) / (j - a) as f64
 }
 
@@ -101,16 +108,15 @@ fn running_sums(v: &[f64], sum: &mut [f64], from: usize) {
 
 /// The rows lost just before each row of `t` on a grid of `spacing`. A lost row shows where
 /// the stamps' offset from a grid of one row a place steps up by half a spacing or more
-/// between the [`ORDER_WINDOW`] rows before a row and as many from it on. It is taken at the
+/// between the `w` rows before a row and as many from it on. It is taken at the
 /// first row from which the offsets stand more than half a spacing above the level before
 /// (the largest sum of their excess from there to two windows on), one row at a time, and
 /// the rows a window back are looked at again: two rows lost within a window read as one
 /// step of nearly two, whose largest step lies between them, so the first is taken first and
 /// the second is then a step of its own. `None` where more than a twentieth of the rows are
 /// lost.
-fn lost_by_order(t: &[f64], spacing: f64) -> Option<Vec<u64>> {
+fn lost_by_order(t: &[f64], spacing: f64, w: usize) -> Option<Vec<u64>> {
     let n = t.len();
-    let w = ORDER_WINDOW;
     // The first and last rows' averages are over too few rows to see a step.
     let edge = w / 3;
     if n < 4 * w {
@@ -123,7 +129,7 @@ fn lost_by_order(t: &[f64], spacing: f64) -> Option<Vec<u64>> {
     let mut total = 0usize;
     let mut j = edge;
     while j + edge < n {
-        if order_step(&sum, j) < 0.5 {
+        if order_step(&sum, j, w) < 0.5 {
             j += 1;
             continue;
         }
@@ -175,20 +181,36 @@ fn places_by_order(t: &[f64], spacing: f64) -> Option<Vec<u64>> {
     // The first spacing is the median over ten rows, which the rows lost lengthen (a lost
     // row in a tenth of the spans: 0.35-0.5 % at 1 % lost, 16-24 rows over a 12 s log at
     // 400 Hz, 0.15 spacings over two windows); the grid through the rows so placed has the
-    // spacing the rows keep, and they are placed again on it.
-    let first = places(lost_by_order(t, spacing)?);
-    let spacing = match host_io::grid::line_through(t, &first) {
-        Some((_, b)) if b > 0.0 => b,
-        _ => spacing,
-    };
-    let placed = places(lost_by_order(t, spacing)?);
+    // spacing the rows keep, and they are placed again on it (twice: at 1 kHz and +-1 ms a
+    // first placement still misses a few lost rows).
+    let mut b = spacing;
+    for _ in 0..2 {
+        let first = places(lost_by_order(t, b, ORDER_WINDOW)?);
+        b = match host_io::grid::line_through(t, &first) {
+            Some((_, b)) if b > 0.0 => b,
+            _ => return None,
+        };
+    }
+    // The stamps' scatter about their places, from neighbouring rows' gaps (each gap holds
+    // two rows' jitter; a lost row's whole spacing is one gap in a hundred, which the
+    // median does not see), sets the window the rows are placed by at last.
+    let mut gaps: Vec<f64> = t.windows(2).map(|p| (p[1] - p[0]) / b - 1.0).collect();
+    gaps.sort_by(f64::total_cmp);
+    let centre = gaps[gaps.len() / 2];
+    let mut spread: Vec<f64> = gaps.iter().map(|g| (g - centre).abs()).collect();
+    spread.sort_by(f64::total_cmp);
+    let sigma = 1.4826 * spread[spread.len() / 2] / std::f64::consts::SQRT_2;
+    let w = ((2.0 * (sigma / ORDER_NOISE).powi(2)).ceil() as usize)
+        .min(n / 8)
+        .max(ORDER_WINDOW);
+    let placed = places(lost_by_order(t, b, w)?);
     let (a, b) = host_io::grid::line_through(t, &placed)?;
     let residual: Vec<f64> = (0..n).map(|j| (t[j] - a) / b - placed[j] as f64).collect();
     let mut sum = vec![0.0; n + 1];
     running_sums(&residual, &mut sum, 0);
-    let edge = ORDER_WINDOW / 3;
+    let edge = w / 3;
     (edge..n - edge)
-        .all(|j| order_step(&sum, j).abs() < 0.5)
+        .all(|j| order_step(&sum, j, w).abs() < 0.5)
         .then_some(placed)
 }
 
@@ -228,7 +250,9 @@ fn boundary_phase(
 /// (which end is the logger's convention). Where the steps' start lies in at least half of
 /// those intervals (modulo the step, within a quarter row), it stays: a row on a step's
 /// boundary is then read by the convention the rows show. Otherwise it moves to the nearest
-/// phase that lies in the most of them. A reference that reaches the car with a jitter of
+/// phase that lies in the most of them, where that puts the steps' middles within a row of
+/// a period start (a first row lost at 400 Hz: 2.5 ms); a 1 kHz log whose stamps run 3 ms
+/// late keeps its steps. A reference that reaches the car with a jitter of
 /// its own moves some changes by a row or two, so the phase is the one most changes agree
 /// on, not one all of them allow. Zero where the reference never changes between
 /// neighbouring rows.
@@ -264,7 +288,15 @@ fn period_alignment(t: &[f64], reference: &[f64], origin: f64, step: f64, row_dt
         a.0.cmp(&b.0)
             .then_with(|| (b.1 - start).abs().total_cmp(&(a.1 - start).abs()))
     });
-    best.map_or(0.0, |(_, x)| x - start)
+    // Moved only where the steps' middles lie within a row of a period start, where a
+    // middle row lost leaves a neighbour from either period: elsewhere the rows near the
+    // middle are the step's own, and the model fits where in its period each sample is taken.
+    let shift = best.map_or(0.0, |(_, x)| x - start);
+    if 0.5 * step - shift.abs() <= row_dt + tolerance {
+        shift
+    } else {
+        0.0
+    }
 }
 
 /// Which of rows `j - 1` and `j`, with rows lost between them, holds the sample of the
