@@ -99,6 +99,18 @@ fn order_step(sum: &[f64], j: usize, w: usize) -> f64 {
     (sum[b] - sum[j]) / (b - j) as f64 - (sum[j] - sum[a]) / (j - a) as f64
 }
 
+/// The median of `v` (not empty) and its spread as a standard deviation: the median absolute
+/// deviation x 1.4826, which a few far values (a lost row's gap) do not move.
+fn median_and_spread(mut v: Vec<f64>) -> (f64, f64) {
+    v.sort_by(f64::total_cmp);
+    let median = v[v.len() / 2];
+    for x in &mut v {
+        *x = (*x - median).abs();
+    }
+    v.sort_by(f64::total_cmp);
+    (median, 1.4826 * v[v.len() / 2])
+}
+
 /// Running sums of `v` from `from` on (`sum[j + 1] = sum[j] + v[j]`).
 fn running_sums(v: &[f64], sum: &mut [f64], from: usize) {
     for j in from..v.len() {
@@ -194,12 +206,8 @@ fn places_by_order(t: &[f64], spacing: f64) -> Option<Vec<u64>> {
     // The stamps' scatter about their places, from neighbouring rows' gaps (each gap holds
     // two rows' jitter; a lost row's whole spacing is one gap in a hundred, which the
     // median does not see), sets the window the rows are placed by at last.
-    let mut gaps: Vec<f64> = t.windows(2).map(|p| (p[1] - p[0]) / b - 1.0).collect();
-    gaps.sort_by(f64::total_cmp);
-    let centre = gaps[gaps.len() / 2];
-    let mut spread: Vec<f64> = gaps.iter().map(|g| (g - centre).abs()).collect();
-    spread.sort_by(f64::total_cmp);
-    let sigma = 1.4826 * spread[spread.len() / 2] / std::f64::consts::SQRT_2;
+    let gaps: Vec<f64> = t.windows(2).map(|p| (p[1] - p[0]) / b - 1.0).collect();
+    let sigma = median_and_spread(gaps).1 / std::f64::consts::SQRT_2;
     let w = ((2.0 * (sigma / ORDER_NOISE).powi(2)).ceil() as usize)
         .min(n / 8)
         .max(ORDER_WINDOW);
@@ -403,17 +411,13 @@ impl LogTiming {
                 (t.iter().sum::<f64>() / n - spacing * mx, spacing)
             }
         };
-        let mut offsets: Vec<f64> = places
+        let offsets: Vec<f64> = places
             .iter()
             .zip(t)
             .map(|(&p, &tj)| tj - (a + b * p as f64))
             .collect();
-        offsets.sort_by(|x, y| x.total_cmp(y));
-        let median = offsets[offsets.len() / 2];
-        let mut dev: Vec<f64> = offsets.iter().map(|o| (o - median).abs()).collect();
-        dev.sort_by(|x, y| x.total_cmp(y));
+        let (median, jitter_s) = median_and_spread(offsets);
         let last = places.last().copied().unwrap_or(0);
-        let jitter_s = 1.4826 * dev[dev.len() / 2];
         LogTiming {
             row_dt_s: b,
             grid_origin_s: a + median - b,
@@ -681,14 +685,10 @@ mod tests {
     /// Stamps of a 2 ms grid, `lost` rows left out, each stamp off its place by up to
     /// `jitter` spacings (a fixed pseudo-random draw), kept in order as a receiver keeps them.
     fn stamps(n: u64, lost: &[u64], jitter: f64) -> Vec<f64> {
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut rng = super::super::rng::seeded(1);
         let mut t: Vec<f64> = Vec::new();
         for place in (0..n).filter(|p| !lost.contains(p)) {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            let u = (state >> 11) as f64 / (1u64 << 53) as f64;
-            let at = 2e-3 * (place as f64 + 1.0 + jitter * (2.0 * u - 1.0));
+            let at = 2e-3 * (place as f64 + 1.0 + rng.range(-jitter, jitter));
             t.push(t.last().map_or(at, |&last: &f64| at.max(last + 1e-6)));
         }
         t
@@ -715,15 +715,11 @@ mod tests {
     #[test]
     fn stamps_that_are_no_grid_are_not_placed_on_one() {
         // Rows 1-3 ms apart at random: a logger that samples as it gets to it.
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut rng = super::super::rng::seeded(2);
         let mut t = vec![0.0];
         for _ in 0..6_000 {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            let u = (state >> 11) as f64 / (1u64 << 53) as f64;
             let last = t[t.len() - 1];
-            t.push(last + 1e-3 + 2e-3 * u);
+            t.push(last + rng.range(1e-3, 3e-3));
         }
         let timing = LogTiming::of(&t);
         assert!(!timing.on_grid, "{timing:?}");
