@@ -474,10 +474,7 @@ fn a_thousand_hertz_log_with_a_millisecond_of_jitter_has_its_timing_read_as_it_i
 /// its stamp tells its place, so the rows' order places them. The timing is read as it is
 /// (the spacing, about 0.6 ms of jitter, the rows lost counted exactly, the rows on the grid,
 /// none but a few beside a lost row off its place) and the record's reference is our
-/// logger's at the same rate, step for step. (Read as an irregular sampling, the stamps
-/// themselves, with rows missing that were not lost: an effect-free car at 80.9 % and
-/// `unexplained` at 400 Hz, our logger's file 90.9 % and `none`; a friction car at 1 kHz read
-/// 1.009 ms rows and was `unexplained` at 57 %.)
+/// logger's at the same rate, step for step.
 #[test]
 fn a_log_with_jitter_up_to_its_spacing_is_placed_by_its_rows_order() {
     let case = GenCase::nominal(sweep(12.0), 400);
@@ -542,9 +539,8 @@ fn a_log_with_jitter_up_to_its_spacing_is_placed_by_its_rows_order() {
 /// boundary (at 250 Hz a period holds 2.5 rows, and only every other period start falls on
 /// a row), the step's sample is the kept row's on the middle's side of the period start the
 /// other rows' changes place, not a blend of the two: the record's reference is our
-/// logger's at the same rate, step for step. (Blended, on the world's file of case 20 under
-/// `starting-250-drop` eight steps were, each a current spike through the acceleration
-/// feedforward: the effect-free car at 76.4 % and `unexplained`, against 92.5 % and `none`.)
+/// logger's at the same rate, step for step (a blend is a current spike through the
+/// acceleration feedforward).
 #[test]
 fn a_log_of_several_rows_a_period_that_lost_rows_reads_each_steps_own_reference() {
     let case = GenCase::nominal(sweep(12.0), 250);
@@ -574,9 +570,6 @@ fn a_log_of_several_rows_a_period_that_lost_rows_reads_each_steps_own_reference(
 /// would start 2.5 ms into the reference's periods and their middles fall on the period
 /// starts, where a step whose middle row was lost took either neighbour's sample. The steps
 /// are moved back onto the periods: the record's reference is our logger's, step for step.
-/// (Not moved, the world's file of case 19 under `starting-400-drop`, whose first row was
-/// lost, read 16 steps from the next period: the friction car at 64.3 % and `unexplained`,
-/// against `coulomb_friction` at 89.3 % from our logger.)
 #[test]
 fn a_log_that_lost_its_first_row_has_its_steps_on_the_reference_periods() {
     let case = GenCase::nominal(sweep(12.0), 400);
