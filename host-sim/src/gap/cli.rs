@@ -231,7 +231,7 @@ fn print_help(selftest: bool) -> Result<()> {
             "Sim-to-real gap of a log: where it lies, which unmodelled effect causes it, how far \
              it shrinks. `gap selftest` checks the diagnosis on logs with a withheld effect \
              (`gap selftest --help`); `gap bench` times two 120 s logs (ours, and a team's of the \
-             EPOS4 car without a header)",
+             EPOS4 car without a header) and a 30 min log's stamps placed on their grid",
         )
         .override_usage("host-sim gap [OPTIONS] <LOG>");
     if selftest {
@@ -560,7 +560,32 @@ fn bench_cmd(args: &GapArgs) -> Result<()> {
         opts.threads,
         d.verdict.effects
     );
-    bench_team_log(args)
+    bench_team_log(args)?;
+    bench_long_stamps();
+    Ok(())
+}
+
+/// The stamps of a 30 min log at 1 kHz as a receiver stamps them (+-1 ms, in order, 1 % of
+/// rows lost at random), placed on their grid: the rows' order places them
+/// (`record::places_by_order`), whose cost must grow with the rows, not the rows times
+/// the rows lost.
+fn bench_long_stamps() {
+    let rows = 1_800_000;
+    let (t, lost) = super::record::receiver_stamps(rows, 1e-3, 1e-3, 0.01, 7);
+    let started = Instant::now();
+    let timing = super::LogTiming::of(&t);
+    println!(
+        "gap bench: a 30 min log's stamps at 1 kHz (+-1 ms, {} of {rows} rows lost) placed on \
+         their grid in {:.2} s: {} rows missing, {}",
+        lost.len(),
+        started.elapsed().as_secs_f64(),
+        timing.missing_rows,
+        if timing.on_grid {
+            "on the grid"
+        } else {
+            "not placed"
+        }
+    );
 }
 
 /// The bench's second log, the slowest path a team's file takes: the independent world's

@@ -91,12 +91,11 @@ const ORDER_NOISE: f64 = 0.1;
 /// where the rows kept in order pull the stamps in.
 const ORDER_MAX_JITTER: f64 = 0.8;
 
-/// The step of the mean of `sum`'s values (its running sums) between the `w` rows before
-/// row `j` and as many from `j` on.
-fn order_step(sum: &[f64], j: usize, w: usize) -> f64 {
-    let n = sum.len() - 1;
+/// The step of the mean of a series (`sum(k)`: the sum of its first `k` values, `n` values
+/// in all) between the `w` rows before row `j` and as many from `j` on.
+fn order_step(sum: impl Fn(usize) -> f64, n: usize, j: usize, w: usize) -> f64 {
     let (a, b) = (j.saturating_sub(w), (j + w).min(n));
-    (sum[b] - sum[j]) / (b - j) as f64 - (sum[j] - sum[a]) / (j - a) as f64
+    (sum(b) - sum(j)) / (b - j) as f64 - (sum(j) - sum(a)) / (j - a) as f64
 }
 
 /// The median of `v` (not empty) and its spread as a standard deviation: the median absolute
@@ -111,10 +110,67 @@ fn median_and_spread(mut v: Vec<f64>) -> (f64, f64) {
     (median, 1.4826 * v[v.len() / 2])
 }
 
-/// Running sums of `v` from `from` on (`sum[j + 1] = sum[j] + v[j]`).
-fn running_sums(v: &[f64], sum: &mut [f64], from: usize) {
-    for j in from..v.len() {
-        sum[j + 1] = sum[j] + v[j];
+/// The stamps' offsets from a grid of one row a place, less a spacing for each row taken as
+/// lost at or before them, and their running sums. The rows taken as lost are counted in
+/// two Fenwick trees (how many up to a row, and the sum of their rows), so that taking one
+/// and reading an offset or a sum each cost O(log rows), not a pass over every later row.
+struct Offsets {
+    raw: Vec<f64>,
+    /// `raw_sum[k]`: the sum of the first `k` raw offsets.
+    raw_sum: Vec<f64>,
+    /// Over rows + 1: the rows taken as lost at each row.
+    count: Vec<u64>,
+    /// Over rows + 1: those rows' indices, summed.
+    at: Vec<u64>,
+}
+
+impl Offsets {
+    fn new(t: &[f64], spacing: f64) -> Offsets {
+        let n = t.len();
+        let raw: Vec<f64> = (0..n).map(|j| (t[j] - t[0]) / spacing - j as f64).collect();
+        let mut raw_sum = vec![0.0; n + 1];
+        for j in 0..n {
+            raw_sum[j + 1] = raw_sum[j] + raw[j];
+        }
+        Offsets {
+            raw,
+            raw_sum,
+            count: vec![0; n + 1],
+            at: vec![0; n + 1],
+        }
+    }
+
+    /// One more row lost just before row `j`: every offset from `j` on is a spacing less.
+    fn lose(&mut self, j: usize) {
+        let mut i = j + 1;
+        while i < self.count.len() {
+            self.count[i] += 1;
+            self.at[i] += j as u64;
+            i += i & i.wrapping_neg();
+        }
+    }
+
+    /// How many rows are lost before rows `0..k`, and the sum of the rows they were lost at.
+    fn lost_before(&self, k: usize) -> (u64, u64) {
+        let (mut i, mut count, mut at) = (k, 0, 0);
+        while i > 0 {
+            count += self.count[i];
+            at += self.at[i];
+            i -= i & i.wrapping_neg();
+        }
+        (count, at)
+    }
+
+    /// Row `q`'s offset.
+    fn offset(&self, q: usize) -> f64 {
+        self.raw[q] - self.lost_before(q + 1).0 as f64
+    }
+
+    /// The sum of the first `k` offsets: a row lost at `p < k` takes one from each of the
+    /// `k - p` offsets from `p` on.
+    fn sum(&self, k: usize) -> f64 {
+        let (count, at) = self.lost_before(k);
+        self.raw_sum[k] - (k as u64 * count - at) as f64
     }
 }
 
@@ -134,24 +190,22 @@ fn lost_by_order(t: &[f64], spacing: f64, w: usize) -> Option<Vec<u64>> {
     if n < 4 * w {
         return None;
     }
-    let mut offset: Vec<f64> = (0..n).map(|j| (t[j] - t[0]) / spacing - j as f64).collect();
-    let mut sum = vec![0.0; n + 1];
-    running_sums(&offset, &mut sum, 0);
+    let mut offsets = Offsets::new(t, spacing);
     let mut lost = vec![0u64; n];
     let mut total = 0usize;
     let mut j = edge;
     while j + edge < n {
-        if order_step(&sum, j, w) < 0.5 {
+        if order_step(|k| offsets.sum(k), n, j, w) < 0.5 {
             j += 1;
             continue;
         }
         // The step first reaches half its size about half a window on, so the window before
         // `j` is the level before it.
         let from = j.saturating_sub(w);
-        let before = (sum[j] - sum[from]) / (j - from) as f64;
+        let before = (offsets.sum(j) - offsets.sum(from)) / (j - from) as f64;
         let (mut at, mut best, mut excess) = (j, f64::NEG_INFINITY, 0.0);
         for q in (j..(j + 2 * w).min(n)).rev() {
-            excess += offset[q] - before - 0.5;
+            excess += offsets.offset(q) - before - 0.5;
             if excess > best {
                 (at, best) = (q, excess);
             }
@@ -161,13 +215,34 @@ fn lost_by_order(t: &[f64], spacing: f64, w: usize) -> Option<Vec<u64>> {
             return None;
         }
         lost[at] += 1;
-        for o in &mut offset[at..] {
-            *o -= 1.0;
-        }
-        running_sums(&offset, &mut sum, at);
+        offsets.lose(at);
         j = at.saturating_sub(w).max(edge);
     }
     Some(lost)
+}
+
+/// The stamps a receiver writes for `rows` rows of a grid of `spacing` s: each within
+/// +-`jitter` s of its place, kept in order (a stamp is never before the one before it),
+/// a `lost` share of the rows left out at random (`seed`), as in a CAN recording. With the
+/// rows lost, for `gap bench` and the tests.
+pub(crate) fn receiver_stamps(
+    rows: u64,
+    spacing: f64,
+    jitter: f64,
+    lost: f64,
+    seed: u64,
+) -> (Vec<f64>, Vec<u64>) {
+    let mut rng = super::rng::seeded(seed);
+    let (mut t, mut gone): (Vec<f64>, Vec<u64>) = (Vec::new(), Vec::new());
+    for place in 0..rows {
+        if rng.unit() < lost {
+            gone.push(place);
+            continue;
+        }
+        let at = spacing * place as f64 + rng.range(-jitter, jitter);
+        t.push(t.last().map_or(at, |&last: &f64| at.max(last + 1e-6)));
+    }
+    (t, gone)
 }
 
 /// Each row's place on a grid of about `spacing` by the rows' order: the row before's place
@@ -208,17 +283,27 @@ fn places_by_order(t: &[f64], spacing: f64) -> Option<Vec<u64>> {
     // median does not see), sets the window the rows are placed by at last.
     let gaps: Vec<f64> = t.windows(2).map(|p| (p[1] - p[0]) / b - 1.0).collect();
     let sigma = median_and_spread(gaps).1 / std::f64::consts::SQRT_2;
-    let w = ((2.0 * (sigma / ORDER_NOISE).powi(2)).ceil() as usize)
-        .min(n / 8)
-        .max(ORDER_WINDOW);
+    let window = |noise: f64| {
+        ((2.0 * (sigma / noise).powi(2)).ceil() as usize)
+            .min(n / 8)
+            .max(ORDER_WINDOW)
+    };
+    // A long log holds more windows, and the largest of their averages' noise is larger:
+    // about sqrt(2 ln windows) of its standard deviations, as the largest of as many draws
+    // of a normal variate. Half a spacing stands that and 1.5 more above it, five at least.
+    let windows = n as f64 / window(ORDER_NOISE) as f64;
+    let margin = ((2.0 * windows.max(1.0).ln()).sqrt() + 1.5).max(0.5 / ORDER_NOISE);
+    let w = window(0.5 / margin);
     let placed = places(lost_by_order(t, b, w)?);
     let (a, b) = host_io::grid::line_through(t, &placed)?;
     let residual: Vec<f64> = (0..n).map(|j| (t[j] - a) / b - placed[j] as f64).collect();
     let mut sum = vec![0.0; n + 1];
-    running_sums(&residual, &mut sum, 0);
+    for j in 0..n {
+        sum[j + 1] = sum[j] + residual[j];
+    }
     let edge = w / 3;
     (edge..n - edge)
-        .all(|j| order_step(&sum, j, w).abs() < 0.5)
+        .all(|j| order_step(|k| sum[k], n, j, w).abs() < 0.5)
         .then_some(placed)
 }
 
@@ -236,11 +321,7 @@ fn boundary_phase(
     row_dt: f64,
 ) -> Option<f64> {
     let (mut c, mut s, mut count) = (0.0, 0.0, 0usize);
-    for i in 1..t.len() {
-        let gap = t[i] - t[i - 1];
-        if reference[i] == reference[i - 1] || gap > 1.5 * row_dt {
-            continue;
-        }
+    for i in changes(t, reference, row_dt) {
         // The middle of the interval the start lies in (which end is closed is the
         // convention's; the middle serves both).
         let middle = 0.5 * (t[i - 1] + t[i]) - origin;
@@ -250,6 +331,17 @@ fn boundary_phase(
         count += 1;
     }
     (count > 0).then(|| (s.atan2(c) / std::f64::consts::TAU).rem_euclid(1.0) * step)
+}
+
+/// The rows `i` at which the reference changes from row `i - 1`, with no row lost between
+/// the two: a period start lies between them.
+fn changes<'a>(
+    t: &'a [f64],
+    reference: &'a [f64],
+    row_dt: f64,
+) -> impl Iterator<Item = usize> + 'a {
+    (1..t.len())
+        .filter(move |&i| reference[i] != reference[i - 1] && t[i] - t[i - 1] <= 1.5 * row_dt)
 }
 
 /// How far the steps of `step` from `origin` must move for their starts to sit on the
@@ -262,22 +354,24 @@ fn boundary_phase(
 /// a period start (a first row lost at 400 Hz: 2.5 ms); a 1 kHz log whose stamps run 3 ms
 /// late keeps its steps. A reference that reaches the car with a jitter of
 /// its own moves some changes by a row or two, so the phase is the one most changes agree
-/// on, not one all of them allow. Zero where the reference never changes between
-/// neighbouring rows.
-fn period_alignment(t: &[f64], reference: &[f64], origin: f64, step: f64, row_dt: f64) -> f64 {
-    let Some(centre) = boundary_phase(t, reference, origin, step, row_dt) else {
-        return 0.0;
-    };
+/// on, not one all of them allow. `centre` is the changes' [`boundary_phase`] against
+/// `origin`.
+fn period_alignment(
+    t: &[f64],
+    reference: &[f64],
+    origin: f64,
+    step: f64,
+    row_dt: f64,
+    centre: f64,
+) -> f64 {
     // A time's phase against the centre, within half a step of it.
     let wrap = |d: f64| d - step * (d / step).round();
     let rel = |x: f64| wrap(x - origin - centre);
     let tolerance = 0.25 * row_dt;
     let (mut lows, mut highs) = (Vec::new(), Vec::new());
-    for i in 1..t.len() {
-        if reference[i] != reference[i - 1] && t[i] - t[i - 1] <= 1.5 * row_dt {
-            lows.push(rel(t[i - 1]) - tolerance);
-            highs.push(rel(t[i]) + tolerance);
-        }
+    for i in changes(t, reference, row_dt) {
+        lows.push(rel(t[i - 1]) - tolerance);
+        highs.push(rel(t[i]) + tolerance);
     }
     lows.sort_by(f64::total_cmp);
     highs.sort_by(f64::total_cmp);
@@ -515,11 +609,15 @@ impl Record {
         // row, so a first row lost moves it by a row: 2.5 ms at 400 Hz, the steps' middles
         // then on the period starts, and a step whose middle row was lost took either
         // neighbour's sample).
-        let origin = if several_rows {
-            origin + period_alignment(t, reference, origin, step, row_dt)
-        } else {
-            origin
-        };
+        let phase = several_rows
+            .then(|| boundary_phase(t, reference, origin, step, row_dt))
+            .flatten();
+        let shift = phase.map_or(0.0, |centre| {
+            period_alignment(t, reference, origin, step, row_dt, centre)
+        });
+        let origin = origin + shift;
+        // The period starts against the moved steps.
+        let phase = phase.map(|centre| (centre - shift).rem_euclid(step));
         let n = (((last - origin + near) / step + 1e-6).floor() as usize).max(1);
         let end = |k: usize| origin + (k + 1) as f64 * step;
         // The row stamped at `at`, within a quarter of a row spacing.
@@ -549,9 +647,6 @@ impl Record {
             }
             starting > ending
         };
-        let phase = several_rows
-            .then(|| boundary_phase(t, reference, origin, step, row_dt))
-            .flatten();
         let reference = (0..n)
             .map(|k| {
                 // The row whose interval holds the middle of the step.
@@ -724,5 +819,50 @@ mod tests {
         let timing = LogTiming::of(&t);
         assert!(!timing.on_grid, "{timing:?}");
         assert!(!timing.is_regular(), "{timing:?}");
+    }
+
+    #[test]
+    fn offsets_with_rows_lost_read_as_a_pass_that_takes_each_off_every_later_row() {
+        let t = stamps(3_000, &[10, 11, 900], 0.4);
+        let mut rng = super::super::rng::seeded(3);
+        let mut offsets = Offsets::new(&t, 2e-3);
+        let mut direct = offsets.raw.clone();
+        // Rows lost anywhere, some at the same row, some before rows already taken.
+        for _ in 0..200 {
+            let at = rng.range(0.0, t.len() as f64) as usize;
+            offsets.lose(at);
+            for o in &mut direct[at..] {
+                *o -= 1.0;
+            }
+        }
+        let mut sum = 0.0;
+        for (k, &offset) in direct.iter().enumerate() {
+            assert!(
+                (offsets.sum(k) - sum).abs() < 1e-6 * (1.0 + sum.abs()),
+                "sum to row {k}"
+            );
+            assert!((offsets.offset(k) - offset).abs() < 1e-9, "row {k}");
+            sum += offset;
+        }
+        assert!((offsets.sum(t.len()) - sum).abs() < 1e-6 * (1.0 + sum.abs()));
+    }
+
+    #[test]
+    fn a_long_log_at_1_khz_with_jitter_and_rows_lost_is_placed_with_every_row_counted() {
+        // 30 min at 1 kHz, +-1 ms, 1 % lost: 1.8 million rows, about 18 000 of them lost.
+        let (t, lost) = receiver_stamps(1_800_000, 1e-3, 1e-3, 0.01, 7);
+        let timing = LogTiming::of(&t);
+        assert!(timing.on_grid, "{timing:?}");
+        // The first and last rows' averages are too short to see a lost row.
+        let inside = lost
+            .iter()
+            .filter(|&&p| (200..1_799_800).contains(&p))
+            .count();
+        assert!(
+            (inside..=lost.len()).contains(&timing.missing_rows),
+            "{} missing, {} lost ({inside} inside)",
+            timing.missing_rows,
+            lost.len()
+        );
     }
 }
