@@ -110,6 +110,16 @@ fn median_and_spread(mut v: Vec<f64>) -> (f64, f64) {
     (median, 1.4826 * v[v.len() / 2])
 }
 
+/// The running sums of `v`: `sum[k]` is the sum of its first `k` values (`v.len() + 1` of
+/// them).
+fn running_sums(v: &[f64]) -> Vec<f64> {
+    let mut sum = vec![0.0; v.len() + 1];
+    for (j, x) in v.iter().enumerate() {
+        sum[j + 1] = sum[j] + x;
+    }
+    sum
+}
+
 /// The stamps' offsets from a grid of one row a place, less a spacing for each row taken as
 /// lost at or before them, and their running sums. The rows taken as lost are counted in
 /// two Fenwick trees (how many up to a row, and the sum of their rows), so that taking one
@@ -128,13 +138,9 @@ impl Offsets {
     fn new(t: &[f64], spacing: f64) -> Offsets {
         let n = t.len();
         let raw: Vec<f64> = (0..n).map(|j| (t[j] - t[0]) / spacing - j as f64).collect();
-        let mut raw_sum = vec![0.0; n + 1];
-        for j in 0..n {
-            raw_sum[j + 1] = raw_sum[j] + raw[j];
-        }
         Offsets {
+            raw_sum: running_sums(&raw),
             raw,
-            raw_sum,
             count: vec![0; n + 1],
             at: vec![0; n + 1],
         }
@@ -297,10 +303,7 @@ fn places_by_order(t: &[f64], spacing: f64) -> Option<Vec<u64>> {
     let placed = places(lost_by_order(t, b, w)?);
     let (a, b) = host_io::grid::line_through(t, &placed)?;
     let residual: Vec<f64> = (0..n).map(|j| (t[j] - a) / b - placed[j] as f64).collect();
-    let mut sum = vec![0.0; n + 1];
-    for j in 0..n {
-        sum[j + 1] = sum[j] + residual[j];
-    }
+    let sum = running_sums(&residual);
     let edge = w / 3;
     (edge..n - edge)
         .all(|j| order_step(|k| sum[k], n, j, w).abs() < 0.5)
