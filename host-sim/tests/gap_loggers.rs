@@ -404,10 +404,11 @@ fn a_late_reference_in_a_log_without_a_header_is_a_delay_of_the_direct_drive() {
 /// One of the independent world's 120 s tracks: a direct-drive car (Table 4 drawn) whose
 /// reference reaches the ECU 39 ms late, logged at 100 Hz without a header, 1 % of rows lost.
 /// On the track's first 10 s, where the cars and their delays are fitted, the reference late
-/// gains the direct drive under two points against the EPOS4's nominal model, whose SYNC
-/// latch and interpolation look like latency; on the whole log it gains 17, and the EPOS4's
-/// nominal model fits 11 points better than the direct drive's own. The cars are compared
-/// with the reference late on the whole log: the direct drive is taken and the delay named.
+/// lifts the direct drive under two points above the EPOS4's nominal model, whose SYNC latch
+/// and interpolation look like latency; on the whole log, where the EPOS4's nominal model
+/// fits 11 points better than the direct drive's own, it lifts it 7 points above (17 above
+/// its own). The cars are compared with the reference late on the whole log: the direct
+/// drive is taken and the delay named.
 #[test]
 fn a_late_reference_that_the_tracks_first_seconds_hardly_show_is_a_delay_of_the_direct_drive() {
     let case = generator::draw(3, 12, 12.0);

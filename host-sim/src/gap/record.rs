@@ -81,9 +81,10 @@ pub struct LogTiming {
 const ORDER_WINDOW: usize = 30;
 
 /// The noise, in spacings, that the average over the rows [`places_by_order`] reads a lost
-/// row from is held under: a tenth of a spacing, so that a lost row's whole spacing stands
-/// five times its noise above the half a spacing it is taken at. The stamps' own scatter
-/// sets the window: 30 rows at 400-500 Hz and +-1 ms, 80 at 1 kHz.
+/// row from is held under on a log of up to about 30 s at 1 kHz: a tenth of a spacing, so
+/// that half a spacing stands five times its noise above it (a longer log holds it lower).
+/// The stamps' own scatter sets the window: 30 rows at 400-500 Hz and +-1 ms, 72-84 at
+/// 1 kHz.
 const ORDER_NOISE: f64 = 0.1;
 
 /// The largest jitter (RMS, in spacings) the rows' order places rows under: +-1 ms reads
