@@ -422,6 +422,33 @@ fn a_late_reference_that_the_tracks_first_seconds_hardly_show_is_a_delay_of_the_
     assert_eq!(effects, vec!["delay".to_string()], "{}", choice.describe());
 }
 
+/// A direct-drive car with friction at the rack (a 10 s sweep), logged at 1 kHz without a
+/// header, stamps +-1 ms: the EPOS4's nominal model fits it 3 points better than the direct
+/// drive's own (friction holds the column back much as the EPOS4's latch and interpolation
+/// do), and under the EPOS4's model the friction is read as a tyre. The two drives' nominal
+/// models are close, so their best single candidates are compared: the direct drive with
+/// friction fits the log far better than the EPOS4 car with anything, and is taken.
+#[test]
+fn a_direct_drive_car_with_friction_that_the_epos4_model_fits_better_is_told_by_its_candidates() {
+    let case = generator::draw(3, 10, 12.0);
+    assert_eq!(case.hidden, vec!["coulomb_friction".to_string()]);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("theirs.csv");
+    let logger = team(ReferenceConvention::PeriodEnding, 1000, true, false);
+    log_of(&case, 3, &logger).save(&path).unwrap();
+    let (effects, _, choice) = verdict_on_car(&path, None, None);
+    let screened = choice.screened.as_ref().expect("the drives came close");
+    assert!(screened.switched, "{}", choice.describe());
+    assert_eq!(screened.cars[0].drive, CarDrive::Epos4);
+    assert_eq!(choice.drive, CarDrive::Direct, "{}", choice.describe());
+    assert_eq!(
+        effects,
+        vec!["coulomb_friction".to_string()],
+        "{}",
+        choice.describe()
+    );
+}
+
 /// The same without a delay, at 100 Hz, by a logger that writes the reference starting at each
 /// row, the car not given: one row of the reference column is the other convention, and a
 /// delay scan fits the wrong one 10 ms late as well as the right one, so a late reference

@@ -139,7 +139,7 @@ fn car_for(
     rec: &super::Record,
     header: &LogHeader,
     timing: super::LogTiming,
-    threads: usize,
+    opts: &Options,
 ) -> Result<(Rig, super::Record, Option<CarChoice>)> {
     let (drive, controller) = car_options(args)?;
     if !matches!(rig.model, super::rig::RigModel::Paper(_)) {
@@ -153,7 +153,7 @@ fn car_for(
         return Ok((rig.clone(), rec.clone(), None));
     }
     Ok(super::drive::choose_for_log(
-        rig, rec, header, timing, drive, controller, threads,
+        rig, rec, header, timing, drive, controller, opts,
     ))
 }
 
@@ -230,8 +230,9 @@ fn print_help(selftest: bool) -> Result<()> {
         .about(
             "Sim-to-real gap of a log: where it lies, which unmodelled effect causes it, how far \
              it shrinks. `gap selftest` checks the diagnosis on logs with a withheld effect \
-             (`gap selftest --help`); `gap bench` times two 120 s logs (ours, and a team's of the \
-             EPOS4 car without a header) and a 30 min log's stamps placed on their grid",
+             (`gap selftest --help`); `gap bench` times three 120 s logs (ours; a team's of the \
+             EPOS4 car without a header; a team's of a direct-drive car with friction, whose two \
+             drives are screened) and a 30 min log's stamps placed on their grid",
         )
         .override_usage("host-sim gap [OPTIONS] <LOG>");
     if selftest {
@@ -273,7 +274,7 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         None => None,
     };
     let opts = options(args, &rig)?;
-    let (rig, rec, car) = car_for(args, &rig, &rec, &header, timing, opts.threads)?;
+    let (rig, rec, car) = car_for(args, &rig, &rec, &header, timing, &opts)?;
     let mut rig = rig;
     // The validation log is the same car's, written by the same logger.
     let shift = car
@@ -561,6 +562,7 @@ fn bench_cmd(args: &GapArgs) -> Result<()> {
         d.verdict.effects
     );
     bench_team_log(args)?;
+    bench_screened_log(args)?;
     bench_long_stamps();
     Ok(())
 }
@@ -588,22 +590,56 @@ fn bench_long_stamps() {
     );
 }
 
-/// The bench's second log, the slowest path a team's file takes: the independent world's
-/// EPOS4 car (exact Table 4, no effect) on the same 120 s track, written a row per TPDO as a
-/// team's logger of the status frames writes it (no header, stamps +-1 ms, 1 % of rows lost),
-/// saved to a file and diagnosed as `host-sim gap FILE` does, the car's drive fitted first.
+/// The bench's second log, a team's file at its commonest: the independent world's EPOS4 car
+/// (exact Table 4, no effect) on the same 120 s track, written a row per TPDO as a team's
+/// logger of the status frames writes it (no header, stamps +-1 ms, 1 % of rows lost).
 fn bench_team_log(args: &GapArgs) -> Result<()> {
-    use super::generator::{self, GenCase, LoggedCar, Logger};
+    use super::generator::{GenCase, LoggedCar};
     let case = GenCase::nominal(crate::scenario::builtin_track(), 100);
-    let logger = Logger {
-        car: LoggedCar::Epos4StatusFrame,
+    let logger = team_logger(LoggedCar::Epos4StatusFrame);
+    bench_file(args, &case, &logger, "the EPOS4 car's 120 s track")
+}
+
+/// A team's 100 Hz logger of `car`: no header, stamps +-1 ms, 1 % of rows lost.
+fn team_logger(car: super::generator::LoggedCar) -> super::generator::Logger {
+    use super::generator::{self, Logger};
+    Logger {
+        car,
         header: false,
         jitter_s: generator::LOGGER_JITTER_S,
         drop_chance: generator::LOGGER_DROP_CHANCE,
         ..Logger::ours(100)
-    };
-    eprintln!("gap bench: writing the EPOS4 car's 120 s track as a team's logger writes it ...");
-    let log = generator::log_of(&case, 7, &logger);
+    }
+}
+
+/// The bench's third log, the slowest path a team's file takes: the independent world's
+/// direct-drive car with 300 N of friction at the rack on the same track, written by a team's
+/// 100 Hz logger (no header, stamps +-1 ms, 1 % of rows lost), whose two drives' nominal
+/// models come close, so that both are screened by their candidates before the diagnosis.
+fn bench_screened_log(args: &GapArgs) -> Result<()> {
+    use super::generator::{GenCase, LoggedCar};
+    let mut case = GenCase::nominal(crate::scenario::builtin_track(), 100);
+    case.truth.rack_friction_n = 300.0;
+    case.hidden = vec!["coulomb_friction".into()];
+    let logger = team_logger(LoggedCar::Direct);
+    bench_file(
+        args,
+        &case,
+        &logger,
+        "the direct drive's 120 s track, 300 N of rack friction",
+    )
+}
+
+/// `case` written by `logger` to a file, and diagnosed as `host-sim gap FILE` does, the car's
+/// drive fitted first; timed from reading the file to the verdict.
+fn bench_file(
+    args: &GapArgs,
+    case: &super::generator::GenCase,
+    logger: &super::generator::Logger,
+    what: &str,
+) -> Result<()> {
+    eprintln!("gap bench: writing {what} as a team's logger writes it ...");
+    let log = super::generator::log_of(case, 7, logger);
     let path = std::env::temp_dir().join(format!("gap-bench-{}.csv", std::process::id()));
     log.save(&path)
         .map_err(|e| format!("{}: {e}", path.display()))?;
@@ -615,19 +651,27 @@ fn bench_team_log(args: &GapArgs) -> Result<()> {
     // The file is the bench's own; it goes whatever the diagnosis makes of it.
     let _ = std::fs::remove_file(&path);
     let (rec, header, timing) = loaded?;
-    let (rig, rec, car) = car_for(args, &rig, &rec, &header, timing, opts.threads)?;
+    let (rig, rec, car) = car_for(args, &rig, &rec, &header, timing, &opts)?;
     let d = diagnose(&rig, &rec, None, &opts);
     let elapsed = started.elapsed().as_secs_f64();
     println!(
-        "gap bench: {:.0} s log ({}, {} rows), read, car fitted and diagnosed in {:.1} s on {} \
-         thread(s), {} simulations; {}; verdict {:?}",
+        "gap bench: {:.0} s log ({what}; {}, {} rows), read, car fitted and diagnosed in {:.1} \
+         s on {} thread(s), {} simulations; {}; verdict {:?}",
         rec.duration_s(),
         logger.describe(),
         timing.rows,
         elapsed,
         opts.threads,
         d.simulations,
-        car.map_or("no car".into(), |c| format!("{} drive", c.drive.name())),
+        car.map_or("no car".into(), |c| format!(
+            "{} drive{}",
+            c.drive.name(),
+            if c.screened.is_some() {
+                ", both drives screened"
+            } else {
+                ""
+            }
+        )),
         d.verdict.effects
     );
     Ok(())

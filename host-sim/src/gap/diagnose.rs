@@ -140,37 +140,9 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
     };
     let signature = log_signature(rig, rec, &sim0, opts);
     let (effects, mut findings) = rule_out(rig, signature.as_ref(), &opts.effects);
-    // A long log is fitted on the window where the nominal residual is largest (the figures
-    // are still given on the whole log): the fits then cost the same for any log length.
-    let frec_owned = fit_window(rig, rec, &scorer, &sim0, MAX_FIT_S);
-    let frec = frec_owned.as_ref().unwrap_or(rec);
-    let fscorer_owned = frec_owned.as_ref().map(|w| scorer.on(rig, w));
-    let fscorer = fscorer_owned.as_ref().unwrap_or(&scorer);
-    let cost0 = match &frec_owned {
-        Some(w) => cost(&fscorer.residual(w, &simulate(rig, w, &nominal))),
-        None => cost(&scorer.residual(rec, &sim0)),
-    };
-    let per_fit = |np: usize| opts.fit.scan + 1 + opts.fit.iterations * (np + 2);
-    let st = Stage {
-        rig,
-        rec,
-        scorer: &scorer,
-        frec,
-        fscorer,
-        validation: validation.map(|v| (v, Scorer::new(rig, v))),
-        opts,
-        progress: Progress::new(
-            effects
-                .iter()
-                .map(|k| per_fit(k.specs(rig).len()))
-                .sum::<usize>()
-                + per_fit(3),
-            opts.progress,
-        ),
-        cost0,
-        floor: fscorer.noise_floor_cost(frec),
-    };
-    let floor = st.floor;
+    let window = FitWindow::of(rig, rec, &scorer, &sim0, MAX_FIT_S);
+    let st = window.stage(rig, rec, &scorer, validation, opts, &effects);
+    let (cost0, floor) = (st.cost0, st.floor);
 
     let mut ranking = singles(&st, &effects);
     // An EPOS4 car's clock fitted before any effect, and an effect that moves it: the
@@ -456,6 +428,129 @@ fn log_signature(rig: &Rig, rec: &Record, sim0: &SimOut, opts: &Options) -> Opti
     }?;
     s.holds &= opts.torque_balance;
     Some(s)
+}
+
+/// The window a log's fits run on: where the nominal residual is largest on a log longer
+/// than the window (the figures are still given on the whole log), so that the fits cost the
+/// same for any log length; `None`, the whole log.
+struct FitWindow {
+    rec: Option<Record>,
+    scorer: Option<Scorer>,
+    /// What the nominal model leaves on the window.
+    cost0: f64,
+}
+
+impl FitWindow {
+    fn of(rig: &Rig, rec: &Record, scorer: &Scorer, sim0: &SimOut, max_s: f64) -> FitWindow {
+        let window = fit_window(rig, rec, scorer, sim0, max_s);
+        let wscorer = window.as_ref().map(|w| scorer.on(rig, w));
+        let cost0 = match (&window, &wscorer) {
+            (Some(w), Some(s)) => cost(&s.residual(w, &simulate(rig, w, &Effects::nominal()))),
+            _ => cost(&scorer.residual(rec, sim0)),
+        };
+        FitWindow {
+            rec: window,
+            scorer: wscorer,
+            cost0,
+        }
+    }
+
+    /// The stage of a diagnosis of `rec` whose fits run on this window, with the nominal
+    /// model's cost on it, its noise floor, and progress counted over `effects`' fits.
+    fn stage<'a>(
+        &'a self,
+        rig: &'a Rig,
+        rec: &'a Record,
+        scorer: &'a Scorer,
+        validation: Option<&'a Record>,
+        opts: &'a Options,
+        effects: &[EffectKind],
+    ) -> Stage<'a> {
+        let frec = self.rec.as_ref().unwrap_or(rec);
+        let fscorer = self.scorer.as_ref().unwrap_or(scorer);
+        let per_fit = |np: usize| opts.fit.scan + 1 + opts.fit.iterations * (np + 2);
+        Stage {
+            rig,
+            rec,
+            scorer,
+            frec,
+            fscorer,
+            validation: validation.map(|v| (v, Scorer::new(rig, v))),
+            opts,
+            progress: Progress::new(
+                effects
+                    .iter()
+                    .map(|k| per_fit(k.specs(rig).len()))
+                    .sum::<usize>()
+                    + per_fit(3),
+                opts.progress,
+            ),
+            cost0: self.cost0,
+            floor: fscorer.noise_floor_cost(frec),
+        }
+    }
+}
+
+/// A first look at a log on a car: the nominal model's GoF on the whole log, and the best
+/// candidate alone (each fitted as the diagnosis first fits them, those the log's torque
+/// balance leaves; the best, the one that leaves the least on the fits' window) with its GoF
+/// on the whole log. Two cars whose nominal models the log
+/// leaves close are told apart by it ([`super::drive`]): a car with an effect can look, to
+/// the nominal models, more like the other drive than like itself.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Screen {
+    pub nominal_gof: f64,
+    /// The best single candidate on the fits' window, and its GoF on the whole log.
+    pub best: Option<(String, f64)>,
+}
+
+impl Screen {
+    /// The best GoF on the whole log: the best candidate's, or the nominal model's.
+    pub fn gof(&self) -> f64 {
+        self.best
+            .as_ref()
+            .map_or(self.nominal_gof, |(_, g)| g.max(self.nominal_gof))
+    }
+}
+
+/// The longest window a [`Screen`]'s fits run on, s: a third of the diagnosis's, so that
+/// screening two cars of a long log costs less than its diagnosis (the candidates' GoFs
+/// are still on the whole log).
+const SCREEN_FIT_S: f64 = 10.0;
+
+/// A [`Screen`]'s fits: LM iterations after the scan (the diagnosis's take 8 and a polish),
+/// enough to tell two cars apart by more than [`super::drive::SCREEN_MARGIN_GOF`].
+const SCREEN_ITERATIONS: usize = 4;
+
+/// [`Screen`] of `rec` on `rig`.
+pub fn screen(rig: &Rig, rec: &Record, opts: &Options) -> Screen {
+    let sim0 = simulate(rig, rec, &Effects::nominal());
+    let scorer = Scorer::new(rig, rec).with_noise(rec, &sim0);
+    let nominal_gof = scorer.fit(rec, &sim0).gof;
+    let signature = log_signature(rig, rec, &sim0, opts);
+    let (effects, _) = rule_out(rig, signature.as_ref(), &opts.effects);
+    let window = FitWindow::of(rig, rec, &scorer, &sim0, SCREEN_FIT_S);
+    let quiet = Options {
+        progress: false,
+        fit: super::fit::FitOptions {
+            iterations: SCREEN_ITERATIONS,
+            polish: 0,
+            ..opts.fit
+        },
+        ..opts.clone()
+    };
+    let st = window.stage(rig, rec, &scorer, None, &quiet, &effects);
+    // Each candidate fitted on the window; the one that leaves the least there, scored on the
+    // whole log (a run of the whole log for each would cost more than the fits).
+    let fits = parallel_map(&effects, opts.threads.max(1), |&k| (k, st.fit(&[k], None)));
+    let best = fits
+        .into_iter()
+        .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
+        .map(|(k, fitted)| {
+            let c = st.candidate(&[k], fitted);
+            (c.effect, c.gof)
+        });
+    Screen { nominal_gof, best }
 }
 
 /// Each candidate of `effects` fitted on its own, in parallel, best first.

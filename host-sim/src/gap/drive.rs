@@ -6,9 +6,10 @@
 //! reads as parameters off the table. The header lines `steer-can convert` and host-sim write
 //! say which car it was (`# drive: epos4`, `# controller: paper`); a log without them (a
 //! team's own logger) is run through every car the header leaves open, and the one whose
-//! nominal model leaves the least of the log (eq. 11) is taken, with the margin printed. The
-//! SYNC's phase is not in any header: the ECU's SYNC grid runs on its own clock, so it is
-//! searched on every EPOS4 log.
+//! nominal model leaves the least of the log (eq. 11) is taken, with the margin printed;
+//! where the other drive's nominal model comes close, the two drives are told apart by their
+//! best single candidates ([`DriveScreen`]). The SYNC's phase is not in any header: the ECU's
+//! SYNC grid runs on its own clock, so it is searched on every EPOS4 log.
 
 use super::drive_clock::{self, ClockRefit};
 use super::model::{Effects, MAX_SYNC_DRIFT};
@@ -165,6 +166,28 @@ pub struct LateComparison {
     pub gof_late: f64,
 }
 
+/// Two drives' cars whose nominal models the log left close, told apart by the candidates
+/// alone ([`super::screen`]): the drive whose best single effect fits the log better by
+/// more than [`SCREEN_MARGIN_GOF`] is taken.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct DriveScreen {
+    /// The car the nominal models ranked first, then the other drive's best.
+    pub cars: [ScreenedCar; 2],
+    /// The other drive's car was taken.
+    pub switched: bool,
+}
+
+/// One car of a [`DriveScreen`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ScreenedCar {
+    pub drive: CarDrive,
+    pub controller: Controller,
+    /// Its nominal GoF on the whole log, and its best single candidate's.
+    pub nominal_gof: f64,
+    pub best_effect: Option<String>,
+    pub best_gof: f64,
+}
+
 /// The car the diagnosis runs, and how it was chosen.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct CarChoice {
@@ -217,6 +240,10 @@ pub struct CarChoice {
     /// ([`super::reference_window`]); the record the diagnosis runs has them moved.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub reference_windows: Vec<ReferenceWindow>,
+    /// The drive fitted where the two drives' nominal models came within
+    /// [`DRIVE_SCREEN_GOF`]: how their candidates told them apart.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub screened: Option<DriveScreen>,
 }
 
 impl CarChoice {
@@ -377,6 +404,35 @@ impl CarChoice {
                 SYNC_SEARCH_S
             ));
         }
+        if let Some(sc) = &self.screened {
+            let car = |c: &ScreenedCar| {
+                format!(
+                    "{} + {} nominal {:.1} %, with {} {:.1} %",
+                    c.drive.name(),
+                    controller_name(c.controller),
+                    100.0 * c.nominal_gof,
+                    c.best_effect.as_deref().unwrap_or("no candidate"),
+                    100.0 * c.best_gof
+                )
+            };
+            line.push_str(&format!(
+                "; the drives' nominal models within {:.0} points, so told apart by their best \
+                 single candidates ({}; {}): {}",
+                100.0 * DRIVE_SCREEN_GOF,
+                car(&sc.cars[0]),
+                car(&sc.cars[1]),
+                if sc.switched {
+                    format!(
+                        "the {} drive taken, its candidates fitting the log more than {:.0} \
+                         points better",
+                        sc.cars[1].drive.name(),
+                        100.0 * SCREEN_MARGIN_GOF
+                    )
+                } else {
+                    format!("the {} drive kept", sc.cars[0].drive.name())
+                }
+            ));
+        }
         line.push_str(&format!(
             "; a delay is named only beyond {:.1} ms (what the timing of the log can explain)",
             1e3 * self.timing_bound_s.max(0.010)
@@ -473,6 +529,19 @@ const LATE_REFINE_S: [f64; 2] = [0.005, 0.0025];
 /// of either drive gain nothing from a delay; a reference 20 ms late costs the nominal model
 /// 10 points or more.
 const LATE_MARGIN_GOF: f64 = 0.03;
+
+/// Where the drive is fitted, no late reference ranked the cars, and the other drive's best
+/// car's nominal GoF on the whole log comes this close to the chosen one's, both are
+/// screened by the candidates alone ([`super::screen`]): a car with an effect can look, to
+/// the nominal models, more like the other drive than like its own (friction at the rack,
+/// or play and a late reference, on the direct drive look like the EPOS4's latch and
+/// interpolation), and an effect's fit lifts a log's GoF by more than a few points.
+pub const DRIVE_SCREEN_GOF: f64 = 0.15;
+
+/// The other drive is taken where its best single candidate fits the log better than the
+/// chosen car's by more than this (GoF on the whole log): more than the spread of two
+/// candidates' fits of one effect on one car.
+pub const SCREEN_MARGIN_GOF: f64 = 0.02;
 
 /// The best reference delay for the car of `rig` on `rec`, and its GoF.
 fn best_late(rig: &Rig, rec: &Record) -> (f64, f64) {
@@ -583,8 +652,9 @@ pub fn choose(
     drive: Option<(CarDrive, Source)>,
     controller: Option<(Controller, Source)>,
     says: LogSays,
-    threads: usize,
+    opts: &super::Options,
 ) -> (Rig, Record, Option<CarChoice>) {
+    let threads = opts.threads;
     if !matches!(rig.model, RigModel::Paper(_)) {
         return (rig.clone(), rec.clone(), None);
     }
@@ -869,59 +939,104 @@ pub fn choose(
             order.insert(0, pick);
         }
     }
-    let tried: Vec<Tried> = order.iter().map(|&i| whole[i]).collect();
-    let Some(best) = tried.first().copied() else {
+    if order.is_empty() {
         return (rig.clone(), rec.clone(), None);
-    };
-    let compared_late = late_shows.then(|| {
-        let i = order[0];
-        LateComparison {
-            delay_s: late[i].0,
-            gof: whole[i].gof,
-            gof_late: late[i].1,
-        }
-    });
+    }
     let fitted_convention = shifts.len() > 1;
     // What the log's timing can explain: three times its stamps' jitter, and one row more when
     // its reference convention is fitted rather than stated (a late reference and a logger
     // that writes it a row early are one row apart).
     let timing_bound_s = 3.0 * says.timing.jitter_s + if fitted_convention { row_dt } else { 0.0 };
-    let choice = CarChoice {
-        drive: best.drive,
-        controller: best.controller,
-        drive_from: drive.map_or(Source::Fitted, |(_, s)| s),
-        controller_from: controller.map_or(Source::Fitted, |(_, s)| s),
-        sync_after_push_s: best.sync_after_push_s,
-        push_after_s: best.push_after_s,
-        sync_drift: best.sync_drift,
-        header_sync_drift: says.sync_drift.filter(|_| best.drive == CarDrive::Epos4),
-        reference_shift_rows: fitted_convention.then_some(best.reference_shift_rows),
-        timing_bound_s,
-        compared_late,
-        tried,
-        readout: best.readout,
-        position_phase_ticks: best.position_phase_ticks,
-        encoder_phase_s: best.encoder_phase_s,
-        clock_refitted: None,
-        reference_windows: Vec::new(),
+    // The car `order[0]`, the others ranked after it: its rig, the record as it reads it, and
+    // the choice as reported.
+    let finish = |order: &[usize]| -> (Rig, Record, CarChoice) {
+        let tried: Vec<Tried> = order.iter().map(|&i| whole[i]).collect();
+        let best = tried[0];
+        let compared_late = late_shows.then(|| LateComparison {
+            delay_s: late[order[0]].0,
+            gof: whole[order[0]].gof,
+            gof_late: late[order[0]].1,
+        });
+        let choice = CarChoice {
+            drive: best.drive,
+            controller: best.controller,
+            drive_from: drive.map_or(Source::Fitted, |(_, s)| s),
+            controller_from: controller.map_or(Source::Fitted, |(_, s)| s),
+            sync_after_push_s: best.sync_after_push_s,
+            push_after_s: best.push_after_s,
+            sync_drift: best.sync_drift,
+            header_sync_drift: says.sync_drift.filter(|_| best.drive == CarDrive::Epos4),
+            reference_shift_rows: fitted_convention.then_some(best.reference_shift_rows),
+            timing_bound_s,
+            compared_late,
+            tried,
+            readout: best.readout,
+            position_phase_ticks: best.position_phase_ticks,
+            encoder_phase_s: best.encoder_phase_s,
+            clock_refitted: None,
+            reference_windows: Vec::new(),
+            screened: None,
+        };
+        let mut chosen = rig_of(&best);
+        if let RigModel::Paper(m) = &mut chosen.model {
+            m.timing_bound_s = timing_bound_s;
+        }
+        let record = records[index_of(best.reference_shift_rows)].clone();
+        // Where the SYNC walked through the frames, the column is a row off the drive's target
+        // for a stretch.
+        let (record, reference_windows) = if choice.may_lead_the_latch() {
+            reference_window::fit(&chosen, &record, threads)
+        } else {
+            (record, Vec::new())
+        };
+        let choice = CarChoice {
+            reference_windows,
+            ..choice
+        };
+        (chosen, record, choice)
     };
-    let mut chosen = rig_of(&best);
-    if let RigModel::Paper(m) = &mut chosen.model {
-        m.timing_bound_s = timing_bound_s;
-    }
-    let record = records[index_of(best.reference_shift_rows)].clone();
-    // Where the SYNC walked through the frames, the column is a row off the drive's target
-    // for a stretch.
-    let (record, reference_windows) = if choice.may_lead_the_latch() {
-        reference_window::fit(&chosen, &record, threads)
-    } else {
-        (record, Vec::new())
+    let first = finish(&order);
+    // The other drive's best car, where the drive is the log's to say and its nominal model
+    // came close. Not where a late reference ranked the cars: that comparison already ran
+    // each with an effect, the one a single candidate's screen would leave out (and the
+    // EPOS4's latch stands in for a late reference beside any one effect).
+    let rival = order
+        .iter()
+        .position(|&i| whole[i].drive != whole[order[0]].drive)
+        .filter(|&p| {
+            drive.is_none()
+                && !late_shows
+                && whole[order[0]].gof - whole[order[p]].gof < DRIVE_SCREEN_GOF
+        });
+    let Some(p) = rival else {
+        return (first.0, first.1, Some(first.2));
     };
+    let mut other_order = order.clone();
+    let pick = other_order.remove(p);
+    other_order.insert(0, pick);
+    let second = finish(&other_order);
+    let screens = [
+        super::screen(&first.0, &first.1, opts),
+        super::screen(&second.0, &second.1, opts),
+    ];
+    let switched = screens[1].gof() > screens[0].gof() + SCREEN_MARGIN_GOF;
+    let car = |c: &CarChoice, s: &super::Screen| ScreenedCar {
+        drive: c.drive,
+        controller: c.controller,
+        nominal_gof: s.nominal_gof,
+        best_effect: s.best.as_ref().map(|(e, _)| e.clone()),
+        best_gof: s.gof(),
+    };
+    let screened = DriveScreen {
+        cars: [car(&first.2, &screens[0]), car(&second.2, &screens[1])],
+        switched,
+    };
+    let (rig, record, choice) = if switched { second } else { first };
     let choice = CarChoice {
-        reference_windows,
+        screened: Some(screened),
         ..choice
     };
-    (chosen, record, Some(choice))
+    (rig, record, Some(choice))
 }
 
 /// `car` (an EPOS4 car whose SYNC phase `phase` was fitted on the head of the log) with its
@@ -1135,7 +1250,7 @@ pub fn choose_for_log(
     timing: super::LogTiming,
     drive: Option<CarDrive>,
     controller: Option<Controller>,
-    threads: usize,
+    opts: &super::Options,
 ) -> (Rig, Record, Option<CarChoice>) {
     let drive = match drive {
         Some(d) => Some((d, Source::Option)),
@@ -1152,7 +1267,7 @@ pub fn choose_for_log(
         sync_drift: header.sync_drift,
         column_sampled_s: header.column_sampled_s,
     };
-    choose(rig, rec, drive, controller, says, threads)
+    choose(rig, rec, drive, controller, says, opts)
 }
 
 #[cfg(test)]

@@ -43,7 +43,7 @@ mod search;
 pub mod selftest;
 pub mod signature;
 
-pub use diagnose::diagnose;
+pub use diagnose::{Screen, diagnose, screen};
 pub use diagnosis::{Candidate, Diagnosis, Options, Verdict, VerdictKind};
 pub use effects::EffectKind;
 pub(crate) use record::interp_at;

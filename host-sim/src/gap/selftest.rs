@@ -562,7 +562,7 @@ pub fn run_loggers(
             loaded.timing,
             car.0,
             car.1,
-            1,
+            &per_case,
         );
         let info = CaseInfo {
             index: case.index,

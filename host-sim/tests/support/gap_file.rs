@@ -18,6 +18,11 @@ pub fn diagnose_file(
     let rig = Rig::paper();
     let loaded = rig.load_log(path).unwrap();
     let header = drive::LogHeader::parse(&loaded.comments).unwrap();
+    let opts = Options {
+        effects: EffectKind::for_rig(&rig),
+        threads: 2,
+        ..Options::default()
+    };
     let (rig, rec, choice) = drive::choose_for_log(
         &rig,
         &loaded.record,
@@ -25,13 +30,8 @@ pub fn diagnose_file(
         loaded.timing,
         drive,
         controller,
-        2,
+        &opts,
     );
-    let opts = Options {
-        effects: EffectKind::for_rig(&rig),
-        threads: 2,
-        ..Options::default()
-    };
     let d = diagnose(&rig, &rec, None, &opts);
     let choice = choice.unwrap().on_the_clock_of(&d);
     println!("{}\n{}", choice.describe(), d.summary());
