@@ -167,8 +167,10 @@ pub struct LateComparison {
 }
 
 /// Two drives' cars whose nominal models the log left close, told apart by the candidates
-/// alone ([`super::screen`]): the drive whose best single effect fits the log better by
-/// more than [`SCREEN_MARGIN_GOF`] is taken.
+/// alone ([`super::screen`]): the other drive is taken where its best single effect fits the
+/// log better than the chosen car's by more than [`SCREEN_MARGIN_GOF`]. The other car is
+/// screened first; where its best does not beat the chosen car's nominal model by the
+/// margin, it cannot beat the chosen car's best, which is then not fitted.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DriveScreen {
     /// The car the nominal models ranked first, then the other drive's best.
@@ -182,10 +184,12 @@ pub struct DriveScreen {
 pub struct ScreenedCar {
     pub drive: CarDrive,
     pub controller: Controller,
-    /// Its nominal GoF on the whole log, and its best single candidate's.
+    /// Its nominal GoF on the whole log, and its best single candidate's: `None` for the
+    /// chosen car where the other car's best did not beat its nominal GoF by the margin (so
+    /// could not beat its best).
     pub nominal_gof: f64,
     pub best_effect: Option<String>,
-    pub best_gof: f64,
+    pub best_gof: Option<f64>,
 }
 
 /// The car the diagnosis runs, and how it was chosen.
@@ -406,13 +410,19 @@ impl CarChoice {
         }
         if let Some(sc) = &self.screened {
             let car = |c: &ScreenedCar| {
+                let best = match c.best_gof {
+                    Some(g) => format!(
+                        "with {} {:.1} %",
+                        c.best_effect.as_deref().unwrap_or("no candidate"),
+                        100.0 * g
+                    ),
+                    None => "its candidates not fitted".to_string(),
+                };
                 format!(
-                    "{} + {} nominal {:.1} %, with {} {:.1} %",
+                    "{} + {} nominal {:.1} %, {best}",
                     c.drive.name(),
                     controller_name(c.controller),
                     100.0 * c.nominal_gof,
-                    c.best_effect.as_deref().unwrap_or("no candidate"),
-                    100.0 * c.best_gof
                 )
             };
             line.push_str(&format!(
@@ -1015,20 +1025,27 @@ pub fn choose(
     let pick = other_order.remove(p);
     other_order.insert(0, pick);
     let second = finish(&other_order);
-    let screens = [
-        super::screen(&first.0, &first.1, opts),
-        super::screen(&second.0, &second.1, opts),
-    ];
-    let switched = screens[1].gof() > screens[0].gof() + SCREEN_MARGIN_GOF;
-    let car = |c: &CarChoice, s: &super::Screen| ScreenedCar {
+    // The other car first: where its best candidate does not beat the chosen car's nominal
+    // model by the margin, it cannot beat the chosen car's best, which is not fitted.
+    let other = super::screen(&second.0, &second.1, opts);
+    let nominal = nominal_fit(&first.0, &first.1).gof;
+    let own = (other.gof() > nominal + SCREEN_MARGIN_GOF)
+        .then(|| super::screen(&first.0, &first.1, opts));
+    let switched = own
+        .as_ref()
+        .is_some_and(|s| other.gof() > s.gof() + SCREEN_MARGIN_GOF);
+    let car = |c: &CarChoice, nominal_gof: f64, s: Option<&super::Screen>| ScreenedCar {
         drive: c.drive,
         controller: c.controller,
-        nominal_gof: s.nominal_gof,
-        best_effect: s.best.as_ref().map(|(e, _)| e.clone()),
-        best_gof: s.gof(),
+        nominal_gof,
+        best_effect: s.and_then(|s| s.best.as_ref().map(|(e, _)| e.clone())),
+        best_gof: s.map(super::Screen::gof),
     };
     let screened = DriveScreen {
-        cars: [car(&first.2, &screens[0]), car(&second.2, &screens[1])],
+        cars: [
+            car(&first.2, nominal, own.as_ref()),
+            car(&second.2, other.nominal_gof, Some(&other)),
+        ],
         switched,
     };
     let (rig, record, choice) = if switched { second } else { first };
