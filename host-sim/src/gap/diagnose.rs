@@ -492,11 +492,12 @@ impl FitWindow {
 }
 
 /// A first look at a log on a car: the nominal model's GoF on the whole log, and the best
-/// candidate alone (each fitted as the diagnosis first fits them, those the log's torque
-/// balance leaves; the best, the one that leaves the least on the fits' window) with its GoF
-/// on the whole log. Two cars whose nominal models the log
-/// leaves close are told apart by it ([`super::drive`]): a car with an effect can look, to
-/// the nominal models, more like the other drive than like itself.
+/// candidate alone with its GoF on the whole log. The candidates are those the log's torque
+/// balance leaves, each fitted as the diagnosis first fits them but on a window of 10 s (not
+/// 30) with 4 LM iterations (not 8 and a polish); the best is the one that leaves the least
+/// on that window. Two cars whose nominal models the log leaves close
+/// are told apart by it ([`super::drive`]): a car with an effect can look, to the nominal
+/// models, more like the other drive than like itself.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Screen {
     pub nominal_gof: f64,

@@ -653,8 +653,10 @@ pub struct LogSays {
 
 /// The car for a log on the paper rig: `drive` and `controller` where given (the command line
 /// or the header), the rest fitted; and, for a log at the reference rate whose header does
-/// not say how its reference column is timed, that convention. Returns the rig with that car
-/// in its model and the record as the diagnosis must read it. Other rigs are returned as
+/// not say how its reference column is timed, that convention. Where the drive is fitted and
+/// the two drives' nominal models come close, their candidates tell them apart
+/// ([`DriveScreen`], fitted with `opts`' candidates and threads). Returns the rig with that
+/// car in its model and the record as the diagnosis must read it. Other rigs are returned as
 /// they are, with `None`.
 pub fn choose(
     rig: &Rig,
