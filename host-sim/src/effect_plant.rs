@@ -336,10 +336,19 @@ fn friction(fc: f64, fs: f64, vs: f64, w_creep: f64, w: f64, j: f64, dt: f64) ->
     }
     let w_eps = 4.0 * level * dt / j;
     if w_creep > w_eps {
-        -level * (w / w_creep).tanh()
+        -level * tanh_by_exp(w / w_creep)
     } else {
         -level * (w / w_eps).clamp(-1.0, 1.0)
     }
+}
+
+/// `tanh(x)` by one `exp`: the library's `tanh` goes through `expm1`, and the two took 15 % of
+/// a diagnosis of a log with rack friction (`perf record` on `host-sim gap`; the friction runs
+/// twice per 50 us step). Within 2.3e-16 of `f64::tanh` for every `x` (absolute: the force's
+/// error is below a femtonewton), +-1 beyond 19, NaN for NaN.
+fn tanh_by_exp(x: f64) -> f64 {
+    let t = (-2.0 * x.abs()).exp();
+    ((1.0 - t) / (1.0 + t)).copysign(x)
 }
 
 /// The paper's plant (eqs. 1-8) with [`PlantEffects`], one current-loop step at a time.
@@ -531,6 +540,28 @@ impl Actuator for EffectPlant {
 mod tests {
     use super::*;
     use crate::plant::LinearPlant;
+
+    #[test]
+    fn tanh_by_exp_is_the_library_tanh_to_a_bit_of_one() {
+        // Every scale the friction meets: speeds far below the creep speed to far above it.
+        let mut worst: f64 = 0.0;
+        for k in 0..200_000 {
+            let x = -25.0 + 50.0 * k as f64 / 200_000.0;
+            worst = worst.max((tanh_by_exp(x) - x.tanh()).abs());
+        }
+        for e in -300..2 {
+            let x = 10f64.powi(e) * 1.37;
+            for x in [x, -x] {
+                worst = worst.max((tanh_by_exp(x) - x.tanh()).abs());
+            }
+        }
+        assert!(worst <= 2.3e-16, "{worst:e}");
+        assert_eq!(tanh_by_exp(f64::INFINITY), 1.0);
+        assert_eq!(tanh_by_exp(f64::NEG_INFINITY), -1.0);
+        assert_eq!(tanh_by_exp(40.0), 1.0);
+        assert!(tanh_by_exp(f64::NAN).is_nan());
+        assert_eq!(tanh_by_exp(0.0), 0.0);
+    }
 
     #[test]
     fn without_effects_it_is_the_linear_plant() {
