@@ -503,6 +503,14 @@ pub(super) const SYNC_SEARCH_S: f64 = 10.0;
 /// car's is not refined: a phase moves the GoF by less.
 const PRUNE_GOF: f64 = 0.15;
 
+/// An EPOS4 car under the ECU controller whose head GoF at its best column-encoder phase on
+/// the head is this far below the best car's keeps that phase: the phase is fitted on the
+/// whole log ([`super::drive_clock::fit_encoder_phase`], eight runs of it) only for a car that
+/// may come first. (The head's best phase bounds the car's head GoF at any phase; the cars are
+/// ranked on the whole log: on the simulated car's sweep logged without a header, the head
+/// chose 1.25 ms and the whole log 1.5 ms, 0.04 points apart there.)
+const ENCODER_REACH_GOF: f64 = 0.02;
+
 /// The position-loop ticks into its period at which a direct-drive car may take each reference
 /// sample: the frame's time on the bus (0.1-0.3 ms at 500 kbit/s - 1 Mbit/s) and the wait for
 /// the next tick of the free-running 2 kHz loop (up to 0.5 ms) put it 0-2 ticks after the
@@ -839,36 +847,47 @@ pub fn choose(
                     }
                     _ => best,
                 };
-                // ECU mode's column terms read the ECU's newest encoder sample: when its task
-                // samples is the car's too. Where the header does not say, fitted on the whole
-                // log at the clock found: a track's first 10 s chose the phase unreliably (on
-                // the simulated car's track 0 ms, on the whole log 1.25 ms).
-                let encoder = match best.encoder_phase_s {
-                    None => drive_clock::fit_encoder_phase(
-                        &rig_of(&best),
-                        &records[index_of(k)],
-                        threads,
-                    ),
-                    Some(_) => None,
-                };
-                // The phase from the whole log, the car's figure on the head as every other
-                // car's is (`best_nominal` and the late reference compare them).
-                let best = match encoder {
-                    Some((phase, _)) => {
-                        let at_phase = Tried {
-                            encoder_phase_s: Some(phase),
-                            ..best
-                        };
-                        Tried {
-                            gof: nominal_fit(&rig_of(&at_phase), &shorts[index_of(k)]).gof,
-                            ..at_phase
-                        }
-                    }
-                    None => best,
-                };
                 best_of_car.push(best);
             }
         }
+    }
+    // ECU mode's column terms read the ECU's newest encoder sample: when its task samples is
+    // the car's too. Where the header does not say, fitted on the whole log at the clock found
+    // (a track's first 10 s chose the phase unreliably: on the simulated car's track 0 ms, on
+    // the whole log 1.25 ms). Its phases are tried on the head first: the best of them bounds
+    // the car's head GoF at any phase, and a car that stays ENCODER_REACH_GOF below the best
+    // car's there keeps the head's phase.
+    let best_head = best_of_car
+        .iter()
+        .map(|t| t.gof)
+        .fold(f64::NEG_INFINITY, f64::max);
+    for best in best_of_car.iter_mut() {
+        if best.encoder_phase_s.is_some() {
+            continue;
+        }
+        let k = best.reference_shift_rows;
+        let car = rig_of(best);
+        let Some((on_head, head_gof)) =
+            drive_clock::fit_encoder_phase(&car, &shorts[index_of(k)], threads)
+        else {
+            continue;
+        };
+        let phase = if head_gof < best_head - ENCODER_REACH_GOF {
+            on_head
+        } else {
+            drive_clock::fit_encoder_phase(&car, &records[index_of(k)], threads)
+                .map_or(on_head, |(phase, _)| phase)
+        };
+        // The car's figure on the head as every other car's is (`best_nominal` and the late
+        // reference compare them).
+        let at_phase = Tried {
+            encoder_phase_s: Some(phase),
+            ..*best
+        };
+        *best = Tried {
+            gof: nominal_fit(&rig_of(&at_phase), &shorts[index_of(k)]).gof,
+            ..at_phase
+        };
     }
     // The cars compared on the whole log; an EPOS4 car also with its SYNC grid walking as the
     // header says, where that fits the log better.

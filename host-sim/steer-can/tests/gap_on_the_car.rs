@@ -60,11 +60,17 @@ fn diagnosed_as_logged(
         SimDrive::Epos4 => CarDrive::Epos4,
         SimDrive::Direct => CarDrive::Direct,
     };
+    // A log whose header lines `edit` took away has its drive fitted.
+    let from = if built.log.comments.is_empty() {
+        Source::Fitted
+    } else {
+        Source::Header
+    };
     let (d, choice) = gap_file::diagnose_file(&path, None, None);
     assert_eq!(
         (choice.drive, choice.drive_from),
-        (want, Source::Header),
-        "the log's header names the drive"
+        (want, from),
+        "the drive, from the log's header where it has one"
     );
     (d, choice)
 }
@@ -227,6 +233,32 @@ fn the_epos4_car_under_the_ecu_controller_on_a_sweep_is_none() {
         "nominal GoF {:.1} % against the chain's repeatability {:.1} %",
         100.0 * d.baseline_gof,
         100.0 * r.gof
+    );
+}
+
+/// The same car logged without a header (a team's logger writing convert's rows): the drive,
+/// the controller and the column encoder's phase are fitted. The phase is fitted on the whole
+/// log for the car that may come first; the sweep's first 10 s chose 1.25 ms, a step short of
+/// where convert's header places the encoder task (1.69 ms after the reference).
+#[test]
+fn the_epos4_car_under_the_ecu_controller_logged_without_a_header_is_told_with_its_encoder_phase() {
+    let (d, choice) = diagnosed_as_logged(
+        epos4(ControllerKind::Ecu),
+        profile::sweep(Sweep::PAPER).unwrap(),
+        |log| log.comments.clear(),
+    );
+    assert_eq!(
+        (choice.controller, choice.controller_from),
+        (host_sim::sim::Controller::Ecu, Source::Fitted)
+    );
+    assert_none_at_95(&d);
+    let phase = choice
+        .encoder_phase_s
+        .expect("the ECU controller's encoder phase, fitted");
+    assert!(
+        (phase - 1.69e-3).abs() <= 0.25e-3,
+        "encoder sampled {:.2} ms after the reference, not within a step of 1.69 ms",
+        1e3 * phase
     );
 }
 
