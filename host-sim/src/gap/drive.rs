@@ -872,21 +872,28 @@ pub fn choose(
         else {
             continue;
         };
-        let phase = if head_gof < best_head - ENCODER_REACH_GOF {
-            on_head
-        } else {
-            drive_clock::fit_encoder_phase(&car, &records[index_of(k)], threads)
-                .map_or(on_head, |(phase, _)| phase)
-        };
+        let whole_log = (head_gof >= best_head - ENCODER_REACH_GOF)
+            .then(|| drive_clock::fit_encoder_phase(&car, &records[index_of(k)], threads))
+            .flatten()
+            .map(|(phase, _)| phase);
         // The car's figure on the head as every other car's is (`best_nominal` and the late
-        // reference compare them).
-        let at_phase = Tried {
-            encoder_phase_s: Some(phase),
-            ..*best
-        };
-        *best = Tried {
-            gof: nominal_fit(&rig_of(&at_phase), &shorts[index_of(k)]).gof,
-            ..at_phase
+        // reference compare them): the head's scan ran it at the head's phase.
+        *best = match whole_log.filter(|&phase| phase != on_head) {
+            Some(phase) => {
+                let at_phase = Tried {
+                    encoder_phase_s: Some(phase),
+                    ..*best
+                };
+                Tried {
+                    gof: nominal_fit(&rig_of(&at_phase), &shorts[index_of(k)]).gof,
+                    ..at_phase
+                }
+            }
+            None => Tried {
+                encoder_phase_s: Some(on_head),
+                gof: head_gof,
+                ..*best
+            },
         };
     }
     // The cars compared on the whole log; an EPOS4 car also with its SYNC grid walking as the
