@@ -274,6 +274,34 @@ fn gap_refuses_a_hole_longer_than_it_bridges_and_says_where() {
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
+/// Row 1, as a spreadsheet or pandas writes a missing value: an empty cell is a `nan` cell,
+/// filled and counted as one; an empty time is refused with its line.
+#[test]
+fn gap_reads_empty_cells_as_missing_samples_and_refuses_an_empty_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut lines = step_log(dir.path());
+    for line in [40, 41, 300] {
+        set_field(&mut lines, line, 2, ""); // sw_deg
+    }
+    let o = gap_of(dir.path(), "empty.csv", &lines);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("empty.csv: column `sw_deg`: 3 missing samples (nan)"),
+        "{}",
+        stderr(&o)
+    );
+    set_field(&mut lines, 500, 0, "");
+    let o = gap_of(dir.path(), "no-time.csv", &lines);
+    assert_refused(
+        &o,
+        &[
+            "no-time.csv",
+            "line 500",
+            "time `t` must be a finite number",
+        ],
+    );
+}
+
 /// Row 2: duplicated time, time going back, and t = 1e300.
 #[test]
 fn gap_refuses_time_that_does_not_increase_with_file_line_and_reason() {

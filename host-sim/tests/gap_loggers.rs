@@ -582,6 +582,116 @@ fn a_log_with_jitter_up_to_its_spacing_is_placed_by_its_rows_order() {
     }
 }
 
+/// A 1 kHz logger that stamps each row within +-1 ms of its place without keeping the stamps
+/// in order (a receiver stamping rows as they come, through a queue of its own): about one
+/// row in eight is stamped before the row ahead of it. The file is read, the rows taken in
+/// its order, each at its place on their grid: the record's reference is the one of the same
+/// rows stamped in order, step for step, its output and effort as near the rows' own places
+/// as that record's, and the log's timing reads the stamps' jitter. A row stamped
+/// further back than that jitter explains is refused, with its line.
+#[test]
+fn a_log_whose_stamps_jitter_past_each_other_is_read_in_its_rows_order() {
+    let case = GenCase::nominal(sweep(12.0), 1000);
+    let logger = team(ReferenceConvention::PeriodStarting, 1000, true, true);
+    let rows = rows_logged(&case, 4, &logger);
+    let dir = tempfile::tempdir().unwrap();
+    let in_order = dir.path().join("in-order.csv");
+    log_of(&case, 4, &logger).save(&in_order).unwrap();
+    // The same rows, each stamped +-1 ms about its place, in whole microseconds.
+    let text = std::fs::read_to_string(&in_order).unwrap();
+    let (head, data): (Vec<&str>, Vec<&str>) = text
+        .lines()
+        .partition(|l| l.starts_with('#') || l.starts_with('t'));
+    assert_eq!(data.len(), rows.t.len());
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut jittered: Vec<String> = head.iter().map(|l| l.to_string()).collect();
+    let mut stamps = Vec::new();
+    for (line, grid) in data.iter().zip(&rows.grid_s) {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        let u = (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0;
+        let stamp = ((grid + 1e-3 * u) * 1e6).round() * 1e-6;
+        stamps.push(stamp);
+        let (_, rest) = line.split_once(',').unwrap();
+        jittered.push(format!("{stamp:.6},{rest}"));
+    }
+    let back = stamps.windows(2).filter(|w| w[1] <= w[0]).count();
+    assert!(back > rows.t.len() / 10, "{back} stamps go back");
+    let past = dir.path().join("past.csv");
+    std::fs::write(&past, jittered.join("\n") + "\n").unwrap();
+
+    let rig = Rig::paper();
+    let ordered = rig.load_log(&in_order).unwrap();
+    let loaded = rig.load_log(&past).unwrap();
+    println!("{:?}\n{:?}", loaded.timing, loaded.notes);
+    assert!(
+        loaded
+            .notes
+            .iter()
+            .any(|n| n.contains(&format!("stamps go back {back} times"))),
+        "{:?}",
+        loaded.notes
+    );
+    // Uniform over +-1 ms: 0.74 ms by the median absolute deviation.
+    let jitter_ms = 1e3 * loaded.timing.jitter_s;
+    assert!((0.6..0.85).contains(&jitter_ms), "jitter {jitter_ms:.2} ms");
+    let lost = rows_lost(&logger, &rows);
+    assert!(
+        loaded.timing.missing_rows.abs_diff(lost) <= 2,
+        "{} rows missing of {lost} lost",
+        loaded.timing.missing_rows
+    );
+    let (a, b) = (&ordered.record, &loaded.record);
+    assert_eq!(a.reference.len(), b.reference.len());
+    assert_eq!(a.reference, b.reference, "the reference, step for step");
+    // Against the record of the rows at their own grid places: a row beside a lost one may
+    // be placed a row off its place either way, and no worse for stamps that go back.
+    let exact = record_of(&rows.grid_s, &rows);
+    let rms = |x: &[f64], y: &[f64]| {
+        let sum: f64 = x.iter().zip(y).map(|(p, q)| (p - q).powi(2)).sum();
+        (sum / x.len() as f64).sqrt()
+    };
+    for (what, truth, ordered, past) in [
+        ("output, deg", &exact.output, &a.output, &b.output),
+        ("effort, A", &exact.effort, &a.effort, &b.effort),
+    ] {
+        let (in_order, gone_back) = (rms(truth, ordered), rms(truth, past));
+        println!(
+            "{what}: off the rows' own places by {in_order:.2e} RMS in order, {gone_back:.2e} as stamped"
+        );
+        assert!(
+            gone_back <= 1.5 * in_order,
+            "{what}: {gone_back} against {in_order}"
+        );
+    }
+
+    // One row stamped 5 ms (five rows) before the one ahead of it: no receiver's jitter.
+    let mut far = jittered.clone();
+    let at = head.len() + 4000;
+    let (_, rest) = far[at].split_once(',').unwrap();
+    far[at] = format!("{:.6},{rest}", stamps[3999 - 1] - 5e-3);
+    let far_path = dir.path().join("far.csv");
+    std::fs::write(&far_path, far.join("\n") + "\n").unwrap();
+    let Err(err) = rig.load_log(&far_path) else {
+        panic!("a stamp 5 ms back is refused");
+    };
+    let err = err.to_string();
+    assert!(
+        err.contains("far.csv: line") && err.contains("strictly increase"),
+        "{err}"
+    );
+}
+
+/// Rows the logger lost: those its grid places skip.
+fn rows_lost(logger: &Logger, rows: &Rows) -> usize {
+    let row_s = 1.0 / f64::from(logger.rate_hz);
+    rows.grid_s
+        .windows(2)
+        .map(|w| ((w[1] - w[0]) / row_s).round() as usize - 1)
+        .sum()
+}
+
 /// Loggers at 250-500 Hz that lost 1 % of their rows, either convention, stamps exact or
 /// +-1 ms: where a step's middle row was lost and no kept row sits near it or on the step's
 /// boundary (at 250 Hz a period holds 2.5 rows, and only every other period start falls on
@@ -662,8 +772,13 @@ fn assert_same_reference(
 /// The case's rows as `logger` writes them, on the diagnosis's 10 ms grid.
 fn record_by(case: &GenCase, logger: &Logger) -> host_sim::gap::Record {
     let rows = rows_logged(case, 4, logger);
+    record_of(&rows.t, &rows)
+}
+
+/// `rows` stamped at `t`, on the diagnosis's 10 ms grid.
+fn record_of(t: &[f64], rows: &Rows) -> host_sim::gap::Record {
     host_sim::gap::Record::from_samples(
-        &rows.t,
+        t,
         &rows.reference,
         &rows.sw_deg,
         &rows.current_a,

@@ -31,9 +31,11 @@
 //! * **Rows.** One line per sample with as many comma-separated fields as the header. A field is
 //!   a decimal number as Rust's `f64` parser reads it (`12`, `-0.5`, `1e-3`).
 //! * **Time.** `t` is finite and strictly increasing from row to row; it need not start at 0 nor
-//!   be evenly spaced.
-//! * **Missing samples.** Any column but `t` may hold `nan` (any letter case) for a sensor
-//!   dropout; it is read as `f64::NAN`. Infinities are refused everywhere: no sensor reports one,
+//!   be evenly spaced. ([`Table`] may also read it as stamped, [`TimeOrder::AsStamped`], for a
+//!   caller that places rows whose stamps jitter past each other.)
+//! * **Missing samples.** Any column but `t` may hold `nan` (any letter case) or nothing (an
+//!   empty field, as a spreadsheet or pandas writes a missing value) for a sensor dropout; it
+//!   is read as `f64::NAN`. Infinities are refused everywhere: no sensor reports one,
 //!   so one in a file means a bug upstream. A tool that cannot use a gap fills it with
 //!   [`fill_missing`] (linear between the neighbours) and says how many samples it filled.
 //! * **Physical bounds.** Every value, time included, must lie within a bound set by the unit at
@@ -258,7 +260,7 @@ impl fmt::Display for LogError {
             Self::BadNumber { line, column, text } => write!(
                 f,
                 "line {line}, column `{column}`: cannot read `{text}` as a value; expected a \
-                 finite number, or `nan` for a missing sample"
+                 finite number, or `nan` or nothing for a missing sample"
             ),
             Self::OutOfBounds {
                 line,
@@ -477,7 +479,9 @@ impl Log {
 
     /// Reads a log in the format of the module doc from plain (not compressed) CSV text.
     pub fn read_from(r: impl BufRead) -> Result<Log, LogError> {
-        let table = read_table(r, |line| Ok((parse_header(line)?, 0)))?;
+        let table = read_table(r, TimeOrder::Increasing, |line| {
+            Ok((parse_header(line)?, 0))
+        })?;
         let mut columns = table.columns.into_iter();
         let mut next = || columns.next().unwrap_or_default();
         let (t, ref_sw_deg, sw_deg, motor_rad, current_a) =
@@ -621,10 +625,30 @@ pub struct Table {
     pub comments: Vec<String>,
 }
 
+/// What the reader asks of the time column besides being finite.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TimeOrder {
+    /// Strictly increasing from row to row (the module doc's rule).
+    Increasing,
+    /// As the logger stamped its rows, in the rows' order: a receiver that stamps each row
+    /// within a millisecond of its place may stamp one before the row ahead of it. The
+    /// caller places the rows ([`Table::first_time_back`] finds where the stamps go back).
+    AsStamped,
+}
+
 impl Table {
     /// Reads plain CSV text whose header names `time_column`.
     pub fn read_from(r: impl BufRead, time_column: &str) -> Result<Table, LogError> {
-        read_table(r, |line| {
+        Table::read_from_ordered(r, time_column, TimeOrder::Increasing)
+    }
+
+    /// As [`Table::read_from`], with the time column's order as `order` asks.
+    pub fn read_from_ordered(
+        r: impl BufRead,
+        time_column: &str,
+        order: TimeOrder,
+    ) -> Result<Table, LogError> {
+        read_table(r, order, |line| {
             let names: Vec<String> = line.split(',').map(|f| f.trim().to_string()).collect();
             let mut seen: Vec<&str> = Vec::new();
             for name in &names {
@@ -643,7 +667,33 @@ impl Table {
 
     /// Reads `path`, plain or gzip-compressed (recognised by content); errors name the file.
     pub fn load(path: &Path, time_column: &str) -> Result<Table, LogError> {
-        read_file(path, |r| Table::read_from(r, time_column))
+        Table::load_ordered(path, time_column, TimeOrder::Increasing)
+    }
+
+    /// As [`Table::load`], with the time column's order as `order` asks.
+    pub fn load_ordered(
+        path: &Path,
+        time_column: &str,
+        order: TimeOrder,
+    ) -> Result<Table, LogError> {
+        read_file(path, |r| Table::read_from_ordered(r, time_column, order))
+    }
+
+    /// The first row whose time `time` is not after the row's before it, as the error
+    /// [`TimeOrder::Increasing`] reports (its file line, the two times); `None` where time
+    /// strictly increases.
+    pub fn first_time_back(&self, time: &[f64]) -> Option<LogError> {
+        let k = time.windows(2).position(|w| w[1] <= w[0])? + 1;
+        Some(LogError::NonMonotonicTime {
+            line: self.lines.get(k).copied().unwrap_or(k),
+            previous: time[k - 1],
+            current: time[k],
+        })
+    }
+
+    /// `err` as it reads for the file at `path` (errors found after reading).
+    pub fn error_in_file(err: LogError, path: &Path) -> LogError {
+        err.in_file(path)
     }
 
     /// The column of this name.
@@ -776,6 +826,7 @@ fn read_file<T>(
 /// neither blank nor a comment and returns the names and the index of the time column.
 fn read_table(
     mut r: impl BufRead,
+    order: TimeOrder,
     header: impl FnOnce(&str) -> Result<(Vec<String>, usize), LogError>,
 ) -> Result<Table, LogError> {
     let mut text = String::new();
@@ -853,7 +904,8 @@ fn read_table(
         if t.is_nan() {
             return Err(LogError::NonFiniteTime { line: line_no });
         }
-        if let Some(&previous) = table.columns[time].last()
+        if order == TimeOrder::Increasing
+            && let Some(&previous) = table.columns[time].last()
             && t <= previous
         {
             return Err(LogError::NonMonotonicTime {
@@ -935,6 +987,10 @@ fn check_column_name(name: &str, earlier: &[&str]) -> Result<(), LogError> {
 }
 
 fn parse_value(field: &str, line: usize, column: &str) -> Result<f64, LogError> {
+    // An empty field is a missing sample, as a spreadsheet or pandas (`to_csv`) writes one.
+    if field.is_empty() {
+        return Ok(f64::NAN);
+    }
     match field.parse::<f64>() {
         Ok(v) if !v.is_infinite() => Ok(v),
         _ => Err(LogError::BadNumber {
@@ -1226,6 +1282,44 @@ mod tests {
         let err = read_str(&format!("{head}inf,1,2,3,4\n")).expect_err("infinite t");
         assert!(
             matches!(err, LogError::BadNumber { line: 2, .. }),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn an_empty_field_is_a_missing_sample_and_an_empty_time_is_refused() {
+        let head = "t,ref_sw_deg,sw_deg,motor_rad,current_a\n";
+        let log = read_str(&format!("{head}0,1,,3,4\n0.1,1,2,3, \n")).expect("valid");
+        assert!(log.sw_deg[0].is_nan() && log.current_a[1].is_nan());
+        assert_eq!((log.sw_deg[1], log.current_a[0]), (2.0, 4.0));
+        let err = read_str(&format!("{head},1,2,3,4\n")).expect_err("empty t");
+        assert!(
+            matches!(err, LogError::NonFiniteTime { line: 2 }),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn a_table_read_as_stamped_keeps_stamps_that_go_back_and_says_where() {
+        let text = "t,x\n0.000,1\n0.0021,2\n0.0019,3\n0.003,4\n";
+        let err = Table::read_from(text.as_bytes(), "t").expect_err("time back");
+        assert!(
+            matches!(err, LogError::NonMonotonicTime { line: 4, .. }),
+            "{err:?}"
+        );
+        let table = Table::read_from_ordered(text.as_bytes(), "t", TimeOrder::AsStamped)
+            .expect("read as stamped");
+        let t = table.column("t").expect("t").to_vec();
+        assert_eq!(t, [0.0, 0.0021, 0.0019, 0.003]);
+        assert_eq!(table.column("x"), Some(&[1.0, 2.0, 3.0, 4.0][..]));
+        let back = table.first_time_back(&t).expect("goes back");
+        assert_eq!(back.to_string(), err.to_string());
+        assert!(table.first_time_back(&[0.0, 0.001, 0.002, 0.003]).is_none());
+        let nan = "t,x\n0,1\nnan,2\n";
+        let err =
+            Table::read_from_ordered(nan.as_bytes(), "t", TimeOrder::AsStamped).expect_err("nan t");
+        assert!(
+            matches!(err, LogError::NonFiniteTime { line: 3 }),
             "{err:?}"
         );
     }

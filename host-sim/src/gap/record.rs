@@ -92,6 +92,38 @@ const ORDER_NOISE: f64 = 0.1;
 /// where the rows kept in order pull the stamps in.
 const ORDER_MAX_JITTER: f64 = 0.8;
 
+/// How far a gap between two stamps may fall short of the rows' spacing, in the gaps' own
+/// spread (a standard deviation, by their median absolute deviation), for stamps that go back
+/// to be a receiver's jitter: +-1 ms at 1 kHz falls short by at most 2 ms, 2.3 spreads; a
+/// normal jitter of any size by five spreads once in 3.5 million gaps.
+const STAMP_GAP_SPREADS: f64 = 5.0;
+
+/// Stamps `t` that go back somewhere, each row at its place on the grid the rows' order puts
+/// them on ([`LogTiming::with_places`]), and the stamps' jitter about it, s. `None` unless the
+/// rows sit on one grid and every gap, the ones that go back too, is within
+/// [`STAMP_GAP_SPREADS`] of the gaps' spread short of their median: a stamp far out of its
+/// place in a log of regular stamps (a duplicated line, two logs run together) is no
+/// receiver's jitter.
+pub(super) fn placed_in_order(t: &[f64]) -> Option<(Vec<f64>, f64)> {
+    let gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let shortest = gaps.iter().copied().fold(f64::INFINITY, f64::min);
+    if gaps.is_empty() {
+        return None;
+    }
+    let (median, spread) = median_and_spread(gaps);
+    if !(median > 0.0 && median - shortest <= STAMP_GAP_SPREADS * spread) {
+        return None;
+    }
+    let (timing, places) = LogTiming::with_places(t);
+    timing.is_regular().then(|| {
+        let placed = places
+            .iter()
+            .map(|&p| timing.grid_origin_s + timing.row_dt_s * (p + 1) as f64)
+            .collect();
+        (placed, timing.jitter_s)
+    })
+}
+
 /// The step of the mean of a series (`sum(k)`: the sum of its first `k` values, `n` values
 /// in all) between the `w` rows before row `j` and as many from `j` on.
 fn order_step(sum: impl Fn(usize) -> f64, n: usize, j: usize, w: usize) -> f64 {

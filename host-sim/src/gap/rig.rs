@@ -4,7 +4,7 @@
 //! servo pendulum.
 
 use super::{CurrentSamples, Record};
-use crate::logfmt::{LogError, Table, fill_missing};
+use crate::logfmt::{LogError, Table, TimeOrder, fill_missing};
 use crate::plant::PlantParams;
 use std::path::Path;
 use steering_ecu::gains::EposGains;
@@ -540,7 +540,8 @@ impl Rig {
 
     /// As [`Rig::load_record`], with a note for each column whose missing samples (`nan`) were
     /// filled, for the caller to show. The file is read and checked by the project's log reader
-    /// (`logfmt::Table`): time strictly increasing, values within physical bounds, errors with
+    /// (`logfmt::Table`): time strictly increasing (on the paper rig, or stamps that go back
+    /// within their jitter, each row then at its place), values within physical bounds, errors with
     /// file and line.
     pub fn load_record_noting(&self, path: &Path) -> Result<(Record, Vec<String>), RigError> {
         self.load_log(path).map(|l| (l.record, l.notes))
@@ -550,7 +551,14 @@ impl Rig {
     /// stamps' timing.
     pub fn load_log(&self, path: &Path) -> Result<LoadedLog, RigError> {
         let name = path.display().to_string();
-        let table = Table::load(path, &self.columns.time).map_err(RigError::Log)?;
+        // The car's logs may come from a receiver that stamps each row within a millisecond of
+        // its place, in the rows' order: at 1 kHz such stamps go back now and then. They are
+        // read as stamped and placed below; every other rig's time must increase.
+        let order = match self.model {
+            RigModel::Paper(_) => TimeOrder::AsStamped,
+            _ => TimeOrder::Increasing,
+        };
+        let table = Table::load_ordered(path, &self.columns.time, order).map_err(RigError::Log)?;
         let mut notes = Vec::new();
         // Missing samples are filled so that no NaN reaches the simulation and the costs; a
         // required column with no sample at all is refused, an optional one is left out.
@@ -588,6 +596,9 @@ impl Rig {
             Ok(Some(values))
         };
         let mut t = col(&self.columns.time, true)?.unwrap_or_default();
+        // The stamps as the file holds them where they had to be placed in order (for the
+        // log's timing), else empty.
+        let mut stamped: Vec<f64> = Vec::new();
         let reference = col(&self.columns.reference, true)?.unwrap_or_default();
         let output = col(&self.columns.output, true)?.unwrap_or_default();
         let effort = col(&self.columns.effort, true)?.unwrap_or_default();
@@ -629,6 +640,7 @@ impl Rig {
         if t.len() < 20 {
             return Err(RigError::TooShort { path: name });
         }
+        let time_back = table.first_time_back(&t);
         if !matches!(self.model, RigModel::Emps(_)) {
             // A logger on the wall clock stamps Unix seconds: read from the first stamp's
             // whole second.
@@ -638,6 +650,19 @@ impl Rig {
                     "{name}: stamps start at {first:.3} s (a wall clock's?); read as seconds \
                      from {from:.0} s"
                 ));
+            }
+            if let Some(back) = time_back {
+                let (placed, jitter_s) = super::record::placed_in_order(&t)
+                    .ok_or_else(|| RigError::Log(Table::error_in_file(back, path)))?;
+                let times = t.windows(2).filter(|w| w[1] <= w[0]).count();
+                notes.push(format!(
+                    "{name}: stamps go back {times} times, within the stamps' jitter \
+                     ({:.2} ms RMS); each row is taken in the file's order at its place on \
+                     the rows' grid",
+                    1e3 * jitter_s
+                ));
+                stamped = t;
+                t = placed;
             }
             let spacing_s = host_io::grid::median_gap(&t);
             if spacing_s > MAX_ROW_STEPS * self.grid_s() {
@@ -741,7 +766,7 @@ impl Rig {
             record,
             notes,
             comments: table.comments.clone(),
-            timing: super::LogTiming::of(&t),
+            timing: super::LogTiming::of(if stamped.is_empty() { &t } else { &stamped }),
         })
     }
 }
