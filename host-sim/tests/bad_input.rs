@@ -237,6 +237,32 @@ fn gap_refuses_rows_too_far_apart_for_the_grid_and_asks_for_seconds() {
     assert_refused(&o, &["ms.csv", "apart", "`t` in seconds"]);
 }
 
+/// A 50 Hz logger: rows 20 ms apart, every other 10 ms reference sample never logged.
+/// Refused with the spacing and the period, not diagnosed against a guess of the samples
+/// between rows (the old reader gave a car with play a nominal GoF of 13 % and
+/// `parameters`).
+#[test]
+fn gap_refuses_rows_further_apart_than_the_reference_period() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines = step_log(dir.path());
+    let sparse: Vec<String> = lines
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i == 0 || i % 20 == 0)
+        .map(|(_, l)| l.clone())
+        .collect();
+    let o = gap_of(dir.path(), "fifty.csv", &sparse);
+    assert_refused(
+        &o,
+        &[
+            "fifty.csv",
+            "rows 20.00 ms apart",
+            "the reference's 10 ms period",
+            "100 Hz",
+        ],
+    );
+}
+
 /// A logger that stalled (0.2 s without a row) or a sensor that dropped out (0.15 s of `nan`
 /// current) leaves a stretch the reader can only fill with a line between its ends: refused,
 /// with where, not scored against the line (2 s of a 100 Hz track missing turned an

@@ -826,6 +826,64 @@ fn a_period_starting_log_at_200_hz_reads_each_steps_own_reference() {
     }
 }
 
+/// A 125 Hz logger: rows 8 ms apart, fewer than two a 10 ms step, so a step's middle has no
+/// row and the row after it often holds the next period's sample. The steps are moved onto
+/// the reference's periods and each reads the row nearest its middle: the record's reference
+/// is our 100 Hz logger's, sample for sample, whichever the convention, with stamps +-1 ms and
+/// 1 % of rows lost. A period no row holds (its one row lost, or a row on its start that
+/// still held the sample before: 2 % of them) takes the cubic through its neighbours'
+/// samples, within half a column-encoder count of its own. (Read as before, by the first row past each step's middle, one step in
+/// five repeated a sample and the next skipped one: a current spike each through the
+/// acceleration feedforward, and a car with play at 5 % nominal GoF called `parameters`.)
+#[test]
+fn a_log_of_fewer_than_two_rows_a_period_reads_each_periods_own_sample() {
+    let case = GenCase::nominal(sweep(12.0), 125);
+    let ours = record_by(&case, &Logger::ours(100));
+    for convention in [
+        ReferenceConvention::PeriodStarting,
+        ReferenceConvention::PeriodEnding,
+    ] {
+        for (jitter, drop) in [(false, false), (true, true)] {
+            let logger = team(convention, 125, jitter, drop);
+            let what = logger.describe();
+            let theirs = record_by(&case, &logger);
+            // The same samples, the steps perhaps a period or two apart at the start.
+            let n = ours.reference.len();
+            let differ_at = |offset: isize| {
+                (5..n - 5)
+                    .filter(|&k| {
+                        let j = k as isize + offset;
+                        usize::try_from(j)
+                            .ok()
+                            .and_then(|j| theirs.reference.get(j))
+                            .is_none_or(|v| *v != ours.reference[k])
+                    })
+                    .count()
+            };
+            let offset = (-3..=3).min_by_key(|&o| differ_at(o)).unwrap();
+            let differ = differ_at(offset);
+            // Where a period's rows were all lost, the cubic through its neighbours' samples.
+            let worst = (5..n - 5)
+                .filter_map(|k| {
+                    let j = usize::try_from(k as isize + offset).ok()?;
+                    Some((theirs.reference.get(j)? - ours.reference[k]).abs())
+                })
+                .fold(0.0, f64::max);
+            println!(
+                "{what}: steps {offset:+} against ours, {differ} of {n} read another sample, \
+                 at most {worst:.1e} deg off"
+            );
+            let bound = n / 25;
+            assert!(
+                differ <= bound,
+                "{what}: {differ} of {n} steps read another sample"
+            );
+            // Half a count of the column encoder (0.088 deg).
+            assert!(worst < 0.044, "{what}: a step {worst} deg off");
+        }
+    }
+}
+
 /// A 1 kHz logger that lost 1 % of its rows, its stamps 2.7 ms late: the record's 10 ms steps
 /// start from the stamps, so their boundaries fall 2-3 ms off the ECU's periods, and a row on
 /// a boundary holds the next period's sample whichever the convention. A step whose middle

@@ -15,7 +15,8 @@ type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 #[derive(Args, Debug)]
 #[command(disable_help_flag = true)]
 pub struct GapArgs {
-    /// The log (rig's CSV columns, .csv or .csv.gz, any rate); or `selftest`, or `bench`.
+    /// The log (rig's CSV columns, .csv or .csv.gz, any rate with a row every reference
+    /// period); or `selftest`, or `bench`.
     #[arg(value_name = "LOG", required_unless_present = "help")]
     pub log: Option<PathBuf>,
     /// Print help (`gap selftest --help`: the selftest's own options).

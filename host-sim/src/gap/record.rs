@@ -369,6 +369,150 @@ fn boundary_phase(
     (count > 0).then(|| (s.atan2(c) / std::f64::consts::TAU).rem_euclid(1.0) * step)
 }
 
+/// Where the reference's periods may start after `origin`, modulo `step`, s: the phases that
+/// lie in the most of the intervals between two neighbouring rows across which the reference
+/// changes (each holds a period start), as the latest of them and the width of their run.
+/// Where the rows' rate and the periods' are commensurate the run keeps a width (8 ms rows
+/// against 10 ms periods: 2 ms), and a row may sit on a start at either of its ends: only the
+/// rows that lie in a period for every start of the run are surely that period's.
+fn period_start_by_changes(
+    t: &[f64],
+    reference: &[f64],
+    origin: f64,
+    step: f64,
+    row_dt: f64,
+) -> Option<(f64, f64)> {
+    const BINS: usize = 400;
+    let width = step / BINS as f64;
+    // A difference array over the bins, each interval (lo, hi] added modulo the step.
+    let mut diff = vec![0i64; BINS + 1];
+    let mut count = 0usize;
+    for i in changes(t, reference, row_dt) {
+        let span = t[i] - t[i - 1];
+        if span >= step {
+            continue;
+        }
+        let lo = ((t[i - 1] - origin).rem_euclid(step) / width).floor() as usize + 1;
+        let n = ((span / width).floor() as usize).max(1);
+        let (from, len) = (lo % BINS, n.min(BINS));
+        let first = len.min(BINS - from);
+        diff[from] += 1;
+        diff[from + first] -= 1;
+        if len > first {
+            diff[0] += 1;
+            diff[len - first] -= 1;
+        }
+        count += 1;
+    }
+    if count == 0 {
+        return None;
+    }
+    let mut hits = Vec::with_capacity(BINS);
+    let mut level = 0i64;
+    for d in &diff[..BINS] {
+        level += d;
+        hits.push(level);
+    }
+    let top = *hits.iter().max()?;
+    // The widest circular run of bins at the top.
+    let (mut best, mut best_len) = (0usize, 0usize);
+    for start in 0..BINS {
+        if hits[start] != top || hits[(start + BINS - 1) % BINS] == top && start != 0 {
+            continue;
+        }
+        let len = (0..BINS)
+            .take_while(|&k| hits[(start + k) % BINS] == top)
+            .count();
+        if len > best_len {
+            (best, best_len) = (start, len);
+        }
+    }
+    Some((
+        ((best + best_len) as f64 * width).rem_euclid(step),
+        best_len as f64 * width,
+    ))
+}
+
+/// How near a period's ends a row of a log of fewer than two rows a period is not taken as
+/// surely the period's, s ([`period_sample`]).
+const PERIOD_EDGE_S: f64 = 1e-3;
+
+/// The sample of the reference's period whose middle is `mid`, from rows fewer than two a
+/// period (`origin` on the latest start the rows allow, `unsure` the width of the starts
+/// they allow): the row that lies in the period for every such start, a millisecond inside
+/// ([`PERIOD_EDGE_S`]; whichever the convention, it holds that period's sample), or a row at
+/// an end whose sample differs from its neighbour's across that end; where the period's rows were lost, the cubic through the two periods' samples on
+/// either side, each at its period's middle (the acceleration feedforward acts on the second
+/// difference, which a straight line across a sine would spike).
+fn period_sample(
+    t: &[f64],
+    reference: &[f64],
+    (origin, step, row_dt): (f64, f64, f64),
+    unsure: f64,
+    mid: f64,
+) -> f64 {
+    // The period starts at `mid - step / 2` at the latest, and may end `unsure` before
+    // `mid + step / 2`; a row within a millisecond of either end may hold a neighbour's
+    // sample still (the reference's frames reach the car with a jitter of their own).
+    let (from, to) = (
+        mid - 0.5 * step + PERIOD_EDGE_S,
+        mid + 0.5 * step - unsure - PERIOD_EDGE_S,
+    );
+    let sure_mid = 0.5 * (from + to);
+    let j = t.partition_point(|v| *v < sure_mid).min(t.len() - 1);
+    let nearest = (j.saturating_sub(1)..=j)
+        .min_by(|&a, &b| (t[a] - sure_mid).abs().total_cmp(&(t[b] - sure_mid).abs()))
+        .unwrap_or(j);
+    if (from..to).contains(&t[nearest]) {
+        return reference[nearest];
+    }
+    // A row at an end holds this period's sample where it differs from its neighbour's across
+    // that end (the sample changed at the row, or changes after it), the two a row apart.
+    let spacing = |a: usize, b: usize| t[b] - t[a] <= 1.5 * row_dt;
+    let at_start = (from - 2.0 * PERIOD_EDGE_S..from).contains(&t[nearest])
+        && nearest > 0
+        && spacing(nearest - 1, nearest)
+        && reference[nearest] != reference[nearest - 1];
+    let at_end = (to..to + 2.0 * PERIOD_EDGE_S).contains(&t[nearest])
+        && nearest + 1 < t.len()
+        && spacing(nearest, nearest + 1)
+        && reference[nearest] != reference[nearest + 1];
+    if at_start || at_end {
+        return reference[nearest];
+    }
+    // Each row's period middle; the nearest two periods with a row on either side.
+    let period = |i: usize| ((t[i] - origin) / step).floor();
+    let here = ((mid - origin) / step).floor();
+    let mut points: Vec<(f64, f64)> = Vec::with_capacity(4);
+    let before = t.partition_point(|v| *v < mid);
+    let mut take = |i: usize, side: f64, upto: usize| {
+        let p = period(i);
+        if (p - here) * side > 0.0 && points.iter().all(|(q, _)| *q != p) {
+            points.push((p, reference[i]));
+        }
+        points.len() >= upto
+    };
+    // Two periods before, then after up to four in all (`any` stops at the count).
+    let _ = (0..before).rev().any(|i| take(i, -1.0, 2));
+    let _ = (before..t.len()).any(|i| take(i, 1.0, 4));
+    if points.len() < 2 {
+        return reference[nearest];
+    }
+    points
+        .iter()
+        .enumerate()
+        .map(|(i, &(pi, vi))| {
+            let w: f64 = points
+                .iter()
+                .enumerate()
+                .filter(|&(m, _)| m != i)
+                .map(|(_, &(pm, _))| (here - pm) / (pi - pm))
+                .product();
+            w * vi
+        })
+        .sum()
+}
+
 /// The rows `i` at which the reference changes from row `i - 1`, with no row lost between
 /// the two: a period start lies between them.
 fn changes<'a>(
@@ -565,9 +709,13 @@ impl LogTiming {
     }
 }
 
+/// Rows closer than this share of a step are several a step; from it up to one a step,
+/// fewer than two ([`Record::from_samples`] reads them by the reference's periods).
+const FEWER_ROWS_A_STEP: f64 = 0.65;
+
 /// How near the rows' spacing must be to a grid step for each row to be its step: 1 %, an
 /// ECU on its internal RC oscillator (the largest SYNC drift the EPOS4 model takes).
-const ONE_ROW_A_STEP: f64 = super::model::MAX_SYNC_DRIFT;
+pub(super) const ONE_ROW_A_STEP: f64 = super::model::MAX_SYNC_DRIFT;
 
 impl Record {
     /// Log rows at any rate (>= the grid's is best) onto a grid of step `dt`; with a row a
@@ -630,7 +778,14 @@ impl Record {
             dt
         };
         let last = t[t.len() - 1];
-        let several_rows = timing.is_regular() && row_dt < 0.75 * dt;
+        let several_rows = timing.is_regular() && row_dt < FEWER_ROWS_A_STEP * dt;
+        // Fewer than two rows a step but more than one (a 125 Hz logger): a step's middle row
+        // need not hold the step's sample, and the row after its middle often holds the next
+        // step's. The steps are moved onto the reference's periods, which the rows' changes
+        // place, and each takes the row nearest its middle: within the period whichever
+        // convention wrote it.
+        let fewer_rows = timing.is_regular()
+            && (FEWER_ROWS_A_STEP * dt..(1.0 - ONE_ROW_A_STEP) * dt).contains(&row_dt);
         // With several rows a step, a row within a quarter of the spacing of a place is that
         // place's: rows placed on a grid whose spacing was estimated (a jittered log's) drift
         // from the 10 ms steps by the estimate's error, 30 us over 12 s at 200 Hz. Otherwise
@@ -651,6 +806,15 @@ impl Record {
         let shift = phase.map_or(0.0, |centre| {
             period_alignment(t, reference, origin, step, row_dt, centre)
         });
+        let starts = fewer_rows
+            .then(|| period_start_by_changes(t, reference, origin, step, row_dt))
+            .flatten();
+        let shift = match starts {
+            Some((latest, _)) => latest,
+            None if fewer_rows => 0.0,
+            None => shift,
+        };
+        let unsure = starts.map_or(0.5 * step, |(_, width)| width);
         let origin = origin + shift;
         // The period starts against the moved steps.
         let phase = phase.map(|centre| (centre - shift).rem_euclid(step));
@@ -687,6 +851,9 @@ impl Record {
             .map(|k| {
                 // The row whose interval holds the middle of the step.
                 let mid = origin + (k as f64 + 0.5) * step;
+                if fewer_rows {
+                    return period_sample(t, reference, (origin, step, row_dt), unsure, mid);
+                }
                 // A row stamped `near` below the middle is the middle's (200 Hz rows sit on
                 // it).
                 let j = t.partition_point(|v| *v < mid - near).min(t.len() - 1);

@@ -319,6 +319,14 @@ pub enum RigError {
         spacing_s: f64,
         grid_s: f64,
     },
+    /// The paper rig: the rows sit further apart than the reference's period (beyond the
+    /// clock error a row-a-period logger may have): the samples the car steered to between
+    /// two rows are not in the log.
+    SparserThanReference {
+        path: String,
+        spacing_s: f64,
+        period_s: f64,
+    },
 }
 
 /// The longest stretch of a log without its samples (no row, or a required one `nan`) the
@@ -382,6 +390,20 @@ impl std::fmt::Display for RigError {
                 1e3 * spacing_s,
                 1e3 * grid_s,
                 1e3 * MAX_ROW_STEPS * grid_s
+            ),
+            RigError::SparserThanReference {
+                path,
+                spacing_s,
+                period_s,
+            } => write!(
+                f,
+                "{path}: rows {:.2} ms apart (median), further apart than the reference's \
+                 {:.0} ms period: the samples the car steered to between two rows are not in \
+                 the log, and a diagnosis against a guess of them would be the guess's; log \
+                 a row at least every period ({:.0} Hz or faster)",
+                1e3 * spacing_s,
+                1e3 * period_s,
+                1.0 / period_s
             ),
         }
     }
@@ -671,6 +693,15 @@ impl Rig {
                     column: self.columns.time.clone(),
                     spacing_s,
                     grid_s: self.grid_s(),
+                });
+            }
+            if let RigModel::Paper(_) = self.model
+                && spacing_s > (1.0 + super::record::ONE_ROW_A_STEP) * self.grid_s()
+            {
+                return Err(RigError::SparserThanReference {
+                    path: name,
+                    spacing_s,
+                    period_s: self.grid_s(),
                 });
             }
             // A stretch with no row, or with a required sample `nan`, is filled by a line
