@@ -348,7 +348,9 @@ impl LogError {
         Self::Io { path: None, source }
     }
 
-    fn in_file(self, path: &Path) -> Self {
+    /// This error as it reads for the file at `path` (also for errors a caller finds in a
+    /// file after reading it).
+    pub fn in_file(self, path: &Path) -> Self {
         match self {
             // An I/O error on a stream is about this file; say so in the error itself rather
             // than wrapping it.
@@ -689,11 +691,6 @@ impl Table {
             previous: time[k - 1],
             current: time[k],
         })
-    }
-
-    /// `err` as it reads for the file at `path` (errors found after reading).
-    pub fn error_in_file(err: LogError, path: &Path) -> LogError {
-        err.in_file(path)
     }
 
     /// The column of this name.

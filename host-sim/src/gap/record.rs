@@ -99,29 +99,25 @@ const ORDER_MAX_JITTER: f64 = 0.8;
 const STAMP_GAP_SPREADS: f64 = 5.0;
 
 /// Stamps `t` that go back somewhere, each row at its place on the grid the rows' order puts
-/// them on ([`LogTiming::with_places`]), and the stamps' jitter about it, s. `None` unless the
+/// them on ([`LogTiming::with_places`]), and the stamps' timing about that grid. `None` unless the
 /// rows sit on one grid and every gap, the ones that go back too, is within
 /// [`STAMP_GAP_SPREADS`] of the gaps' spread short of their median: a stamp far out of its
 /// place in a log of regular stamps (a duplicated line, two logs run together) is no
 /// receiver's jitter.
-pub(super) fn placed_in_order(t: &[f64]) -> Option<(Vec<f64>, f64)> {
+pub(super) fn placed_in_order(t: &[f64]) -> Option<(Vec<f64>, LogTiming)> {
     let gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    let shortest = gaps.iter().copied().fold(f64::INFINITY, f64::min);
     if gaps.is_empty() {
         return None;
     }
+    let shortest = gaps.iter().copied().fold(f64::INFINITY, f64::min);
     let (median, spread) = median_and_spread(gaps);
     if !(median > 0.0 && median - shortest <= STAMP_GAP_SPREADS * spread) {
         return None;
     }
     let (timing, places) = LogTiming::with_places(t);
-    timing.is_regular().then(|| {
-        let placed = places
-            .iter()
-            .map(|&p| timing.grid_origin_s + timing.row_dt_s * (p + 1) as f64)
-            .collect();
-        (placed, timing.jitter_s)
-    })
+    timing
+        .is_regular()
+        .then(|| (timing.at_places(&places), timing))
 }
 
 /// The step of the mean of a series (`sum(k)`: the sum of its first `k` values, `n` values
@@ -441,9 +437,10 @@ const PERIOD_EDGE_S: f64 = 1e-3;
 /// period (`origin` on the latest start the rows allow, `unsure` the width of the starts
 /// they allow): the row that lies in the period for every such start, a millisecond inside
 /// ([`PERIOD_EDGE_S`]; whichever the convention, it holds that period's sample), or a row at
-/// an end whose sample differs from its neighbour's across that end; where the period's rows were lost, the cubic through the two periods' samples on
-/// either side, each at its period's middle (the acceleration feedforward acts on the second
-/// difference, which a straight line across a sine would spike).
+/// an end whose sample differs from its neighbour's across that end; where no row holds the
+/// period's sample, the cubic through the two periods' samples on either side, each at its
+/// period's middle (the acceleration feedforward acts on the second difference, which a
+/// straight line across a sine would spike).
 fn period_sample(
     t: &[f64],
     reference: &[f64],
@@ -498,17 +495,22 @@ fn period_sample(
     if points.len() < 2 {
         return reference[nearest];
     }
+    lagrange(&points, here)
+}
+
+/// The polynomial through `points` (`(x, y)`, distinct `x`) at `x`, by Lagrange's form.
+fn lagrange(points: &[(f64, f64)], x: f64) -> f64 {
     points
         .iter()
         .enumerate()
-        .map(|(i, &(pi, vi))| {
+        .map(|(i, &(xi, yi))| {
             let w: f64 = points
                 .iter()
                 .enumerate()
                 .filter(|&(m, _)| m != i)
-                .map(|(_, &(pm, _))| (here - pm) / (pi - pm))
+                .map(|(_, &(xm, _))| (x - xm) / (xi - xm))
                 .product();
-            w * vi
+            w * yi
         })
         .sum()
 }
@@ -702,6 +704,14 @@ impl LogTiming {
         }
     }
 
+    /// The times of grid `places` (a place counts rows from one spacing after the origin), s.
+    pub fn at_places(&self, places: &[u64]) -> Vec<f64> {
+        places
+            .iter()
+            .map(|&p| self.grid_origin_s + self.row_dt_s * (p + 1) as f64)
+            .collect()
+    }
+
     /// The stamps are a regular grid with jitter (not an irregular sampling), each row at its
     /// place ([`LogTiming::on_grid`]).
     pub fn is_regular(&self) -> bool {
@@ -747,10 +757,7 @@ impl Record {
         // already on a grid are kept as they are.
         let snapped: Vec<f64>;
         let t = if timing.is_regular() && timing.jitter_s > 1e-7 {
-            snapped = places
-                .iter()
-                .map(|&p| timing.grid_origin_s + timing.row_dt_s * (p + 1) as f64)
-                .collect();
+            snapped = timing.at_places(&places);
             &snapped[..]
         } else {
             t
@@ -782,8 +789,8 @@ impl Record {
         // Fewer than two rows a step but more than one (a 125 Hz logger): a step's middle row
         // need not hold the step's sample, and the row after its middle often holds the next
         // step's. The steps are moved onto the reference's periods, which the rows' changes
-        // place, and each takes the row nearest its middle: within the period whichever
-        // convention wrote it.
+        // place, and each takes a row that lies in its period ([`period_sample`]): that
+        // period's sample whichever convention wrote it.
         let fewer_rows = timing.is_regular()
             && (FEWER_ROWS_A_STEP * dt..(1.0 - ONE_ROW_A_STEP) * dt).contains(&row_dt);
         // With several rows a step, a row within a quarter of the spacing of a place is that
@@ -809,11 +816,8 @@ impl Record {
         let starts = fewer_rows
             .then(|| period_start_by_changes(t, reference, origin, step, row_dt))
             .flatten();
-        let shift = match starts {
-            Some((latest, _)) => latest,
-            None if fewer_rows => 0.0,
-            None => shift,
-        };
+        // (Fewer rows than several a step have no `phase`, so `shift` is 0 there.)
+        let shift = starts.map_or(shift, |(latest, _)| latest);
         let unsure = starts.map_or(0.5 * step, |(_, width)| width);
         let origin = origin + shift;
         // The period starts against the moved steps.
@@ -894,16 +898,10 @@ impl Record {
                 } else if missing {
                     let lo = j.saturating_sub(2);
                     let hi = (j + 1).min(t.len() - 1);
-                    let at = |i: usize| t[i] - 0.5 * row_dt;
-                    (lo..=hi)
-                        .map(|i| {
-                            let w: f64 = (lo..=hi)
-                                .filter(|&m| m != i)
-                                .map(|m| (mid - at(m)) / (at(i) - at(m)))
-                                .product();
-                            w * reference[i]
-                        })
-                        .sum()
+                    let points: Vec<(f64, f64)> = (lo..=hi)
+                        .map(|i| (t[i] - 0.5 * row_dt, reference[i]))
+                        .collect();
+                    lagrange(&points, mid)
                 } else {
                     reference[j]
                 }

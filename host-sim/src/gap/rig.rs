@@ -618,9 +618,8 @@ impl Rig {
             Ok(Some(values))
         };
         let mut t = col(&self.columns.time, true)?.unwrap_or_default();
-        // The stamps as the file holds them where they had to be placed in order (for the
-        // log's timing), else empty.
-        let mut stamped: Vec<f64> = Vec::new();
+        // The stamps' timing where they had to be placed in order (read before they were).
+        let mut stamped: Option<super::LogTiming> = None;
         let reference = col(&self.columns.reference, true)?.unwrap_or_default();
         let output = col(&self.columns.output, true)?.unwrap_or_default();
         let effort = col(&self.columns.effort, true)?.unwrap_or_default();
@@ -674,16 +673,16 @@ impl Rig {
                 ));
             }
             if let Some(back) = time_back {
-                let (placed, jitter_s) = super::record::placed_in_order(&t)
-                    .ok_or_else(|| RigError::Log(Table::error_in_file(back, path)))?;
+                let (placed, timing) = super::record::placed_in_order(&t)
+                    .ok_or_else(|| RigError::Log(back.in_file(path)))?;
                 let times = t.windows(2).filter(|w| w[1] <= w[0]).count();
                 notes.push(format!(
                     "{name}: stamps go back {times} times, within the stamps' jitter \
                      ({:.2} ms RMS); each row is taken in the file's order at its place on \
                      the rows' grid",
-                    1e3 * jitter_s
+                    1e3 * timing.jitter_s
                 ));
-                stamped = t;
+                stamped = Some(timing);
                 t = placed;
             }
             let spacing_s = host_io::grid::median_gap(&t);
@@ -797,7 +796,7 @@ impl Rig {
             record,
             notes,
             comments: table.comments.clone(),
-            timing: super::LogTiming::of(if stamped.is_empty() { &t } else { &stamped }),
+            timing: stamped.unwrap_or_else(|| super::LogTiming::of(&t)),
         })
     }
 }
