@@ -675,11 +675,10 @@ impl Rig {
             if let Some(back) = time_back {
                 let (placed, timing) = super::record::placed_in_order(&t)
                     .ok_or_else(|| RigError::Log(back.in_file(path)))?;
-                let times = t.windows(2).filter(|w| w[1] <= w[0]).count();
                 notes.push(format!(
-                    "{name}: stamps go back {times} times, within the stamps' jitter \
-                     ({:.2} ms RMS); each row is taken in the file's order at its place on \
-                     the rows' grid",
+                    "{name}: {}, within the stamps' jitter ({:.2} ms RMS); each row is taken \
+                     in the file's order at its place on the rows' grid",
+                    stamps_out_of_order(&t),
                     1e3 * timing.jitter_s
                 ));
                 stamped = Some(timing);
@@ -935,4 +934,16 @@ fn bam_record(m: &BamModel, name: &str, c: &BamColumns) -> Result<Record, RigErr
         }
     }
     Ok(record)
+}
+
+/// How often stamps `t` go back and how often one repeats the one before it (a clock in whole
+/// milliseconds at 1 kHz), in words: "stamps go back 3 times and repeat 2 times".
+fn stamps_out_of_order(t: &[f64]) -> String {
+    let back = t.windows(2).filter(|w| w[1] < w[0]).count();
+    let same = t.windows(2).filter(|w| w[1] == w[0]).count();
+    match (back, same) {
+        (_, 0) => format!("stamps go back {back} times"),
+        (0, _) => format!("stamps repeat {same} times"),
+        _ => format!("stamps go back {back} times and repeat {same} times"),
+    }
 }
