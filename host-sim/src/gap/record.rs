@@ -1114,6 +1114,7 @@ mod tests {
             lost.len()
         );
     }
+
     #[test]
     fn stamps_rounded_as_coarsely_as_their_jitter_read_it_by_their_rms() {
         // 1 kHz, +-1 ms, 1 % lost, stamped in whole milliseconds, in order and not, on a
