@@ -111,11 +111,12 @@ pub(super) fn placed_in_order(t: &[f64]) -> Option<(Vec<f64>, LogTiming)> {
         return None;
     }
     let shortest = gaps.iter().copied().fold(f64::INFINITY, f64::min);
-    let (median, spread) = median_and_spread(gaps, stamp_resolution(t));
+    let resolution = stamp_resolution(t);
+    let (median, spread) = median_and_spread(gaps, resolution);
     if !(median > 0.0 && median - shortest <= STAMP_GAP_SPREADS * spread) {
         return None;
     }
-    let (timing, places) = LogTiming::with_places(t);
+    let (timing, places) = LogTiming::at_resolution(t, resolution);
     timing
         .is_regular()
         .then(|| (timing.at_places(&places), timing))
@@ -319,7 +320,8 @@ pub(crate) fn receiver_stamps(
 /// Jitter of half a spacing (a 500 Hz logger stamping +-1 ms) leaves each stamp as near the
 /// place before or after its own as its own, so neither its gap nor its stamp places it;
 /// the average over a few dozen rows still shows the whole spacing a lost row adds.
-fn places_by_order(t: &[f64], spacing: f64) -> Option<Vec<u64>> {
+/// `resolution`: the stamps' own ([`stamp_resolution`]), s.
+fn places_by_order(t: &[f64], spacing: f64, resolution: f64) -> Option<Vec<u64>> {
     let n = t.len();
     let places = |lost: Vec<u64>| -> Vec<u64> {
         let mut place = 0u64;
@@ -347,7 +349,7 @@ fn places_by_order(t: &[f64], spacing: f64) -> Option<Vec<u64>> {
     // two rows' jitter; a lost row's whole spacing is one gap in a hundred, which the
     // median does not see), sets the window the rows are placed by at last.
     let gaps: Vec<f64> = t.windows(2).map(|p| (p[1] - p[0]) / b - 1.0).collect();
-    let sigma = median_and_spread(gaps, stamp_resolution(t) / b).1 / std::f64::consts::SQRT_2;
+    let sigma = median_and_spread(gaps, resolution / b).1 / std::f64::consts::SQRT_2;
     let window = |noise: f64| {
         ((2.0 * (sigma / noise).powi(2)).ceil() as usize)
             .min(n / 8)
@@ -671,6 +673,12 @@ impl LogTiming {
 
     /// [`LogTiming::of`], with each row's place on the grid.
     pub fn with_places(t: &[f64]) -> (LogTiming, Vec<u64>) {
+        LogTiming::at_resolution(t, stamp_resolution(t))
+    }
+
+    /// [`LogTiming::with_places`] for stamps of a known `resolution`
+    /// ([`stamp_resolution`]), s.
+    fn at_resolution(t: &[f64], resolution: f64) -> (LogTiming, Vec<u64>) {
         if t.len() < 2 {
             return (
                 LogTiming {
@@ -682,7 +690,7 @@ impl LogTiming {
         }
         let median_gap = host_io::grid::median_gap(t);
         let (places, _) = host_io::grid::places_by_gaps(t, median_gap);
-        let by_gaps = LogTiming::on_places(t, &places, median_gap);
+        let by_gaps = LogTiming::on_places(t, &places, median_gap, resolution);
         if by_gaps.is_regular() {
             return (by_gaps, places);
         }
@@ -694,8 +702,8 @@ impl LogTiming {
         let spacing = spans[spans.len() / 2].max(1e-9);
         // Jitter of up to half the spacing (a 400 or 500 Hz logger stamping +-1 ms, its rows
         // in the order they came): the rows' order places them.
-        if let Some(by_order) = places_by_order(t, spacing) {
-            let mut timing = LogTiming::on_places(t, &by_order, spacing);
+        if let Some(by_order) = places_by_order(t, spacing, resolution) {
+            let mut timing = LogTiming::on_places(t, &by_order, spacing, resolution);
             if timing.jitter_s < ORDER_MAX_JITTER * timing.row_dt_s {
                 timing.on_grid = true;
                 return (timing, by_order);
@@ -714,7 +722,7 @@ impl LogTiming {
             by_stamp.push(at);
             last = Some(at);
         }
-        let by_stamps = LogTiming::on_places(t, &by_stamp, spacing);
+        let by_stamps = LogTiming::on_places(t, &by_stamp, spacing, resolution);
         if by_stamps.jitter_s / by_stamps.row_dt_s < by_gaps.jitter_s / by_gaps.row_dt_s {
             (by_stamps, by_stamp)
         } else {
@@ -723,8 +731,9 @@ impl LogTiming {
     }
 
     /// The grid through stamps `t` at rows `places`: the least-squares line, the robust
-    /// spread about it, the rows the places skip. `spacing` where the line has no slope.
-    fn on_places(t: &[f64], places: &[u64], spacing: f64) -> LogTiming {
+    /// spread about it, the rows the places skip. `spacing` where the line has no slope;
+    /// `resolution`: the stamps' own ([`stamp_resolution`]), s.
+    fn on_places(t: &[f64], places: &[u64], spacing: f64, resolution: f64) -> LogTiming {
         // t = a + b * place by least squares; through the mean with `spacing` where that
         // has no positive slope.
         let (a, b) = match host_io::grid::line_through(t, places) {
@@ -740,7 +749,7 @@ impl LogTiming {
             .zip(t)
             .map(|(&p, &tj)| tj - (a + b * p as f64))
             .collect();
-        let (median, jitter_s) = median_and_spread(offsets, stamp_resolution(t));
+        let (median, jitter_s) = median_and_spread(offsets, resolution);
         let last = places.last().copied().unwrap_or(0);
         LogTiming {
             row_dt_s: b,
