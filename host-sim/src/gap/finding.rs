@@ -144,6 +144,18 @@ pub enum Finding {
         reading: f64,
         standard_error: f64,
     },
+    /// The best single left the log's GoF below the nominal one, the torque balance shows play
+    /// in the belt and a play candidate leaves the GoF no lower: the play is the best instead
+    /// (GoFs as fractions, the reading in deg).
+    BalanceShowsPlay {
+        best: String,
+        best_gof: f64,
+        play: String,
+        play_gof: f64,
+        nominal_gof: f64,
+        reading: f64,
+        standard_error: f64,
+    },
     /// Table 4 refitted freely left the tolerance; what it moved and left, and the bounded refit.
     RefitFree {
         moved: Vec<String>,
@@ -414,6 +426,24 @@ impl fmt::Display for Finding {
                  is the best single",
                 100.0 * friction_gof,
                 100.0 * tyre_gof
+            ),
+            Finding::BalanceShowsPlay {
+                best,
+                best_gof,
+                play,
+                play_gof,
+                nominal_gof,
+                reading,
+                standard_error,
+            } => write!(
+                f,
+                "{best} left the least on the fit's window but the log's GoF at {:.1} %, below \
+                 the nominal {:.1} %; the log's torque balance shows {reading:.2} +- \
+                 {standard_error:.2} deg of play in the belt and {play} leaves the GoF at \
+                 {:.1} %: {play} is the best single",
+                100.0 * best_gof,
+                100.0 * nominal_gof,
+                100.0 * play_gof
             ),
             Finding::RefitFree {
                 moved,
