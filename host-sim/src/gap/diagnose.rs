@@ -625,8 +625,11 @@ fn best_single(
         .filter(|c| st.named_alone(c))?;
     if best.kinds[0].family() == EffectKind::TireGround.family()
         && let Some(sig) = signature.filter(|s| s.holds)
-        && sig.rack_coulomb_n - 3.0 * sig.rack_coulomb_se_n
-            >= EffectKind::RackFriction.min_size(st.rig)
+        && Signature::above(
+            sig.rack_coulomb_n,
+            sig.rack_coulomb_se_n,
+            EffectKind::RackFriction.min_size(st.rig),
+        )
         && let Some(friction) = ranking
             .iter()
             .find(|c| c.kinds == [EffectKind::RackFriction] && st.named_alone(c))
@@ -642,11 +645,15 @@ fn best_single(
         });
         return Some(friction.clone());
     }
-    let is_play = |k: &EffectKind| matches!(k, EffectKind::BeltPlay | EffectKind::Backlash);
+    let is_play = |k: &EffectKind| k.family() == EffectKind::Backlash.family();
     if best.gof < nominal_gof
         && !best.kinds.iter().any(is_play)
         && let Some(sig) = signature.filter(|s| s.holds)
-        && sig.belt_play_deg - 3.0 * sig.belt_play_se_deg >= EffectKind::BeltPlay.min_size(st.rig)
+        && Signature::above(
+            sig.belt_play_deg,
+            sig.belt_play_se_deg,
+            EffectKind::BeltPlay.min_size(st.rig),
+        )
         && let Some(play) = ranking.iter().find(|c| {
             c.kinds.len() == 1 && is_play(&c.kinds[0]) && st.named_alone(c) && c.gof >= nominal_gof
         })

@@ -434,9 +434,8 @@ struct Need {
 /// nor a tyre (a tyre saturates into the same force).
 fn demanded(rig: &Rig, s: &Signature, chosen: &Candidate) -> Option<Need> {
     let has = |family: &str| chosen.kinds.iter().any(|k| k.family() == family);
-    let clearly = |value: f64, se: f64, kind: EffectKind| {
-        value.is_finite() && value - 3.0 * se >= kind.min_size(rig)
-    };
+    let clearly =
+        |value: f64, se: f64, kind: EffectKind| Signature::above(value, se, kind.min_size(rig));
     if !has("backlash") && clearly(s.belt_play_deg, s.belt_play_se_deg, EffectKind::BeltPlay) {
         return Some(Need {
             families: &["backlash"],

@@ -102,6 +102,11 @@ impl Signature {
     pub fn below(value: f64, se: f64, size: f64) -> bool {
         value.is_finite() && se.is_finite() && value + 3.0 * se < size
     }
+
+    /// A reading at or above `size` by three standard errors: the log clearly shows that much.
+    pub fn above(value: f64, se: f64, size: f64) -> bool {
+        value.is_finite() && se.is_finite() && value - 3.0 * se >= size
+    }
 }
 
 /// The log's [`Signature`] on the paper's plant, or `None` without a motor column, on a log
