@@ -530,3 +530,78 @@ fn gap_refuses_a_header_line_it_cannot_read() {
         assert!(err.contains("expected"), "{bad}: {err}");
     }
 }
+
+/// A team's logger that names its columns otherwise (`time_s`, `current`) is refused with the
+/// names its header has and the way to read it: a rig file naming them. Read through such a
+/// file (the built-in paper rig's, its columns renamed), the same log is diagnosed as the
+/// log with the project's names is.
+#[test]
+fn gap_names_the_columns_it_lacks_and_reads_them_through_a_rig_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let ours = step_log(dir.path());
+    let verdict = |o: &Output| -> String {
+        assert!(o.status.success(), "{}", stderr(o));
+        let out = stdout(o);
+        out.lines()
+            .find(|l| l.starts_with("verdict:"))
+            .unwrap_or_else(|| panic!("no verdict: {out}"))
+            .to_string()
+    };
+    let expected = verdict(&gap_of(dir.path(), "ours.csv", &ours));
+
+    // The team's names for the project's, in the header host-sim wrote.
+    let renamed = |names: &[(&str, &str)]| -> String {
+        let header: Vec<&str> = ours[0]
+            .split(',')
+            .map(|n| names.iter().find(|(a, _)| *a == n).map_or(n, |(_, b)| *b))
+            .collect();
+        header.join(",")
+    };
+    for (names, column) in [
+        (&[("t", "time_s")][..], "t"),
+        (&[("current_a", "current")][..], "current_a"),
+    ] {
+        let mut lines = ours.clone();
+        lines[0] = renamed(names);
+        let o = gap_of(dir.path(), "team.csv", &lines);
+        assert_refused(
+            &o,
+            &["team.csv", &format!("{column:?}"), &lines[0], "--rig FILE"],
+        );
+    }
+
+    let rig: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/rigs/paper.json")).unwrap(),
+    )
+    .unwrap();
+    let mut rig = rig;
+    rig["columns"]["time"] = "time_s".into();
+    rig["columns"]["effort"] = "current".into();
+    let rig_path = dir.path().join("team_rig.json");
+    std::fs::write(&rig_path, rig.to_string()).unwrap();
+    let mut lines = ours.clone();
+    lines[0] = renamed(&[("t", "time_s"), ("current_a", "current")]);
+    let log = dir.path().join("team.csv");
+    write_lines(&log, &lines);
+    let o = host_sim(&["gap", s(&log), "--rig", s(&rig_path), "--threads", "2"]);
+    assert_eq!(verdict(&o), expected);
+}
+
+/// A log exported with `;` between its fields (a spreadsheet in a comma-decimal locale) or
+/// tabs is refused with the separator it has, not read as one column named by the whole line.
+#[test]
+fn gap_refuses_a_log_not_separated_by_commas_and_names_its_separator() {
+    let dir = tempfile::tempdir().unwrap();
+    let ours = step_log(dir.path());
+    for (name, separator, decimal, named) in [
+        ("semicolons.csv", ";", ",", "`;`"),
+        ("tabs.csv", "\t", ".", "tabs"),
+    ] {
+        let lines: Vec<String> = ours
+            .iter()
+            .map(|l| l.replace(',', separator).replace('.', decimal))
+            .collect();
+        let o = gap_of(dir.path(), name, &lines);
+        assert_refused(&o, &[name, named, "comma-separated"]);
+    }
+}

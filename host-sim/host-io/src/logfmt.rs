@@ -186,6 +186,10 @@ pub enum LogError {
         expected: String,
         found_header: String,
     },
+    /// A header with no comma whose fields are separated by another character (`;` as a
+    /// spreadsheet in a comma-decimal locale writes, or a tab): the log's fields are
+    /// comma-separated, so the whole line would be read as one column's name.
+    Separator { separator: char, header: String },
     /// A gzip file that ends before its compressed data does.
     TruncatedGzip,
     /// A time stamp that is `nan`.
@@ -279,6 +283,16 @@ impl fmt::Display for LogError {
             } => write!(
                 f,
                 "the header lacks the column `{expected}`: found `{found_header}`"
+            ),
+            Self::Separator { separator, header } => write!(
+                f,
+                "the header `{header}` separates its fields by {}, not by commas: a log's \
+                 fields are comma-separated, with `.` as the decimal point (export the file \
+                 again as comma-separated)",
+                match separator {
+                    '\t' => "tabs".to_string(),
+                    c => format!("`{c}`"),
+                }
             ),
             Self::TruncatedGzip => write!(
                 f,
@@ -844,6 +858,12 @@ fn read_table(
         if let Some(comment) = line.strip_prefix('#') {
             comments.push(comment.trim().to_string());
         } else if !line.is_empty() {
+            if let Some(separator) = foreign_separator(line) {
+                return Err(LogError::Separator {
+                    separator,
+                    header: line.to_string(),
+                });
+            }
             break header(line)?;
         }
     };
@@ -917,6 +937,15 @@ fn read_table(
         table.lines.push(line_no);
     }
     Ok(table)
+}
+
+/// The separator of a header that has no comma but splits at `;` or a tab: `None` for a
+/// comma-separated header, and for a one-column one.
+fn foreign_separator(header: &str) -> Option<char> {
+    if header.contains(',') {
+        return None;
+    }
+    [';', '\t'].into_iter().find(|c| header.contains(*c))
 }
 
 /// The longest line the reader takes, bytes: a row of thousands of columns fits, and a file
@@ -1536,6 +1565,32 @@ mod tests {
             matches!(err, LogError::NonMonotonicTime { line: 4, .. }),
             "{err:?}"
         );
+    }
+
+    #[test]
+    fn a_header_split_by_semicolons_or_tabs_is_named_so() {
+        for (text, separator) in [
+            ("t;ref_sw_deg;sw_deg;current_a\n0;1,5;1,4;0,2\n", ';'),
+            ("t\tref_sw_deg\tsw_deg\tcurrent_a\n0\t1.5\t1.4\t0.2\n", '\t'),
+        ] {
+            let err = read_str(text).expect_err("not comma-separated");
+            assert!(
+                matches!(err, LogError::Separator { separator: s, .. } if s == separator),
+                "{err:?}"
+            );
+            let err = Table::read_from(text.as_bytes(), "t").expect_err("not comma-separated");
+            assert!(
+                matches!(err, LogError::Separator { separator: s, .. } if s == separator),
+                "{err:?}"
+            );
+            let shown = err.to_string();
+            assert!(shown.contains("comma-separated"), "{shown}");
+        }
+        // A one-column table and a comma-separated header with a `;` in a name are not
+        // taken for another separator.
+        assert!(Table::read_from("t\n0\n1\n".as_bytes(), "t").is_ok());
+        let err = Table::read_from("t,a;b\n0,1\n".as_bytes(), "t");
+        assert!(!matches!(err, Err(LogError::Separator { .. })), "{err:?}");
     }
 
     #[test]

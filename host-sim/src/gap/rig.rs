@@ -282,9 +282,11 @@ pub enum RigError {
         path: String,
         message: String,
     },
+    /// The log has no column of the rig's name for a signal; `found` are the header's names.
     MissingColumn {
         path: String,
         column: String,
+        found: Vec<String>,
     },
     TooShort {
         path: String,
@@ -344,12 +346,18 @@ impl std::fmt::Display for RigError {
         match self {
             RigError::Io { path, source } => write!(f, "{path}: {source}"),
             RigError::Parse { path, message } => write!(f, "{path}: {message}"),
-            RigError::MissingColumn { path, column } => {
-                write!(
-                    f,
-                    "{path}: no column named {column:?} (the rig file names it)"
-                )
-            }
+            RigError::MissingColumn {
+                path,
+                column,
+                found,
+            } => write!(
+                f,
+                "{path}: no column named {column:?}: the header names `{}`. A log whose \
+                 columns carry other names is read through a rig file that names them: copy \
+                 host-sim/rigs/paper.json, set its `columns` to the log's names and pass \
+                 `--rig FILE`",
+                found.join(",")
+            ),
             RigError::TooShort { path } => write!(f, "{path}: fewer than 20 samples"),
             RigError::Log(e) => write!(f, "{e}"),
             RigError::NoSamples { path, column } => {
@@ -580,7 +588,21 @@ impl Rig {
             RigModel::Paper(_) => TimeOrder::AsStamped,
             _ => TimeOrder::Increasing,
         };
-        let table = Table::load_ordered(path, &self.columns.time, order).map_err(RigError::Log)?;
+        let table =
+            Table::load_ordered(path, &self.columns.time, order).map_err(|e| match e.root() {
+                LogError::MissingNamedColumn {
+                    expected,
+                    found_header,
+                } => RigError::MissingColumn {
+                    path: path.display().to_string(),
+                    column: expected.clone(),
+                    found: found_header
+                        .split(',')
+                        .map(|n| n.trim().to_string())
+                        .collect(),
+                },
+                _ => RigError::Log(e),
+            })?;
         let mut notes = Vec::new();
         // Missing samples are filled so that no NaN reaches the simulation and the costs; a
         // required column with no sample at all is refused, an optional one is left out.
@@ -590,6 +612,7 @@ impl Rig {
                     Err(RigError::MissingColumn {
                         path: name.clone(),
                         column: c.to_string(),
+                        found: table.names.clone(),
                     })
                 } else {
                     Ok(None)
