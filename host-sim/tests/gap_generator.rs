@@ -342,3 +342,42 @@ fn play_that_a_stiff_tyre_hides_is_named_where_the_torque_balance_shows_it() {
         case.gof_after
     );
 }
+
+/// A car of the independent world (seed 3, the index below): 1.27 deg of play in the belt
+/// under a 10 deg sweep logged at 1 kHz. The verdict names the play with the size it was
+/// fitted at, and the selftest sets it beside the torque balance's reading of the same play,
+/// each against what the car hides: two methods, one a fit of the model and one read off the
+/// log without it. Run as `gap selftest --seed 3 --case` runs it.
+#[test]
+fn a_named_play_carries_its_fitted_size_beside_the_balances() {
+    use host_sim::gap::selftest;
+    let mut opts = selftest::default_options();
+    opts.threads = 2;
+    let report = selftest::run(selftest::World::Independent, &[1], 3, 12.0, &opts, &|_| {});
+    let case = &report.cases[0];
+    assert_eq!(case.named, ["backlash"], "{}", case.reason);
+    let hidden = case.case.truth.as_ref().unwrap().truth.belt_play_deg;
+    let (kind, fitted) = case
+        .fitted
+        .as_ref()
+        .and_then(|f| f.play_deg())
+        .expect("a named play has a fitted size");
+    assert!(kind.starts_with("backlash"), "{kind}");
+    // The fit's size and the balance's, each of the play's order (no hard-coded value: the
+    // fit and the balance are two readings of what the car hides).
+    assert!(
+        (0.5..2.0).contains(&(fitted / hidden)),
+        "{fitted} of {hidden}"
+    );
+    let balance = case.signature.as_ref().filter(|g| g.holds).unwrap();
+    assert!(
+        (balance.belt_play_deg / hidden - 1.0).abs() < 0.25,
+        "{} of {hidden}",
+        balance.belt_play_deg
+    );
+    let summary = report.balance_summary();
+    assert!(
+        summary.contains("the play's size where a car with play was named right (1 logs)"),
+        "{summary}"
+    );
+}

@@ -63,6 +63,94 @@ pub struct Verdict {
     pub fit_validation: Option<Fit>,
     /// Why: the cost left, the noise floor, and the rule that applied.
     pub reason: String,
+    /// The sizes the named effects were fitted at (`effects` names their families); `None`
+    /// unless effects are named.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fitted: Option<NamedFit>,
+}
+
+/// The candidate (or pair) a verdict names, with its fitted sizes as the ranking prints them
+/// (a pair's keyed `effect.param`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct NamedFit {
+    pub effect: String,
+    pub params: BTreeMap<String, f64>,
+    pub std_err: BTreeMap<String, f64>,
+}
+
+/// Two readings of a size agree within this share of the larger: a fit and the torque
+/// balance further apart leave the size uncertain by as much.
+pub const SIZES_AGREE_WITHIN: f64 = 0.2;
+
+impl NamedFit {
+    pub fn of(c: &Candidate) -> NamedFit {
+        NamedFit {
+            effect: c.effect.clone(),
+            params: c.params.clone(),
+            std_err: c.std_err.clone(),
+        }
+    }
+
+    /// The play it names, deg at the column, with its candidate's name (`backlash` between
+    /// the pinion and the encoder, `backlash_belt` in the belt/nut).
+    pub fn play_deg(&self) -> Option<(&'static str, f64)> {
+        let single = !self.effect.contains('+');
+        [EffectKind::BeltPlay, EffectKind::Backlash]
+            .into_iter()
+            .find_map(|k| {
+                let key = if single {
+                    (self.effect == k.name()).then(|| "width_deg".to_string())?
+                } else {
+                    format!("{}.width_deg", k.name())
+                };
+                self.params.get(&key).map(|w| (k.name(), *w))
+            })
+    }
+
+    /// `effect p=v (+- se) ...`, as the verdict's second line.
+    fn summary(&self) -> String {
+        let params: Vec<String> = self
+            .params
+            .iter()
+            .map(|(k, v)| match self.std_err.get(k) {
+                Some(e) if e.is_finite() => format!("{k}={v:.4} (+- {e:.4})"),
+                _ => format!("{k}={v:.4}"),
+            })
+            .collect();
+        format!("{} {}", self.effect, params.join(" "))
+    }
+}
+
+/// The play a verdict names beside the torque balance's reading of it (`balance` and its
+/// standard error, deg): one line of the report, and whether the two agree within
+/// [`SIZES_AGREE_WITHIN`].
+pub fn play_beside_balance(
+    fitted_deg: f64,
+    balance_deg: f64,
+    balance_se_deg: f64,
+    against_model: bool,
+) -> (String, bool) {
+    let larger = fitted_deg.abs().max(balance_deg.abs()).max(1e-12);
+    let apart = (fitted_deg - balance_deg).abs() / larger;
+    let agree = apart <= SIZES_AGREE_WITHIN;
+    let line = format!(
+        "size of the play: {fitted_deg:.2} deg as fitted; the torque balance ({}) reads \
+         {balance_deg:.2} +- {balance_se_deg:.2} deg in the belt: {}",
+        if against_model {
+            "no fit: the log's less the nominal model's"
+        } else {
+            "no fit: the log alone"
+        },
+        if agree {
+            format!("the two agree within {:.0} %", 100.0 * SIZES_AGREE_WITHIN)
+        } else {
+            format!(
+                "the two differ by {:.0} % of the larger, and the play's size is as uncertain",
+                100.0 * apart
+            )
+        }
+    );
+    (line, agree)
 }
 
 /// Everything the diagnosis found.
@@ -392,6 +480,17 @@ impl Diagnosis {
                 }
             }
         );
+        if let Some(named) = &v.fitted {
+            let _ = writeln!(s, "  fitted: {}", named.summary());
+            if let (Some((_, w)), Some(b)) = (
+                named.play_deg(),
+                self.signature.as_ref().filter(|b| b.holds),
+            ) {
+                let (line, _) =
+                    play_beside_balance(w, b.belt_play_deg, b.belt_play_se_deg, b.against_model);
+                let _ = writeln!(s, "  {line}");
+            }
+        }
         let _ = writeln!(s, "  {}", v.reason);
         let _ = writeln!(
             s,
@@ -416,5 +515,50 @@ impl Diagnosis {
             );
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn named(effect: &str, params: &[(&str, f64)]) -> NamedFit {
+        NamedFit {
+            effect: effect.into(),
+            params: params.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            std_err: BTreeMap::new(),
+        }
+    }
+
+    #[test]
+    fn the_play_a_verdict_names_is_read_alone_or_in_a_pair() {
+        let belt = named("backlash_belt", &[("width_deg", 1.7)]);
+        assert_eq!(belt.play_deg(), Some(("backlash_belt", 1.7)));
+        let pair = named(
+            "tire_ground_dahl+backlash",
+            &[
+                ("backlash.width_deg", 0.76),
+                ("tire_ground_dahl.force_n", 271.0),
+            ],
+        );
+        assert_eq!(pair.play_deg(), Some(("backlash", 0.76)));
+        // No play named: none read, whatever else the fit has.
+        assert_eq!(named("delay", &[("delay_ms", 30.0)]).play_deg(), None);
+        assert_eq!(
+            named("tire_ground", &[("force_n", 1.0), ("width_deg", 2.0)]).play_deg(),
+            None
+        );
+    }
+
+    #[test]
+    fn a_fit_and_a_balance_apart_by_more_than_a_fifth_leave_the_size_uncertain() {
+        let (line, agree) = play_beside_balance(1.70, 1.26, 0.02, false);
+        assert!(!agree, "{line}");
+        assert!(line.contains("differ by 26 %"), "{line}");
+        assert!(line.contains("the log alone"), "{line}");
+        let (line, agree) = play_beside_balance(1.05, 1.0, 0.05, true);
+        assert!(agree, "{line}");
+        assert!(line.contains("agree within 20 %"), "{line}");
+        assert!(line.contains("less the nominal model's"), "{line}");
     }
 }

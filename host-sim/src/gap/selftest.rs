@@ -255,6 +255,9 @@ pub struct CaseResult {
     /// reading of play and rack friction beside the verdict; `None` where it cannot be read.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub signature: Option<super::signature::Signature>,
+    /// The sizes the verdict's effects were fitted at, where it names effects.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fitted: Option<super::NamedFit>,
     /// The logger that wrote the case's file, in a run under several loggers.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub logger: Option<LoggedBy>,
@@ -335,6 +338,7 @@ fn diagnosed(
         gof_before: d.baseline_gof,
         gof_after: d.verdict.gof_after,
         reason: d.verdict.reason.clone(),
+        fitted: d.verdict.fitted.clone(),
         ranking: d.ranking,
         parameters: d.parameters,
         effort_offset: d.effort_offset,
@@ -777,6 +781,7 @@ impl SelftestReport {
             &without_play,
             "without it",
         ));
+        s.push_str(&self.play_sizes());
         let (with_friction, neither) = split(
             |t| t.rack_friction_n,
             |t| t.rack_friction_n == 0.0 && t.dahl_force_n == 0.0,
@@ -792,6 +797,47 @@ impl SelftestReport {
             "with neither friction nor a tyre",
         ));
         s
+    }
+}
+
+impl SelftestReport {
+    /// The play's size two ways on the cars named right with play that hide it and whose
+    /// balance holds: as the verdict fitted it and as the torque balance read it, each as a
+    /// range of shares of what the car hides and a median error. Empty where no case has all.
+    fn play_sizes(&self) -> String {
+        let pairs: Vec<(f64, f64)> = self
+            .cases
+            .iter()
+            .filter(|r| r.correct)
+            .filter_map(|r| {
+                let hidden = r.case.truth.as_ref()?.truth.belt_play_deg;
+                let (_, fitted) = r.fitted.as_ref()?.play_deg()?;
+                let balance = r.signature.as_ref().filter(|g| g.holds)?.belt_play_deg;
+                (hidden > 0.0).then_some((fitted / hidden, balance / hidden))
+            })
+            .collect();
+        if pairs.is_empty() {
+            return String::new();
+        }
+        let shares = |pick: fn(&(f64, f64)) -> f64| -> String {
+            let mut v: Vec<f64> = pairs.iter().map(pick).collect();
+            v.sort_by(f64::total_cmp);
+            let mut errors: Vec<f64> = v.iter().map(|x| (x - 1.0).abs()).collect();
+            errors.sort_by(f64::total_cmp);
+            format!(
+                "x{:.2}-{:.2} of what they hide (median error {:.0} %)",
+                v[0],
+                v[v.len() - 1],
+                100.0 * errors[errors.len() / 2]
+            )
+        };
+        format!(
+            "  the play's size where a car with play was named right ({} logs): as fitted {}; \
+             as the balance reads it {}\n",
+            pairs.len(),
+            shares(|p| p.0),
+            shares(|p| p.1)
+        )
     }
 }
 
