@@ -300,18 +300,23 @@ fn a_lighter_wheel_hides_behind_late_stamps() {
 /// Case `index` of the independent world's `seed`, diagnosed as `gap selftest --seed SEED
 /// --case INDEX` diagnoses it (the selftest's options, two threads).
 fn diagnosed(seed: u64, index: usize) -> host_sim::gap::selftest::CaseResult {
+    selftest_of(seed, index).cases.remove(0)
+}
+
+/// The selftest of the independent world's car `index` of `seed`, as `gap selftest --seed
+/// --case` runs it.
+fn selftest_of(seed: u64, index: usize) -> host_sim::gap::selftest::SelftestReport {
     use host_sim::gap::selftest;
     let mut opts = selftest::default_options();
     opts.threads = 2;
-    let mut report = selftest::run(
+    selftest::run(
         selftest::World::Independent,
         &[index],
         seed,
         12.0,
         &opts,
         &|_| {},
-    );
-    report.cases.remove(0)
+    )
 }
 
 /// A car of the independent world (seed 3, the index below): a soft Dahl tyre (1056 N, 203
@@ -350,10 +355,7 @@ fn play_that_a_stiff_tyre_hides_is_named_where_the_torque_balance_shows_it() {
 /// log without it. Run as `gap selftest --seed 3 --case` runs it.
 #[test]
 fn a_named_play_carries_its_fitted_size_beside_the_balances() {
-    use host_sim::gap::selftest;
-    let mut opts = selftest::default_options();
-    opts.threads = 2;
-    let report = selftest::run(selftest::World::Independent, &[1], 3, 12.0, &opts, &|_| {});
+    let report = selftest_of(3, 1);
     let case = &report.cases[0];
     assert_eq!(case.named, ["backlash"], "{}", case.reason);
     let hidden = case.case.truth.as_ref().unwrap().truth.belt_play_deg;

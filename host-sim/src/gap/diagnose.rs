@@ -3,7 +3,7 @@
 
 use super::diagnosis::{
     Candidate, Diagnosis, FRICTION_FOR_SCALE_SIGNIFICANCE, MAX_FIT_S, MIN_IMPROVEMENT,
-    MIN_PAIR_IMPROVEMENT, MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, NamedFit, Options,
+    MIN_PAIR_IMPROVEMENT, MIN_PAIR_SHARE_OF_FLOOR, MIN_SHARE_OF_REDUCIBLE, Options,
     SCALE_LEFT_BESIDE_FRICTION, SCALE_MIN_SHARE, UNEXPLAINED_BELOW_GOF, UNEXPLAINED_RATIO, Verdict,
     VerdictKind,
 };
@@ -398,7 +398,7 @@ pub fn diagnose(rig: &Rig, rec: &Record, validation: Option<&Record>, opts: &Opt
             fit_after: c.fit,
             fit_validation: c.fit_validation,
             reason: finding::reason(&findings),
-            fitted: Some(NamedFit::of(c)),
+            fitted: Some(c.clone()),
         },
         None => Verdict {
             kind: if unexplained {

@@ -10,7 +10,7 @@ use super::{EffectKind, Fit, Noise, identify, locate};
 use std::collections::BTreeMap;
 
 /// One candidate (or pair) after its fit.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct Candidate {
     /// Effect name; a pair is `a+b`.
     pub effect: String,
@@ -63,77 +63,28 @@ pub struct Verdict {
     pub fit_validation: Option<Fit>,
     /// Why: the cost left, the noise floor, and the rule that applied.
     pub reason: String,
-    /// The sizes the named effects were fitted at (`effects` names their families); `None`
-    /// unless effects are named.
+    /// The candidate (or pair) the verdict names, with the sizes it was fitted at (`effects`
+    /// names their families); `None` unless effects are named.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub fitted: Option<NamedFit>,
-}
-
-/// The candidate (or pair) a verdict names, with its fitted sizes as the ranking prints them
-/// (a pair's keyed `effect.param`).
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct NamedFit {
-    pub effect: String,
-    pub params: BTreeMap<String, f64>,
-    pub std_err: BTreeMap<String, f64>,
+    pub fitted: Option<Candidate>,
 }
 
 /// Two readings of a size agree within this share of the larger: a fit and the torque
 /// balance further apart leave the size uncertain by as much.
 pub const SIZES_AGREE_WITHIN: f64 = 0.2;
 
-impl NamedFit {
-    pub fn of(c: &Candidate) -> NamedFit {
-        NamedFit {
-            effect: c.effect.clone(),
-            params: c.params.clone(),
-            std_err: c.std_err.clone(),
-        }
-    }
-
-    /// The play it names, deg at the column, with its candidate's name (`backlash` between
-    /// the pinion and the encoder, `backlash_belt` in the belt/nut).
-    pub fn play_deg(&self) -> Option<(&'static str, f64)> {
-        let single = !self.effect.contains('+');
-        [EffectKind::BeltPlay, EffectKind::Backlash]
-            .into_iter()
-            .find_map(|k| {
-                let key = if single {
-                    (self.effect == k.name()).then(|| "width_deg".to_string())?
-                } else {
-                    format!("{}.width_deg", k.name())
-                };
-                self.params.get(&key).map(|w| (k.name(), *w))
-            })
-    }
-
-    /// `effect p=v (+- se) ...`, as the verdict's second line.
-    fn summary(&self) -> String {
-        let params: Vec<String> = self
-            .params
-            .iter()
-            .map(|(k, v)| match self.std_err.get(k) {
-                Some(e) if e.is_finite() => format!("{k}={v:.4} (+- {e:.4})"),
-                _ => format!("{k}={v:.4}"),
-            })
-            .collect();
-        format!("{} {}", self.effect, params.join(" "))
-    }
-}
-
 /// The play a verdict names beside the torque balance's reading of it (`balance` and its
-/// standard error, deg): one line of the report, and whether the two agree within
+/// standard error, deg), as one line of the report that says whether the two agree within
 /// [`SIZES_AGREE_WITHIN`].
 pub fn play_beside_balance(
     fitted_deg: f64,
     balance_deg: f64,
     balance_se_deg: f64,
     against_model: bool,
-) -> (String, bool) {
+) -> String {
     let larger = fitted_deg.abs().max(balance_deg.abs()).max(1e-12);
     let apart = (fitted_deg - balance_deg).abs() / larger;
-    let agree = apart <= SIZES_AGREE_WITHIN;
-    let line = format!(
+    format!(
         "size of the play: {fitted_deg:.2} deg as fitted; the torque balance ({}) reads \
          {balance_deg:.2} +- {balance_se_deg:.2} deg in the belt: {}",
         if against_model {
@@ -141,7 +92,7 @@ pub fn play_beside_balance(
         } else {
             "no fit: the log alone"
         },
-        if agree {
+        if apart <= SIZES_AGREE_WITHIN {
             format!("the two agree within {:.0} %", 100.0 * SIZES_AGREE_WITHIN)
         } else {
             format!(
@@ -149,8 +100,7 @@ pub fn play_beside_balance(
                 100.0 * apart
             )
         }
-    );
-    (line, agree)
+    )
 }
 
 /// Everything the diagnosis found.
@@ -320,6 +270,30 @@ impl Default for Options {
 }
 
 impl Candidate {
+    /// The play it names, deg at the column, with its candidate's name (`backlash` between
+    /// the pinion and the encoder, `backlash_belt` in the belt/nut).
+    pub fn play_deg(&self) -> Option<(&'static str, f64)> {
+        let play = *self
+            .kinds
+            .iter()
+            .find(|k| k.family() == EffectKind::Backlash.family())?;
+        let key = super::search::param_key(&self.kinds, play, "width_deg");
+        self.params.get(&key).map(|w| (play.name(), *w))
+    }
+
+    /// Its fitted sizes, `p=v` each, with `(+- se)` after each where `errors` asks.
+    pub fn params_text(&self, errors: bool) -> String {
+        let params: Vec<String> = self
+            .params
+            .iter()
+            .map(|(k, v)| match self.std_err.get(k) {
+                Some(e) if errors && e.is_finite() => format!("{k}={v:.4} (+- {e:.4})"),
+                _ => format!("{k}={v:.4}"),
+            })
+            .collect();
+        params.join(" ")
+    }
+
     /// The effect set of this candidate on a rig (the parameter count depends on the rig).
     pub fn effects_on(&self, rig: &Rig) -> Effects {
         let mut fx = Effects::nominal();
@@ -435,11 +409,6 @@ impl Diagnosis {
             "effect", "cost %", "GoF %", "out %", "eff %", "valid. %"
         );
         for c in &self.ranking {
-            let params: Vec<String> = c
-                .params
-                .iter()
-                .map(|(k, v)| format!("{k}={v:.4}"))
-                .collect();
             let _ = writeln!(
                 s,
                 "  {:<28} {:>7.1} {:>7.1} {:>7.1} {:>7.1} {:>9}  {}",
@@ -450,7 +419,7 @@ impl Diagnosis {
                 100.0 * c.fit.gof_effort,
                 c.gof_validation
                     .map_or("-".into(), |g| format!("{:.1}", 100.0 * g)),
-                params.join(" ")
+                c.params_text(false)
             );
         }
         let v = &self.verdict;
@@ -481,12 +450,12 @@ impl Diagnosis {
             }
         );
         if let Some(named) = &v.fitted {
-            let _ = writeln!(s, "  fitted: {}", named.summary());
+            let _ = writeln!(s, "  fitted: {} {}", named.effect, named.params_text(true));
             if let (Some((_, w)), Some(b)) = (
                 named.play_deg(),
                 self.signature.as_ref().filter(|b| b.holds),
             ) {
-                let (line, _) =
+                let line =
                     play_beside_balance(w, b.belt_play_deg, b.belt_play_se_deg, b.against_model);
                 let _ = writeln!(s, "  {line}");
             }
@@ -522,20 +491,21 @@ impl Diagnosis {
 mod tests {
     use super::*;
 
-    fn named(effect: &str, params: &[(&str, f64)]) -> NamedFit {
-        NamedFit {
-            effect: effect.into(),
+    fn named(kinds: &[EffectKind], params: &[(&str, f64)]) -> Candidate {
+        Candidate {
+            effect: kinds.iter().map(|k| k.name()).collect::<Vec<_>>().join("+"),
+            kinds: kinds.to_vec(),
             params: params.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
-            std_err: BTreeMap::new(),
+            ..Candidate::default()
         }
     }
 
     #[test]
     fn the_play_a_verdict_names_is_read_alone_or_in_a_pair() {
-        let belt = named("backlash_belt", &[("width_deg", 1.7)]);
+        let belt = named(&[EffectKind::BeltPlay], &[("width_deg", 1.7)]);
         assert_eq!(belt.play_deg(), Some(("backlash_belt", 1.7)));
         let pair = named(
-            "tire_ground_dahl+backlash",
+            &[EffectKind::TireDahl, EffectKind::Backlash],
             &[
                 ("backlash.width_deg", 0.76),
                 ("tire_ground_dahl.force_n", 271.0),
@@ -543,22 +513,29 @@ mod tests {
         );
         assert_eq!(pair.play_deg(), Some(("backlash", 0.76)));
         // No play named: none read, whatever else the fit has.
-        assert_eq!(named("delay", &[("delay_ms", 30.0)]).play_deg(), None);
         assert_eq!(
-            named("tire_ground", &[("force_n", 1.0), ("width_deg", 2.0)]).play_deg(),
+            named(&[EffectKind::Delay], &[("delay_ms", 30.0)]).play_deg(),
+            None
+        );
+        assert_eq!(
+            named(
+                &[EffectKind::TireGround],
+                &[("force_n", 1.0), ("width_deg", 2.0)]
+            )
+            .play_deg(),
             None
         );
     }
 
     #[test]
     fn a_fit_and_a_balance_apart_by_more_than_a_fifth_leave_the_size_uncertain() {
-        let (line, agree) = play_beside_balance(1.70, 1.26, 0.02, false);
-        assert!(!agree, "{line}");
+        let line = play_beside_balance(1.70, 1.26, 0.02, false);
         assert!(line.contains("differ by 26 %"), "{line}");
+        assert!(!line.contains("agree"), "{line}");
         assert!(line.contains("the log alone"), "{line}");
-        let (line, agree) = play_beside_balance(1.05, 1.0, 0.05, true);
-        assert!(agree, "{line}");
+        let line = play_beside_balance(1.05, 1.0, 0.05, true);
         assert!(line.contains("agree within 20 %"), "{line}");
+        assert!(!line.contains("differ"), "{line}");
         assert!(line.contains("less the nominal model's"), "{line}");
     }
 }

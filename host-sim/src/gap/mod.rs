@@ -44,7 +44,7 @@ pub mod selftest;
 pub mod signature;
 
 pub use diagnose::{Screen, diagnose, screen};
-pub use diagnosis::{Candidate, Diagnosis, NamedFit, Options, Verdict, VerdictKind};
+pub use diagnosis::{Candidate, Diagnosis, Options, Verdict, VerdictKind};
 pub use effects::EffectKind;
 pub(crate) use record::interp_at;
 pub use record::{CurrentSamples, LogTiming, Record};

@@ -282,11 +282,12 @@ pub enum RigError {
         path: String,
         message: String,
     },
-    /// The log has no column of the rig's name for a signal; `found` are the header's names.
+    /// The log has no column of the rig's name for a signal; `found` is the header's names,
+    /// comma-separated.
     MissingColumn {
         path: String,
         column: String,
-        found: Vec<String>,
+        found: String,
     },
     TooShort {
         path: String,
@@ -352,11 +353,10 @@ impl std::fmt::Display for RigError {
                 found,
             } => write!(
                 f,
-                "{path}: no column named {column:?}: the header names `{}`. A log whose \
+                "{path}: no column named {column:?}: the header names `{found}`. A log whose \
                  columns carry other names is read through a rig file that names them: copy \
                  host-sim/rigs/paper.json, set its `columns` to the log's names and pass \
-                 `--rig FILE`",
-                found.join(",")
+                 `--rig FILE`"
             ),
             RigError::TooShort { path } => write!(f, "{path}: fewer than 20 samples"),
             RigError::Log(e) => write!(f, "{e}"),
@@ -596,10 +596,7 @@ impl Rig {
                 } => RigError::MissingColumn {
                     path: path.display().to_string(),
                     column: expected.clone(),
-                    found: found_header
-                        .split(',')
-                        .map(|n| n.trim().to_string())
-                        .collect(),
+                    found: found_header.clone(),
                 },
                 _ => RigError::Log(e),
             })?;
@@ -612,7 +609,7 @@ impl Rig {
                     Err(RigError::MissingColumn {
                         path: name.clone(),
                         column: c.to_string(),
-                        found: table.names.clone(),
+                        found: table.names.join(","),
                     })
                 } else {
                     Ok(None)

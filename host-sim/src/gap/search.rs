@@ -225,6 +225,16 @@ pub(super) fn fit_window(
     })
 }
 
+/// The key of `owner`'s parameter `name` in a candidate of `kinds`: the name alone, or in a
+/// pair `effect.name`.
+pub(super) fn param_key(kinds: &[EffectKind], owner: EffectKind, name: &str) -> String {
+    if kinds.len() > 1 {
+        format!("{}.{name}", owner.name())
+    } else {
+        name.to_string()
+    }
+}
+
 pub(super) fn make_candidate(
     rig: &Rig,
     rec: &Record,
@@ -248,11 +258,7 @@ pub(super) fn make_candidate(
     let mut std_err = BTreeMap::new();
     let mut significant = true;
     for (((owner, s), v), e) in specs.iter().zip(&values).zip(&errs) {
-        let key = if kinds.len() > 1 {
-            format!("{}.{}", owner.name(), s.name)
-        } else {
-            s.name.to_string()
-        };
+        let key = param_key(kinds, *owner, s.name);
         params.insert(key.clone(), *v);
         std_err.insert(key, *e);
         if s.lo == 0.0 && e.is_finite() && *v < 2.0 * e {

@@ -257,7 +257,7 @@ pub struct CaseResult {
     pub signature: Option<super::signature::Signature>,
     /// The sizes the verdict's effects were fitted at, where it names effects.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub fitted: Option<super::NamedFit>,
+    pub fitted: Option<super::Candidate>,
     /// The logger that wrote the case's file, in a run under several loggers.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub logger: Option<LoggedBy>,
@@ -798,9 +798,7 @@ impl SelftestReport {
         ));
         s
     }
-}
 
-impl SelftestReport {
     /// The play's size two ways on the cars named right with play that hide it and whose
     /// balance holds: as the verdict fitted it and as the torque balance read it, each as a
     /// range of shares of what the car hides and a median error. Empty where no case has all.
