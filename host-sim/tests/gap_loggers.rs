@@ -40,6 +40,7 @@ fn team(reference: ReferenceConvention, rate_hz: u32, jitter: bool, drop: bool) 
         header: false,
         car: LoggedCar::Direct,
         drifting_clock: false,
+        instant_current: false,
     }
 }
 
@@ -272,6 +273,8 @@ fn logger_kinds_are_named_as_they_are_given() {
         "epos4-convert",
         "epos4-status",
         "epos4-status-jitter-drop",
+        "ending-100-instant",
+        "starting-100-jitter-drop-instant",
     ] {
         assert_eq!(LoggerKind::parse(name).unwrap().name(), name);
     }
@@ -292,6 +295,8 @@ fn logger_kinds_are_named_as_they_are_given() {
         "epos4",
         "epos4-100",
         "epos4-convert-jitter",
+        "epos4-status-instant",
+        "ending-100-instant-instant",
     ] {
         assert!(LoggerKind::parse(bad).is_err(), "{bad:?}");
     }
@@ -458,10 +463,64 @@ fn a_direct_drive_car_with_friction_that_the_epos4_model_fits_better_is_told_by_
 #[test]
 fn a_late_reference_does_not_choose_a_logs_reference_convention() {
     let case = GenCase::nominal(sweep(10.0), 100);
-    let (effects, kind, choice) = verdict_car_fitted(
-        &case,
-        &team(ReferenceConvention::PeriodStarting, 100, true, true),
+    let choice = effect_free_direct(
+        verdict_car_fitted(
+            &case,
+            &team(ReferenceConvention::PeriodStarting, 100, true, true),
+        ),
+        1,
     );
+    // Nor is the other convention a late reference.
+    assert_eq!(choice.compared_late, None, "{}", choice.describe());
+}
+
+/// A team's logger of the direct drive that writes at each row the current's instantaneous
+/// sample, not its interval's mean: at 100 Hz the cascade's chatter scatters it by amperes
+/// from row to row. It is read as such (the header says nothing), the EPOS4 left out and the
+/// car fitted on the column and the motor angle, and the effect-free car is `none`, with the
+/// logger's reference convention found. The same car as our logger and a team's logger of
+/// interval means write it is not read so.
+#[test]
+fn instantaneous_samples_of_the_current_loops_chatter_are_read_as_such() {
+    let case = GenCase::nominal(sweep(10.0), 100);
+    let instant = Logger {
+        instant_current: true,
+        ..team(ReferenceConvention::PeriodEnding, 100, false, false)
+    };
+    let rows = rows_logged(&case, 5, &instant);
+    let means = rows_logged(
+        &case,
+        5,
+        &team(ReferenceConvention::PeriodEnding, 100, false, false),
+    );
+    let scatter = rms_difference(&rows.current_a, &means.current_a);
+    assert!(scatter > 2.0, "instants against means: {scatter:.2} A RMS");
+    let choice = effect_free_direct(verdict_car_fitted(&case, &instant), 0);
+    let chatter = choice
+        .current_chatter
+        .unwrap_or_else(|| panic!("not read as chatter: {}", choice.describe()));
+    eprintln!("{}", choice.describe());
+    assert!(!chatter.stated && chatter.epos4_left_out, "{chatter:?}");
+    assert!(
+        chatter.log_white_a > 2.0 * chatter.cars_white_a,
+        "{chatter:?}"
+    );
+    for logger in [
+        Logger::ours(100),
+        team(ReferenceConvention::PeriodStarting, 100, true, true),
+    ] {
+        let (_, kind, choice) = verdict_car_fitted(&case, &logger);
+        assert_eq!(choice.current_chatter, None, "{}", choice.describe());
+        assert_eq!(kind, VerdictKind::None, "{}", choice.describe());
+    }
+}
+
+/// The car of a verdict on an effect-free log, which must be `none` on the direct drive
+/// with its reference column moved `rows` later.
+fn effect_free_direct(
+    (effects, kind, choice): (Vec<String>, VerdictKind, drive::CarChoice),
+    rows: usize,
+) -> drive::CarChoice {
     assert_eq!(
         kind,
         VerdictKind::None,
@@ -471,12 +530,83 @@ fn a_late_reference_does_not_choose_a_logs_reference_convention() {
     assert_eq!(choice.drive, CarDrive::Direct, "{}", choice.describe());
     assert_eq!(
         choice.reference_shift_rows,
-        Some(1),
+        Some(rows),
         "{}",
         choice.describe()
     );
-    // Nor is the other convention a late reference.
-    assert_eq!(choice.compared_late, None, "{}", choice.describe());
+    choice
+}
+
+fn rms_difference(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()).max(1);
+    (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / n as f64).sqrt()
+}
+
+/// A header that states the period-starting convention (`# reference: period-starting`) is
+/// read so: the reference column is taken a row later, as where the convention is fitted on
+/// the same log without its header, and not as the period-ending one.
+#[test]
+fn a_header_that_states_the_period_starting_convention_is_read_so() {
+    let case = GenCase::nominal(sweep(10.0), 100);
+    let logger = Logger {
+        header: true,
+        ..team(ReferenceConvention::PeriodStarting, 100, false, false)
+    };
+    let log = log_of(&case, 5, &logger);
+    assert!(
+        log.comments
+            .iter()
+            .any(|c| c == "reference: period-starting"),
+        "{:?}",
+        log.comments
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let written = |name: &str, comments: Vec<String>| {
+        let path = dir.path().join(name);
+        host_sim::logfmt::Log {
+            comments,
+            ..log.clone()
+        }
+        .save(&path)
+        .unwrap();
+        verdict_on_car(&path, Some(CarDrive::Direct), Some(Controller::Paper))
+    };
+    let stated = written("starting.csv", log.comments.clone());
+    let fitted = written("bare.csv", Vec::new());
+    let as_ending = written(
+        "ending.csv",
+        log.comments
+            .iter()
+            .map(|c| c.replace("period-starting", "period-ending"))
+            .collect(),
+    );
+    assert_eq!(stated.1, VerdictKind::None, "{:?}", stated.0);
+    assert_eq!(stated.2.reference_shift_rows, None);
+    assert_eq!(
+        fitted.2.reference_shift_rows,
+        Some(1),
+        "{}",
+        fitted.2.describe()
+    );
+    let gof = |c: &drive::CarChoice| c.tried[0].gof;
+    eprintln!(
+        "nominal GoF: stated starting {:.4}, fitted {:.4}, read as ending {:.4}",
+        gof(&stated.2),
+        gof(&fitted.2),
+        gof(&as_ending.2)
+    );
+    assert!(
+        (gof(&stated.2) - gof(&fitted.2)).abs() < 1e-9,
+        "{} against {}",
+        stated.2.describe(),
+        fitted.2.describe()
+    );
+    assert!(
+        gof(&stated.2) > gof(&as_ending.2) + 0.01,
+        "{} against {}",
+        stated.2.describe(),
+        as_ending.2.describe()
+    );
 }
 
 /// A 1 kHz logger whose stamps jitter by +-1 ms, its rows in the order they came: the rows'

@@ -72,7 +72,8 @@ pub struct GapArgs {
     pub unmodelled: bool,
     /// selftest: diagnose each car from the files of these loggers, as `gap FILE` reads them
     /// (ours always, first): `ours`, `drawn` (a team's logger drawn with each case), or
-    /// `ending|starting-RATE[-jitter][-drop]` (RATE in Hz, 100-1000, dividing 20000); or the
+    /// `ending|starting-RATE[-jitter][-drop][-instant]` (RATE in Hz, 100-1000, dividing 20000;
+    /// `-instant`: the current sampled at each row's instant, not its interval's mean); or the
     /// world's EPOS4 car (its own drive
     /// at 25 kHz / 2.5 kHz) as `epos4-convert` (steer-can convert's rows and header) or
     /// `epos4-status[-jitter][-drop]` (a row as each TPDO arrives, no header), either with

@@ -62,8 +62,27 @@ impl LogHeader {
                         format!("header `# controller: {v}`: expected `paper` or `ecu`")
                     })?)
                 }
-                "current" => h.current = Some(v.to_string()),
-                "reference" => h.reference = Some(v.to_string()),
+                "current" => match v {
+                    "interval-mean" | "sync-sample" | "instantaneous" => {
+                        h.current = Some(v.to_string())
+                    }
+                    _ => {
+                        return Err(format!(
+                            "header `# current: {v}`: expected `interval-mean`, `sync-sample` \
+                             or `instantaneous`"
+                        ));
+                    }
+                },
+                "reference" => match v {
+                    "period-ending" | "period-starting" => h.reference = Some(v.to_string()),
+                    _ => {
+                        return Err(format!(
+                            "header `# reference: {v}`: expected `period-ending` (each row holds \
+                             the reference of the period that ends there) or `period-starting` \
+                             (the one that starts there)"
+                        ));
+                    }
+                },
                 "sync-drift" => {
                     h.sync_drift = Some(
                         v.strip_suffix("ppm")
@@ -248,6 +267,10 @@ pub struct CarChoice {
     /// [`DRIVE_SCREEN_GOF`]: how their candidates told them apart.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub screened: Option<DriveScreen>,
+    /// The current column read as instantaneous samples of the loop's chatter, compared
+    /// through a moving mean in every fit ([`super::chatter`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub current_chatter: Option<super::chatter::CurrentChatter>,
 }
 
 impl CarChoice {
@@ -385,6 +408,9 @@ impl CarChoice {
                 1e3 * r.column_age_s
             ));
         }
+        if let Some(c) = &self.current_chatter {
+            line.push_str(&format!("; {}", c.describe()));
+        }
         match self.reference_shift_rows {
             Some(0) => line.push_str(
                 "; reference column: the period ending at each row (fitted; the header does not say)",
@@ -521,7 +547,7 @@ const POSITION_TICK_S: f64 = 1.0 / steering_ecu::paper_mode::POSITION_LOOP_HZ as
 
 /// `rig` as the car `drive` + `controller`, its reference timed by `phase` (s after each
 /// reference sample): an EPOS4's SYNC, or the direct drive's position tick that takes it.
-fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, phase: f64) -> Rig {
+pub(super) fn with_car(rig: &Rig, drive: CarDrive, controller: Controller, phase: f64) -> Rig {
     let mut r = rig.clone();
     if let RigModel::Paper(m) = &mut r.model {
         m.drive = drive;
@@ -638,6 +664,7 @@ pub(super) fn head(rec: &Record, seconds: f64) -> Record {
         disturbance: rec.disturbance.as_ref().map(|d| d[..n].to_vec()),
         supply_v: rec.supply_v.as_ref().map(|s| s[..n].to_vec()),
         powered_from: rec.powered_from.min(n),
+        current_chatter: rec.current_chatter,
     }
 }
 
@@ -646,9 +673,14 @@ pub(super) fn head(rec: &Record, seconds: f64) -> Record {
 pub struct LogSays {
     /// The header states the reference convention (`# reference: ...`).
     pub reference_stated: bool,
+    /// ... and states `period-starting`: each row holds the reference that starts there.
+    pub reference_starting: bool,
     /// The header states what the current column holds (`# current: ...`), and so how an
     /// EPOS4 car's samples were read into the rows (`steer-can convert`'s way).
     pub current_stated: bool,
+    /// The header says the current column holds instantaneous samples
+    /// (`# current: instantaneous`).
+    pub current_instantaneous: bool,
     pub timing: super::LogTiming,
     /// How fast an EPOS4 car's SYNC grid walks against the reference frames, s per s, where
     /// the header says (`# sync-drift:`); the model runs it
@@ -690,9 +722,24 @@ pub fn choose(
         m.epos4.encoder_phase_s = drive_clock::encoder_phase_of(&stated).unwrap_or(0.0);
     }
     let rig = &with_column;
-    let drives: Vec<CarDrive> = match drive {
-        Some((d, _)) => vec![d],
-        None => vec![CarDrive::Epos4, CarDrive::Direct],
+    // A current of instantaneous samples of the loop's chatter: the car is fitted on the
+    // column and the motor angle, and the diagnosis weighs the current as noise (the record
+    // returned carries it).
+    let mut chatter = super::chatter::read(
+        rig,
+        rec,
+        says.current_stated.then_some(says.current_instantaneous),
+    );
+    let mut by_angles = rec.clone();
+    by_angles.current_chatter = chatter.is_some();
+    let rec = &by_angles;
+    let drives: Vec<CarDrive> = match (drive, &mut chatter) {
+        (Some((d, _)), _) => vec![d],
+        (None, Some(c)) => {
+            c.epos4_left_out = true;
+            vec![CarDrive::Direct]
+        }
+        (None, None) => vec![CarDrive::Epos4, CarDrive::Direct],
     };
     let controllers: Vec<Controller> = match controller {
         Some((c, _)) => vec![c],
@@ -702,10 +749,12 @@ pub fn choose(
     // rows resolve the reference's steps and the binning places them.
     let row_dt = says.timing.row_dt_s;
     let at_reference_rate = row_dt > 0.75 * rec.dt && row_dt < 1.5 * rec.dt;
-    let shifts: Vec<usize> = if !says.reference_stated && at_reference_rate {
-        vec![0, 1]
-    } else {
-        vec![0]
+    // A convention the header states is taken; a row holding the reference that starts there
+    // is the next period's, one row later than ours.
+    let shifts: Vec<usize> = match (says.reference_stated, at_reference_rate) {
+        (false, true) => vec![0, 1],
+        (true, true) if says.reference_starting => vec![1],
+        _ => vec![0],
     };
     let records: Vec<Record> = shifts.iter().map(|&k| shifted_reference(rec, k)).collect();
     let shorts: Vec<Record> = records.iter().map(|r| head(r, SYNC_SEARCH_S)).collect();
@@ -1014,6 +1063,7 @@ pub fn choose(
             clock_refitted: None,
             reference_windows: Vec::new(),
             screened: None,
+            current_chatter: chatter,
         };
         let mut chosen = rig_of(&best);
         if let RigModel::Paper(m) = &mut chosen.model {
@@ -1307,7 +1357,9 @@ pub fn choose_for_log(
     };
     let says = LogSays {
         reference_stated: header.reference.is_some(),
+        reference_starting: header.reference.as_deref() == Some("period-starting"),
         current_stated: header.current.is_some(),
+        current_instantaneous: header.current.as_deref() == Some("instantaneous"),
         timing,
         sync_drift: header.sync_drift,
         column_sampled_s: header.column_sampled_s,
@@ -1379,6 +1431,26 @@ mod tests {
             let e = header(line).unwrap_err();
             assert!(e.contains(expected), "{line}: {e}");
         }
+    }
+
+    #[test]
+    fn a_current_or_a_reference_convention_the_reader_does_not_know_is_refused() {
+        for kind in ["interval-mean", "sync-sample", "instantaneous"] {
+            let h = header(&format!("current: {kind}")).unwrap();
+            assert_eq!(h.current.as_deref(), Some(kind));
+        }
+        for convention in ["period-ending", "period-starting"] {
+            let h = header(&format!("reference: {convention}")).unwrap();
+            assert_eq!(h.reference.as_deref(), Some(convention));
+        }
+        assert_refused(
+            &["current: peak", "current: mean", "current: "],
+            "expected `interval-mean`, `sync-sample` or `instantaneous`",
+        );
+        assert_refused(
+            &["reference: sideways", "reference: starting", "reference: "],
+            "expected `period-ending`",
+        );
     }
 
     #[test]

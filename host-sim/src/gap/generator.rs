@@ -179,8 +179,12 @@ impl ReferenceConvention {
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Logger {
     pub reference: ReferenceConvention,
-    /// Rows per second (the row grid; each row's current is the mean over its own interval).
+    /// Rows per second (the row grid).
     pub rate_hz: u32,
+    /// The direct drive only: each row's current is the sensor's sample at the row's instant
+    /// (a logger that reads the ECU's last current sample), not the mean over the row's
+    /// interval that host-sim's logs and the 0x102 frame carry.
+    pub instant_current: bool,
     /// Stamp jitter, s: each stamp lies within +-this of the row's place on the logger's grid
     /// (uniform), the rows kept in order as a receiver stamps frames in the order they come.
     pub jitter_s: f64,
@@ -236,6 +240,7 @@ impl Logger {
             header: true,
             car: LoggedCar::Direct,
             drifting_clock: false,
+            instant_current: false,
         }
     }
 
@@ -271,6 +276,7 @@ impl Logger {
             header: false,
             car: LoggedCar::Direct,
             drifting_clock: false,
+            instant_current: false,
         }
     }
 
@@ -289,6 +295,9 @@ impl Logger {
         }
         if self.drifting_clock {
             s.push_str(" ECU clock drifting");
+        }
+        if self.instant_current {
+            s.push_str(" current at the instant");
         }
         if self.header {
             s.push_str(" header");
@@ -741,8 +750,13 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
                 rows.sw_deg.push((sw.0 as f64).to_degrees());
                 rows.motor_rad
                     .push(motor_from_hall(hall_from_motor(x[1])).0 as f64);
+                let current = if logger.instant_current {
+                    x[0]
+                } else {
+                    mean_current
+                };
                 rows.current_a
-                    .push(mean_current + offset_a + CURRENT_NOISE_A * rng.normal());
+                    .push(current + offset_a + CURRENT_NOISE_A * rng.normal());
             }
         }
     }

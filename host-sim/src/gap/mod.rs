@@ -17,6 +17,7 @@
 //! GoF is the paper's eq. 11 per signal; the combined figure is `1 - sqrt(mean (1 - GoF)^2)`
 //! over the output and the effort, which is what the fits minimise.
 
+pub mod chatter;
 pub mod cli;
 mod diagnose;
 mod diagnosis;

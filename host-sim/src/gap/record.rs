@@ -28,6 +28,12 @@ pub struct Record {
     /// the EPOS4's first status frame): the car was powering up, its drive not yet running.
     /// 0 for a log that starts with the drive running.
     pub powered_from: usize,
+    /// The current column holds instantaneous samples of a current loop's chatter, which no
+    /// model repeats sample for sample (stated or found, [`super::chatter`]):
+    /// [`super::Scorer::fit`]'s GoF pairs the output with the motor angle, not with the
+    /// effort, and the likelihood takes the effort's whole scatter about the nominal model
+    /// for its noise.
+    pub current_chatter: bool,
 }
 
 /// What a log's current column holds.
@@ -1015,6 +1021,7 @@ impl Record {
             disturbance: None,
             supply_v: None,
             powered_from: 0,
+            current_chatter: false,
         }
     }
 

@@ -796,6 +796,7 @@ impl Rig {
                 disturbance,
                 supply_v: None,
                 powered_from: 0,
+                current_chatter: false,
             },
             RigModel::Bam(m) => bam_record(
                 m,
@@ -925,6 +926,7 @@ fn bam_record(m: &BamModel, name: &str, c: &BamColumns) -> Result<Record, RigErr
                 .collect(),
         ),
         powered_from: 0,
+        current_chatter: false,
     };
     // The gain the log's rows show: duty over error, where the firmware's output is neither
     // saturated nor within a few encoder counts of zero.

@@ -102,9 +102,19 @@ impl Scorer {
         };
         let per_sample = ((n - s).max(1) as f64).sqrt();
         let sig = |r: Vec<f64>, den: f64| white_sigma(&r).max(1e-3 * den / per_sample);
+        let effort = res(&sim0.effort, &rec.effort);
+        // A current of instantaneous samples of the loop's chatter ([`super::chatter`]): its
+        // scatter about the model is the chatter, whose median third difference takes its
+        // heavy tails and the slow beat of a loop sampled at the rows' rate for less than it
+        // is; its RMS about the residual's mean is its noise.
+        let effort_noise = if rec.current_chatter {
+            (demeaned_norm(&effort) / per_sample).max(1e-3 * self.den_effort / per_sample)
+        } else {
+            sig(effort, self.den_effort)
+        };
         self.noise = Some(Noise {
             output: sig(res(&sim0.output, &rec.output), self.den_output),
-            effort: sig(res(&sim0.effort, &rec.effort), self.den_effort),
+            effort: effort_noise,
         });
         self
     }
@@ -163,6 +173,17 @@ impl Scorer {
         let go = 1.0 - eo.sqrt() / self.den_output;
         let ge = 1.0 - ee.sqrt() / self.den_effort;
         let m = (n - s).max(1) as f64;
+        // A current of instantaneous samples of the loop's chatter cannot tell cars apart: the
+        // motor angle, which answers the reference through the position loop, stands in for
+        // it ([`super::chatter`]).
+        let gof = match (&rec.motor, rec.current_chatter) {
+            (Some(motor), true) if motor.len() >= n && sim.motor.len() >= n => {
+                let gm = 1.0 - sq(&sim.motor, motor).sqrt() / demeaned_norm(&motor[s..n]);
+                combined_gof(go, gm)
+            }
+            (_, true) => go,
+            _ => combined_gof(go, ge),
+        };
         let effort_norm = rec.effort[s..n]
             .iter()
             .map(|v| v * v)
@@ -170,7 +191,7 @@ impl Scorer {
             .sqrt()
             .max(1e-12);
         Fit {
-            gof: combined_gof(go, ge),
+            gof,
             gof_output: go,
             gof_effort: ge,
             rms_output: (eo / m).sqrt(),

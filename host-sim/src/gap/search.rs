@@ -222,6 +222,7 @@ pub(super) fn fit_window(
         supply_v: rec.supply_v.as_ref().map(|d| d[a..b].to_vec()),
         // What of the power-up the window holds; one from past it starts with the drive running.
         powered_from: rec.powered_from.saturating_sub(a).min(b - a),
+        current_chatter: rec.current_chatter,
     })
 }
 

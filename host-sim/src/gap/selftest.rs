@@ -378,7 +378,7 @@ impl LoggerKind {
         }
         let bad = || {
             format!(
-                "logger {name:?}: expected `ours`, `drawn`, ending|starting-RATE[-jitter][-drop] \
+                "logger {name:?}: expected `ours`, `drawn`, ending|starting-RATE[-jitter][-drop][-instant] \
                  with RATE in Hz, 100-1000, dividing 20000 (e.g. starting-100-jitter-drop, \
                  ending-250), or the EPOS4 car's \
                  epos4-convert[-drift]|epos4-status[-drift][-jitter][-drop]"
@@ -414,6 +414,7 @@ impl LoggerKind {
                 header: false,
                 car: LoggedCar::Direct,
                 drifting_clock: false,
+                instant_current: false,
             },
         };
         for p in parts {
@@ -427,6 +428,10 @@ impl LoggerKind {
                 "jitter" if logger.jitter_s == 0.0 => logger.jitter_s = generator::LOGGER_JITTER_S,
                 "drop" if logger.drop_chance == 0.0 => {
                     logger.drop_chance = generator::LOGGER_DROP_CHANCE
+                }
+                // The current sampled at the row's instant (the direct drive's loggers).
+                "instant" if logger.car == LoggedCar::Direct && !logger.instant_current => {
+                    logger.instant_current = true
                 }
                 _ => return Err(bad()),
             }
@@ -453,6 +458,9 @@ impl LoggerKind {
                 }
                 if l.drop_chance > 0.0 {
                     s.push_str("-drop");
+                }
+                if l.instant_current {
+                    s.push_str("-instant");
                 }
                 s
             }
@@ -621,9 +629,20 @@ impl LoggersReport {
         for l in &self.loggers {
             let n = l.report.cases.len();
             let right = l.report.cases.iter().filter(|r| r.correct).count();
+            let chatter = l
+                .report
+                .cases
+                .iter()
+                .filter(|r| {
+                    r.logger
+                        .as_ref()
+                        .and_then(|b| b.car.as_ref())
+                        .is_some_and(|c| c.current_chatter.is_some())
+                })
+                .count();
             let _ = writeln!(
                 s,
-                "logger {}: {right} of {n} right, {} changed against ours{}",
+                "logger {}: {right} of {n} right, {} changed against ours{}{}",
                 l.kind,
                 l.changed_vs_ours.len(),
                 if l.changed_vs_ours.is_empty() {
@@ -637,6 +656,13 @@ impl LoggersReport {
                             .collect::<Vec<_>>()
                             .join(",")
                     )
+                },
+                if chatter > 0 {
+                    format!(
+                        "; {chatter} read as instantaneous samples of the current loop's chatter"
+                    )
+                } else {
+                    String::new()
                 }
             );
             s.push_str(&l.report.confusion_table());
