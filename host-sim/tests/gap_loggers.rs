@@ -505,6 +505,19 @@ fn instantaneous_samples_of_the_current_loops_chatter_are_read_as_such() {
         chatter.log_white_a > 2.0 * chatter.cars_white_a,
         "{chatter:?}"
     );
+    // Said by the header, the same: but the header's word says nothing of how much the
+    // samples chatter, so the EPOS4 stays a candidate.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("stated.csv");
+    host_sim::logfmt::Log {
+        comments: vec!["current: instantaneous".into()],
+        ..log_of(&case, 5, &instant)
+    }
+    .save(&path)
+    .unwrap();
+    let (_, _, stated) = verdict_on_car(&path, None, None);
+    let said = stated.current_chatter.unwrap();
+    assert!(said.stated && !said.epos4_left_out, "{said:?}");
     for logger in [
         Logger::ours(100),
         team(ReferenceConvention::PeriodStarting, 100, true, true),

@@ -18,8 +18,8 @@
 //! record (the direct drive's interval mean under either controller, the EPOS4's SYNC
 //! sample), the car is fitted on the column and the motor angle
 //! ([`super::Record::current_chatter`]): the motor answers the reference through the position
-//! loop, ahead of the belt, the rack and the tyre. Where the log does not say which drive
-//! wrote it, the EPOS4 is left out: its current is one sample a SYNC of a 25 kHz loop on a
+//! loop, ahead of the belt, the rack and the tyre. Where the scatter found it and the log
+//! does not say which drive wrote it, the EPOS4 is left out: its current is one sample a SYNC of a 25 kHz loop on a
 //! fine encoder, and the largest scatter of [`read`]'s cars is its own (1.3-1.4 A on the
 //! independent world's sweeps, as the world's EPOS4 logs show it); the direct drive's
 //! instantaneous samples scatter four times that and more. The diagnosis's likelihood then

@@ -735,11 +735,13 @@ pub fn choose(
     let rec = &by_angles;
     let drives: Vec<CarDrive> = match (drive, &mut chatter) {
         (Some((d, _)), _) => vec![d],
-        (None, Some(c)) => {
+        // Found by its scatter, the current is no EPOS4's; a header's word that the samples
+        // are instants says nothing of how much they chatter.
+        (None, Some(c)) if !c.stated => {
             c.epos4_left_out = true;
             vec![CarDrive::Direct]
         }
-        (None, None) => vec![CarDrive::Epos4, CarDrive::Direct],
+        (None, _) => vec![CarDrive::Epos4, CarDrive::Direct],
     };
     let controllers: Vec<Controller> = match controller {
         Some((c, _)) => vec![c],

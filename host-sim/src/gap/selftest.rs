@@ -365,10 +365,11 @@ pub enum LoggerKind {
 }
 
 impl LoggerKind {
-    /// `ours`, `drawn`, or `ending|starting-RATE[-jitter][-drop]`: a team's logger with that
-    /// reference convention and rate (Hz, 100-1000, a whole number of the plant's 20 kHz
-    /// ticks a row: 100, 200, 250, 400, 500, 1000, ...), stamps +-1 ms if `jitter`, 1 % of rows lost
-    /// if `drop`, no header lines.
+    /// `ours`, `drawn`, or `ending|starting-RATE[-jitter][-drop][-instant]`: a team's logger
+    /// with that reference convention and rate (Hz, 100-1000, a whole number of the plant's
+    /// 20 kHz ticks a row: 100, 200, 250, 400, 500, 1000, ...), stamps +-1 ms if `jitter`, 1 %
+    /// of rows lost if `drop`, the current's instantaneous sample at each row if `instant`, no
+    /// header lines.
     pub fn parse(name: &str) -> Result<LoggerKind, String> {
         let name = name.trim();
         match name {
