@@ -550,6 +550,33 @@ fn effect_free_direct(
     choice
 }
 
+/// 2.5 deg of play in the belt (the independent world's case 3 of seed 1, a 100 Hz sweep)
+/// written by a team's logger of the current's instantaneous samples. The nominal model fits
+/// a column that play holds back better with the reference a row late, and with the current
+/// chattering nothing else in the car's fits says otherwise: the two conventions are told
+/// apart by their candidates, and the play is named on the logger's own convention (it was
+/// named rack friction with a tyre, the reference taken a row late).
+#[test]
+fn play_under_a_chattering_current_is_not_taken_for_a_reference_a_row_late() {
+    let case = generator::draw(1, 3, 12.0);
+    assert_eq!(case.log_rate_hz, 100);
+    let logger = Logger {
+        instant_current: true,
+        ..team(ReferenceConvention::PeriodEnding, 100, false, false)
+    };
+    let (effects, _, choice) = verdict_car_fitted(&case, &logger);
+    assert!(choice.current_chatter.is_some(), "{}", choice.describe());
+    let screen = choice.screened.as_ref().unwrap();
+    assert!(screen.by_convention, "{}", choice.describe());
+    assert_eq!(
+        choice.reference_shift_rows,
+        Some(0),
+        "{}",
+        choice.describe()
+    );
+    assert_eq!(effects, ["backlash"], "{}", choice.describe());
+}
+
 fn rms_difference(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len()).max(1);
     (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / n as f64).sqrt()

@@ -192,6 +192,9 @@ pub struct LateComparison {
 /// margin, it cannot beat the chosen car's best, which is then not fitted.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DriveScreen {
+    /// The two cars differ in their reference convention, not their drive: on a current of
+    /// the loop's chatter ([`super::chatter`]) the conventions are screened so.
+    pub by_convention: bool,
     /// The car the nominal models ranked first, then the other drive's best.
     pub cars: [ScreenedCar; 2],
     /// The other drive's car was taken.
@@ -203,6 +206,8 @@ pub struct DriveScreen {
 pub struct ScreenedCar {
     pub drive: CarDrive,
     pub controller: Controller,
+    /// Its reference convention where fitted (see [`Tried::reference_shift_rows`]).
+    pub reference_shift_rows: Option<usize>,
     /// Its nominal GoF on the whole log, and its best single candidate's: `None` for the
     /// chosen car where the other car's best did not beat its nominal GoF by the margin (so
     /// could not beat its best).
@@ -444,20 +449,44 @@ impl CarChoice {
                     ),
                     None => "its candidates not fitted".to_string(),
                 };
+                let convention = match (sc.by_convention, c.reference_shift_rows) {
+                    (true, Some(0)) => " (reference ending at the row)",
+                    (true, Some(_)) => " (reference starting at the row)",
+                    _ => "",
+                };
                 format!(
-                    "{} + {} nominal {:.1} %, {best}",
+                    "{} + {}{convention} nominal {:.1} %, {best}",
                     c.drive.name(),
                     controller_name(c.controller),
                     100.0 * c.nominal_gof,
                 )
             };
             line.push_str(&format!(
-                "; the drives' nominal models within {:.0} points, so told apart by their best \
+                "; the {}' nominal models within {:.0} points, so told apart by their best \
                  single candidates ({}; {}): {}",
+                if sc.by_convention {
+                    "reference conventions"
+                } else {
+                    "drives"
+                },
                 100.0 * DRIVE_SCREEN_GOF,
                 car(&sc.cars[0]),
                 car(&sc.cars[1]),
-                if sc.switched {
+                if sc.by_convention {
+                    format!(
+                        "the reference {} at each row {}",
+                        if sc.cars[usize::from(sc.switched)].reference_shift_rows == Some(0) {
+                            "ending"
+                        } else {
+                            "starting"
+                        },
+                        if sc.switched {
+                            "taken, its candidates fitting the log better"
+                        } else {
+                            "kept"
+                        }
+                    )
+                } else if sc.switched {
                     format!(
                         "the {} drive taken, its candidates fitting the log more than {:.0} \
                          points better",
@@ -1090,11 +1119,21 @@ pub fn choose(
     // came close. Not where a late reference ranked the cars: that comparison already ran
     // each with an effect, the one a single candidate's screen would leave out (and the
     // EPOS4's latch stands in for a late reference beside any one effect).
+    // On a current of the loop's chatter (the EPOS4 left out or the drive given) the cars'
+    // nominal models cannot tell a reference convention from play or a tyre that holds the
+    // column back: the other convention's best car is the rival, told apart the same way.
+    let by_convention = chatter.is_some() && fitted_convention;
     let rival = order
         .iter()
-        .position(|&i| whole[i].drive != whole[order[0]].drive)
+        .position(|&i| {
+            if by_convention {
+                whole[i].reference_shift_rows != whole[order[0]].reference_shift_rows
+            } else {
+                whole[i].drive != whole[order[0]].drive
+            }
+        })
         .filter(|&p| {
-            drive.is_none()
+            (drive.is_none() || by_convention)
                 && !late_shows
                 && whole[order[0]].gof - whole[order[p]].gof < DRIVE_SCREEN_GOF
         });
@@ -1117,11 +1156,13 @@ pub fn choose(
     let car = |c: &CarChoice, nominal_gof: f64, s: Option<&super::Screen>| ScreenedCar {
         drive: c.drive,
         controller: c.controller,
+        reference_shift_rows: c.reference_shift_rows,
         nominal_gof,
         best_effect: s.and_then(|s| s.best.as_ref().map(|(e, _)| e.clone())),
         best_gof: s.map(super::Screen::gof),
     };
     let screened = DriveScreen {
+        by_convention,
         cars: [
             car(&first.2, nominal, own.as_ref()),
             car(&second.2, other.nominal_gof, Some(&other)),
