@@ -483,10 +483,7 @@ fn a_late_reference_does_not_choose_a_logs_reference_convention() {
 #[test]
 fn instantaneous_samples_of_the_current_loops_chatter_are_read_as_such() {
     let case = GenCase::nominal(sweep(10.0), 100);
-    let instant = Logger {
-        instant_current: true,
-        ..team(ReferenceConvention::PeriodEnding, 100, false, false)
-    };
+    let instant = instant_logger();
     let rows = rows_logged(&case, 5, &instant);
     let means = rows_logged(
         &case,
@@ -528,6 +525,15 @@ fn instantaneous_samples_of_the_current_loops_chatter_are_read_as_such() {
     }
 }
 
+/// A team's 100 Hz logger of the direct drive writing the current's instantaneous sample at
+/// each row, the reference that ends there, every row on its place, no header.
+fn instant_logger() -> Logger {
+    Logger {
+        instant_current: true,
+        ..team(ReferenceConvention::PeriodEnding, 100, false, false)
+    }
+}
+
 /// The car of a verdict on an effect-free log, which must be `none` on the direct drive
 /// with its reference column moved `rows` later.
 fn effect_free_direct(
@@ -560,10 +566,7 @@ fn effect_free_direct(
 fn play_under_a_chattering_current_is_not_taken_for_a_reference_a_row_late() {
     let case = generator::draw(1, 3, 12.0);
     assert_eq!(case.log_rate_hz, 100);
-    let logger = Logger {
-        instant_current: true,
-        ..team(ReferenceConvention::PeriodEnding, 100, false, false)
-    };
+    let logger = instant_logger();
     let (effects, _, choice) = verdict_car_fitted(&case, &logger);
     assert!(choice.current_chatter.is_some(), "{}", choice.describe());
     let screen = choice.screened.as_ref().unwrap();

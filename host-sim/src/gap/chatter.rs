@@ -19,10 +19,12 @@
 //! sample), the car is fitted on the column and the motor angle
 //! ([`super::Record::current_chatter`]): the motor answers the reference through the position
 //! loop, ahead of the belt, the rack and the tyre. Where the scatter found it and the log
-//! does not say which drive wrote it, the EPOS4 is left out: its current is one sample a SYNC of a 25 kHz loop on a
-//! fine encoder, and the largest scatter of [`read`]'s cars is its own (1.3-1.4 A on the
-//! independent world's sweeps, as the world's EPOS4 logs show it); the direct drive's
-//! instantaneous samples scatter four times that and more. The diagnosis's likelihood then
+//! does not say which drive wrote it, the EPOS4 is left out: its current is one sample a
+//! SYNC of a 25 kHz loop on a fine encoder, and the largest scatter of [`read`]'s cars is its
+//! own (1.2-1.5 A on the independent world's sweeps, as the world's EPOS4 logs show it); the
+//! direct drive's instantaneous samples at 100 Hz scatter 2.9-5.5 times that. Where the
+//! log's reference convention is fitted, the two conventions' best cars are told apart by
+//! their candidates, as two drives are. The diagnosis's likelihood then
 //! takes the current's whole scatter about the nominal model for its noise (the median third
 //! difference it reads off other logs takes a chatter's heavy tails for less than they are),
 //! and its GoF too pairs the column with the motor angle.
@@ -31,15 +33,16 @@ use super::Record;
 use super::drive::{SYNC_SEARCH_S, head, with_car};
 use super::model::Effects;
 use super::rig::{CarDrive, Rig, RigModel};
-use super::score::white_sigma;
+use super::score::{Scorer, white_sigma};
 use crate::sim::Controller;
 
 /// How many times more than any car's logged current a log's current must scatter row to row
-/// (the white part: the median third difference) to be taken for instantaneous samples of the loop's
-/// chatter. The largest car's is the EPOS4's SYNC sample, and the world's EPOS4 logs scatter
-/// as much as its model (1.30 A against 1.32 A, 1.39 against 1.40 on two sweeps); the direct
-/// drive's instantaneous samples at 100 Hz scatter 2.9-4.2 times the model's on its sweeps:
-/// twice it lies between, a factor of two from each.
+/// (the white part: the median third difference) to be taken for instantaneous samples of
+/// the loop's chatter. The largest car's is the EPOS4's SYNC sample, and the world's EPOS4
+/// logs scatter as much as its model (1.30 A against 1.32 A, 1.39 against 1.40 on two
+/// sweeps); the direct drive's instantaneous samples at 100 Hz scatter 2.9-5.5 times the
+/// largest car's on the first 20 cars' logs: twice lies between, about a factor of two from
+/// the EPOS4's and from the lowest of them.
 pub const CHATTER_RATIO: f64 = 2.0;
 
 /// What the log's current column was read as, and why.
@@ -93,7 +96,7 @@ pub fn read(rig: &Rig, rec: &Record, stated: Option<bool>) -> Option<CurrentChat
         return None;
     }
     let on = head(rec, SYNC_SEARCH_S);
-    let skip = ((rig.skip_s / on.dt).round() as usize).min(on.len());
+    let skip = Scorer::new(rig, &on).skip();
     let log_white_a = white_sigma(&on.effort[skip..]);
     let cars = [
         (CarDrive::Direct, Controller::Paper, 0.0),

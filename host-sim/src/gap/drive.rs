@@ -272,8 +272,9 @@ pub struct CarChoice {
     /// [`DRIVE_SCREEN_GOF`]: how their candidates told them apart.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub screened: Option<DriveScreen>,
-    /// The current column read as instantaneous samples of the loop's chatter, compared
-    /// through a moving mean in every fit ([`super::chatter`]).
+    /// The current column read as instantaneous samples of the loop's chatter: the GoF pairs
+    /// the column with the motor angle, and the likelihood weighs the current as noise
+    /// ([`super::chatter`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub current_chatter: Option<super::chatter::CurrentChatter>,
 }
@@ -450,8 +451,7 @@ impl CarChoice {
                     None => "its candidates not fitted".to_string(),
                 };
                 let convention = match (sc.by_convention, c.reference_shift_rows) {
-                    (true, Some(0)) => " (reference ending at the row)",
-                    (true, Some(_)) => " (reference starting at the row)",
+                    (true, Some(rows)) => convention_clause(rows),
                     _ => "",
                 };
                 format!(
@@ -512,11 +512,7 @@ impl CarChoice {
                     t.drive.name(),
                     controller_name(t.controller),
                     if self.reference_shift_rows.is_some() {
-                        if t.reference_shift_rows == 0 {
-                            " (reference ending at the row)"
-                        } else {
-                            " (reference starting at the row)"
-                        }
+                        convention_clause(t.reference_shift_rows)
                     } else {
                         ""
                     },
@@ -573,6 +569,16 @@ const ENCODER_REACH_GOF: f64 = 0.02;
 const MAX_PUSH_TICK: u32 = 2;
 const PUSH_TICKS: [u32; MAX_PUSH_TICK as usize + 1] = [0, 1, MAX_PUSH_TICK];
 const POSITION_TICK_S: f64 = 1.0 / steering_ecu::paper_mode::POSITION_LOOP_HZ as f64;
+
+/// How the report names a car's reference convention, from the rows its reference column
+/// was moved by ([`Tried::reference_shift_rows`]).
+fn convention_clause(shift_rows: usize) -> &'static str {
+    if shift_rows == 0 {
+        " (reference ending at the row)"
+    } else {
+        " (reference starting at the row)"
+    }
+}
 
 /// `rig` as the car `drive` + `controller`, its reference timed by `phase` (s after each
 /// reference sample): an EPOS4's SYNC, or the direct drive's position tick that takes it.
