@@ -560,8 +560,8 @@ fn effect_free_direct(
 /// written by a team's logger of the current's instantaneous samples. The nominal model fits
 /// a column that play holds back better with the reference a row late, and with the current
 /// chattering nothing else in the car's fits says otherwise: the two conventions are told
-/// apart by their candidates, and the play is named on the logger's own convention (it was
-/// named rack friction with a tyre, the reference taken a row late).
+/// apart by their candidates, and the play is named on the logger's own convention (with the
+/// reference a row late the best fit is rack friction with a tyre).
 #[test]
 fn play_under_a_chattering_current_is_not_taken_for_a_reference_a_row_late() {
     let case = generator::draw(1, 3, 12.0);
