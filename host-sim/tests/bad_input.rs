@@ -531,6 +531,40 @@ fn gap_refuses_a_header_line_it_cannot_read() {
     }
 }
 
+/// A current logged with the other sign (a sensor mounted the other way round) is read as the
+/// car has it, and the car line says so: the verdict is the one on the log as written by the
+/// car's own logger. Read as logged, the same file was `unexplained` at 146 times its noise
+/// floor.
+#[test]
+fn gap_reads_a_current_logged_with_the_other_sign_as_the_car_has_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = step_log(dir.path());
+    let verdict = |o: &Output| {
+        assert!(o.status.success(), "{}", stderr(o));
+        let out = stdout(o);
+        let v = out
+            .lines()
+            .find(|l| l.starts_with("verdict:"))
+            .unwrap_or("");
+        (v.to_string(), out)
+    };
+    let (as_written, _) = verdict(&gap_of(dir.path(), "own.csv", &rows));
+    let mut negated = rows.clone();
+    for line in negated.iter_mut().skip(1) {
+        let mut fields: Vec<String> = line.split(',').map(str::to_string).collect();
+        let current: f64 = fields[4].parse().unwrap();
+        fields[4] = format!("{}", -current);
+        *line = fields.join(",");
+    }
+    let (read, out) = verdict(&gap_of(dir.path(), "negated.csv", &negated));
+    assert!(as_written.starts_with("verdict: none"), "{as_written}");
+    assert_eq!(read, as_written, "{out}");
+    assert!(
+        out.contains("the current read with its sign reversed"),
+        "{out}"
+    );
+}
+
 /// A team's logger that names its columns otherwise (`time_s`, `current`) is refused with the
 /// names its header has and the way to read it: a rig file naming them. Read through such a
 /// file (the built-in paper rig's, its columns renamed), the same log is diagnosed as the

@@ -10,6 +10,8 @@
 
 #[path = "support/gap_file.rs"]
 mod gap_file;
+#[path = "support/world_sweep.rs"]
+mod world_sweep;
 
 use host_sim::gap::drive;
 use host_sim::gap::generator::{
@@ -20,16 +22,7 @@ use host_sim::gap::rig::{CarDrive, Rig};
 use host_sim::gap::{LogTiming, VerdictKind};
 use host_sim::sim::Controller;
 use std::path::Path;
-
-fn sweep(duration_s: f64) -> Vec<f64> {
-    host_sim::scenario::Sweep {
-        amplitude_deg: 8.0,
-        f_start_hz: 0.2,
-        f_end_hz: 4.0,
-        duration_s,
-    }
-    .samples()
-}
+use world_sweep::sweep_of;
 
 fn team(reference: ReferenceConvention, rate_hz: u32, jitter: bool, drop: bool) -> Logger {
     Logger {
@@ -41,6 +34,7 @@ fn team(reference: ReferenceConvention, rate_hz: u32, jitter: bool, drop: bool) 
         car: LoggedCar::Direct,
         drifting_clock: false,
         instant_current: false,
+        negated: generator::Negated::None,
     }
 }
 
@@ -139,7 +133,7 @@ fn check_logger(case: &GenCase, logger: &Logger, rows: &Rows, full: &Rows) -> us
 #[test]
 fn each_logger_writes_what_it_claims() {
     use ReferenceConvention::{PeriodEnding, PeriodStarting};
-    let mut case = GenCase::nominal(sweep(30.0), 100);
+    let mut case = GenCase::nominal(sweep_of(30.0), 100);
     // A receiver's lag: the grid is the logger's clock, whatever the lag of its samples.
     case.skew_s = 1.5e-3;
     for logger in [
@@ -275,6 +269,9 @@ fn logger_kinds_are_named_as_they_are_given() {
         "epos4-status-jitter-drop",
         "ending-100-instant",
         "starting-100-jitter-drop-instant",
+        "ending-100-negcurrent",
+        "starting-100-jitter-drop-instant-negref",
+        "epos4-status-drift-negcurrent",
     ] {
         assert_eq!(LoggerKind::parse(name).unwrap().name(), name);
     }
@@ -297,6 +294,8 @@ fn logger_kinds_are_named_as_they_are_given() {
         "epos4-convert-jitter",
         "epos4-status-instant",
         "ending-100-instant-instant",
+        "ending-100-negcurrent-negref",
+        "epos4-convert-negcurrent",
     ] {
         assert!(LoggerKind::parse(bad).is_err(), "{bad:?}");
     }
@@ -349,7 +348,7 @@ fn both_loggers(case: &GenCase) -> [(Vec<String>, VerdictKind, drive::CarChoice)
 
 #[test]
 fn an_effect_free_car_is_none_whichever_logger_wrote_it() {
-    let [ours, theirs] = both_loggers(&GenCase::nominal(sweep(10.0), 100));
+    let [ours, theirs] = both_loggers(&GenCase::nominal(sweep_of(10.0), 100));
     assert_eq!(ours.1, VerdictKind::None, "ours: {:?}", ours.0);
     assert_eq!(theirs.1, VerdictKind::None, "theirs: {:?}", theirs.0);
     // Ours states its convention; the other logger's is found, one row late.
@@ -364,7 +363,7 @@ fn an_effect_free_car_is_none_whichever_logger_wrote_it() {
 
 #[test]
 fn a_late_reference_is_a_delay_whichever_logger_wrote_it() {
-    let mut case = GenCase::nominal(sweep(10.0), 100);
+    let mut case = GenCase::nominal(sweep_of(10.0), 100);
     case.truth.reference_delay_s = 0.035;
     case.hidden = vec!["delay".into()];
     let [ours, theirs] = both_loggers(&case);
@@ -380,7 +379,7 @@ fn a_late_reference_is_a_delay_whichever_logger_wrote_it() {
 /// taken and the log called `parameters`.)
 #[test]
 fn a_late_reference_in_a_log_without_a_header_is_a_delay_of_the_direct_drive() {
-    let mut case = GenCase::nominal(sweep(12.0), 1000);
+    let mut case = GenCase::nominal(sweep_of(12.0), 1000);
     case.truth.reference_delay_s = 0.025;
     case.hidden = vec!["delay".into()];
     let (effects, _, choice) = verdict_car_fitted(
@@ -462,7 +461,7 @@ fn a_direct_drive_car_with_friction_that_the_epos4_model_fits_better_is_told_by_
 /// early).
 #[test]
 fn a_late_reference_does_not_choose_a_logs_reference_convention() {
-    let case = GenCase::nominal(sweep(10.0), 100);
+    let case = GenCase::nominal(sweep_of(10.0), 100);
     let choice = effect_free_direct(
         verdict_car_fitted(
             &case,
@@ -482,7 +481,7 @@ fn a_late_reference_does_not_choose_a_logs_reference_convention() {
 /// interval means write it is not read so.
 #[test]
 fn instantaneous_samples_of_the_current_loops_chatter_are_read_as_such() {
-    let case = GenCase::nominal(sweep(10.0), 100);
+    let case = GenCase::nominal(sweep_of(10.0), 100);
     let instant = instant_logger();
     let rows = rows_logged(&case, 5, &instant);
     let means = rows_logged(
@@ -590,7 +589,7 @@ fn rms_difference(a: &[f64], b: &[f64]) -> f64 {
 /// the same log without its header, and not as the period-ending one.
 #[test]
 fn a_header_that_states_the_period_starting_convention_is_read_so() {
-    let case = GenCase::nominal(sweep(10.0), 100);
+    let case = GenCase::nominal(sweep_of(10.0), 100);
     let logger = Logger {
         header: true,
         ..team(ReferenceConvention::PeriodStarting, 100, false, false)
@@ -661,7 +660,7 @@ fn a_header_that_states_the_period_starting_convention_is_read_so() {
 #[test]
 fn a_thousand_hertz_log_with_a_millisecond_of_jitter_has_its_timing_read_as_it_is() {
     use ReferenceConvention::PeriodStarting;
-    let case = GenCase::nominal(sweep(12.0), 1000);
+    let case = GenCase::nominal(sweep_of(12.0), 1000);
     for (jitter, drop) in [(true, true), (true, false)] {
         let logger = team(PeriodStarting, 1000, jitter, drop);
         let rows = rows_logged(&case, 4, &logger);
@@ -698,7 +697,7 @@ fn a_thousand_hertz_log_with_a_millisecond_of_jitter_has_its_timing_read_as_it_i
 /// logger's at the same rate, step for step.
 #[test]
 fn a_log_with_jitter_up_to_its_spacing_is_placed_by_its_rows_order() {
-    let case = GenCase::nominal(sweep(12.0), 400);
+    let case = GenCase::nominal(sweep_of(12.0), 400);
     for rate_hz in [400, 500, 1000] {
         let ours = record_by(&case, &Logger::ours(rate_hz));
         for convention in [
@@ -764,7 +763,7 @@ fn a_log_with_jitter_up_to_its_spacing_is_placed_by_its_rows_order() {
 /// further back than that jitter explains is refused, with its line.
 #[test]
 fn a_log_whose_stamps_jitter_past_each_other_is_read_in_its_rows_order() {
-    let case = GenCase::nominal(sweep(12.0), 1000);
+    let case = GenCase::nominal(sweep_of(12.0), 1000);
     let logger = team(ReferenceConvention::PeriodStarting, 1000, true, true);
     let rows = rows_logged(&case, 4, &logger);
     let dir = tempfile::tempdir().unwrap();
@@ -933,7 +932,7 @@ fn rows_lost(logger: &Logger, rows: &Rows) -> usize {
 /// acceleration feedforward).
 #[test]
 fn a_log_of_several_rows_a_period_that_lost_rows_reads_each_steps_own_reference() {
-    let case = GenCase::nominal(sweep(12.0), 250);
+    let case = GenCase::nominal(sweep_of(12.0), 250);
     for rate_hz in [250, 400, 500] {
         let ours = record_by(&case, &Logger::ours(rate_hz));
         for convention in [
@@ -962,7 +961,7 @@ fn a_log_of_several_rows_a_period_that_lost_rows_reads_each_steps_own_reference(
 /// are moved back onto the periods: the record's reference is our logger's, step for step.
 #[test]
 fn a_log_that_lost_its_first_row_has_its_steps_on_the_reference_periods() {
-    let case = GenCase::nominal(sweep(12.0), 400);
+    let case = GenCase::nominal(sweep_of(12.0), 400);
     let ours = record_by(&case, &Logger::ours(400));
     for jitter in [false, true] {
         let logger = team(ReferenceConvention::PeriodStarting, 400, jitter, true);
@@ -1027,7 +1026,7 @@ fn record_of(t: &[f64], rows: &Rows) -> host_sim::gap::Record {
 #[test]
 fn a_period_starting_log_at_200_hz_reads_each_steps_own_reference() {
     use ReferenceConvention::PeriodStarting;
-    let case = GenCase::nominal(sweep(12.0), 200);
+    let case = GenCase::nominal(sweep_of(12.0), 200);
     let read = |logger: &Logger| record_by(&case, logger);
     let ours = read(&Logger::ours(200));
     // With rows lost too: the row in the middle of a step gone, the step's sample is the one
@@ -1069,7 +1068,7 @@ fn a_period_starting_log_at_200_hz_reads_each_steps_own_reference() {
 /// acceleration feedforward, and a car with play at 5 % nominal GoF called `parameters`.)
 #[test]
 fn a_log_of_fewer_than_two_rows_a_period_reads_each_periods_own_sample() {
-    let case = GenCase::nominal(sweep(12.0), 125);
+    let case = GenCase::nominal(sweep_of(12.0), 125);
     let ours = record_by(&case, &Logger::ours(100));
     for convention in [
         ReferenceConvention::PeriodStarting,
@@ -1125,7 +1124,7 @@ fn a_log_of_fewer_than_two_rows_a_period_reads_each_periods_own_sample() {
 /// 79.5 % and `unexplained`.)
 #[test]
 fn a_thousand_hertz_log_that_lost_rows_reads_each_steps_own_reference() {
-    let mut case = GenCase::nominal(sweep(12.0), 1000);
+    let mut case = GenCase::nominal(sweep_of(12.0), 1000);
     case.skew_s = 0.0027;
     let read = |logger: &Logger| record_by(&case, logger);
     let ours = read(&Logger::ours(1000));

@@ -72,11 +72,13 @@ pub struct GapArgs {
     pub unmodelled: bool,
     /// selftest: diagnose each car from the files of these loggers, as `gap FILE` reads them
     /// (ours always, first): `ours`, `drawn` (a team's logger drawn with each case), or
-    /// `ending|starting-RATE[-jitter][-drop][-instant]` (RATE in Hz, 100-1000, dividing 20000;
-    /// `-instant`: the current sampled at each row's instant, not its interval's mean); or the
-    /// world's EPOS4 car (its own drive
-    /// at 25 kHz / 2.5 kHz) as `epos4-convert` (steer-can convert's rows and header) or
-    /// `epos4-status[-jitter][-drop]` (a row as each TPDO arrives, no header), either with
+    /// `ending|starting-RATE[-jitter][-drop][-instant][-negcurrent|-negref]` (RATE in Hz,
+    /// 100-1000, dividing 20000; `-instant`: the current sampled at each row's instant, not
+    /// its interval's mean; `-negcurrent`, `-negref`: the current or the reference written
+    /// with the other sign); or the world's EPOS4 car (its own drive at 25 kHz / 2.5 kHz) as
+    /// `epos4-convert` (steer-can convert's rows and header) or
+    /// `epos4-status[-jitter][-drop][-negcurrent|-negref]` (a row as each TPDO arrives, no
+    /// header), either with
     /// `-drift` after `epos4-convert`/`epos4-status` (the car's ECU on a clock of its own,
     /// 20-100 ppm off the vehicle computer's: its SYNC grid walks); bare `--loggers`
     /// is `drawn`. Prints per logger the verdicts right, those changed against ours, the
@@ -283,7 +285,11 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         .as_ref()
         .and_then(|c| c.reference_shift_rows)
         .unwrap_or(0);
-    let val = val.map(|v| super::drive::shifted_reference(&v, shift));
+    let columns = car.as_ref().and_then(|c| c.columns);
+    let val = val.map(|v| {
+        let v = columns.map_or(v.clone(), |c| c.apply(&v));
+        super::drive::shifted_reference(&v, shift)
+    });
     // The validation log's own stretches where its column is a row off the drive's latch (its
     // crossings are its own).
     let (val, val_windows) = match (val, &car) {

@@ -277,6 +277,11 @@ pub struct CarChoice {
     /// ([`super::chatter`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub current_chatter: Option<super::chatter::CurrentChatter>,
+    /// How the diagnosis reads the log's columns against the nominal model's: a column the
+    /// logger wrote with the other sign read negated, a motor angle in another unit left out
+    /// ([`super::columns`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub columns: Option<super::columns::ColumnSigns>,
 }
 
 impl CarChoice {
@@ -415,6 +420,9 @@ impl CarChoice {
             ));
         }
         if let Some(c) = &self.current_chatter {
+            line.push_str(&format!("; {}", c.describe()));
+        }
+        if let Some(c) = self.columns.filter(super::columns::ColumnSigns::any) {
             line.push_str(&format!("; {}", c.describe()));
         }
         match self.reference_shift_rows {
@@ -1101,6 +1109,7 @@ pub fn choose(
             reference_windows: Vec::new(),
             screened: None,
             current_chatter: chatter,
+            columns: None,
         };
         let mut chosen = rig_of(&best);
         if let RigModel::Paper(m) = &mut chosen.model {
@@ -1413,7 +1422,31 @@ pub fn choose_for_log(
         sync_drift: header.sync_drift,
         column_sampled_s: header.column_sampled_s,
     };
-    choose(rig, rec, drive, controller, says, opts)
+    // A column the logger wrote with the other sign: read as the car has it, before the car
+    // is fitted on it.
+    let Some(signs) = super::columns::read(rig, rec) else {
+        return choose(rig, rec, drive, controller, says, opts);
+    };
+    let read = signs.any().then(|| signs.apply(rec));
+    match choose(
+        rig,
+        read.as_ref().unwrap_or(rec),
+        drive,
+        controller,
+        says,
+        opts,
+    ) {
+        (rig, rec, Some(choice)) => (
+            rig,
+            rec,
+            Some(CarChoice {
+                columns: Some(signs),
+                ..choice
+            }),
+        ),
+        // No car to report it on: the log as logged, as `choose` leaves it.
+        (rig, _, None) => (rig, rec.clone(), None),
+    }
 }
 
 #[cfg(test)]

@@ -185,6 +185,9 @@ pub struct Logger {
     /// (a logger that reads the ECU's last current sample), not the mean over the row's
     /// interval that host-sim's logs and the 0x102 frame carry.
     pub instant_current: bool,
+    /// A team's signs: the current written negated (a current sensor mounted the other way
+    /// round) or the reference (the vehicle computer's convention against the car's).
+    pub negated: Negated,
     /// Stamp jitter, s: each stamp lies within +-this of the row's place on the logger's grid
     /// (uniform), the rows kept in order as a receiver stamps frames in the order they come.
     pub jitter_s: f64,
@@ -217,6 +220,19 @@ pub enum LoggedCar {
     Epos4StatusFrame,
 }
 
+/// A column a team's [`Logger`] writes with the other sign than the car's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Negated {
+    /// Every column as the car has it.
+    #[default]
+    None,
+    /// The current (a sensor mounted the other way round).
+    Current,
+    /// The reference (the vehicle computer's convention against the car's).
+    Reference,
+}
+
 /// A logger of the direct drive can write at `rate_hz`: 100 Hz (the reference's rate) to
 /// 1 kHz, a whole number of the plant's current-loop ticks a row.
 pub fn logs_at(rate_hz: u32) -> bool {
@@ -241,6 +257,7 @@ impl Logger {
             car: LoggedCar::Direct,
             drifting_clock: false,
             instant_current: false,
+            negated: Negated::None,
         }
     }
 
@@ -277,6 +294,7 @@ impl Logger {
             car: LoggedCar::Direct,
             drifting_clock: false,
             instant_current: false,
+            negated: Negated::None,
         }
     }
 
@@ -298,6 +316,11 @@ impl Logger {
         }
         if self.instant_current {
             s.push_str(" current at the instant");
+        }
+        match self.negated {
+            Negated::None => {}
+            Negated::Current => s.push_str(" current negated"),
+            Negated::Reference => s.push_str(" reference negated"),
         }
         if self.header {
             s.push_str(" header");
@@ -850,12 +873,19 @@ pub fn log_of(case: &GenCase, seed: u64, logger: &Logger) -> crate::logfmt::Log 
     } else {
         Vec::new()
     };
+    let negate = |v: Vec<f64>, yes: bool| {
+        if yes {
+            v.into_iter().map(|x| -x).collect()
+        } else {
+            v
+        }
+    };
     crate::logfmt::Log {
         t: rows.t,
-        ref_sw_deg: rows.reference,
+        ref_sw_deg: negate(rows.reference, logger.negated == Negated::Reference),
         sw_deg: rows.sw_deg,
         motor_rad: rows.motor_rad,
-        current_a: rows.current_a,
+        current_a: negate(rows.current_a, logger.negated == Negated::Current),
         extra: Vec::new(),
         comments,
     }

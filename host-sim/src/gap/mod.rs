@@ -19,6 +19,7 @@
 
 pub mod chatter;
 pub mod cli;
+pub mod columns;
 mod diagnose;
 mod diagnosis;
 pub mod drive;

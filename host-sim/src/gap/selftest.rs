@@ -365,11 +365,12 @@ pub enum LoggerKind {
 }
 
 impl LoggerKind {
-    /// `ours`, `drawn`, or `ending|starting-RATE[-jitter][-drop][-instant]`: a team's logger
-    /// with that reference convention and rate (Hz, 100-1000, a whole number of the plant's
-    /// 20 kHz ticks a row: 100, 200, 250, 400, 500, 1000, ...), stamps +-1 ms if `jitter`, 1 %
-    /// of rows lost if `drop`, the current's instantaneous sample at each row if `instant`, no
-    /// header lines.
+    /// `ours`, `drawn`, or `ending|starting-RATE[-jitter][-drop][-instant][-negcurrent|-negref]`:
+    /// a team's logger with that reference convention and rate (Hz, 100-1000, a whole number
+    /// of the plant's 20 kHz ticks a row: 100, 200, 250, 400, 500, 1000, ...), stamps +-1 ms if
+    /// `jitter`, 1 % of rows lost if `drop`, the current's instantaneous sample at each row if
+    /// `instant`, the current or the reference written negated if `negcurrent` or `negref`,
+    /// no header lines.
     pub fn parse(name: &str) -> Result<LoggerKind, String> {
         let name = name.trim();
         match name {
@@ -379,10 +380,11 @@ impl LoggerKind {
         }
         let bad = || {
             format!(
-                "logger {name:?}: expected `ours`, `drawn`, ending|starting-RATE[-jitter][-drop][-instant] \
-                 with RATE in Hz, 100-1000, dividing 20000 (e.g. starting-100-jitter-drop, \
-                 ending-250), or the EPOS4 car's \
-                 epos4-convert[-drift]|epos4-status[-drift][-jitter][-drop]"
+                "logger {name:?}: expected `ours`, `drawn`, \
+                 ending|starting-RATE[-jitter][-drop][-instant][-negcurrent|-negref] with RATE \
+                 in Hz, 100-1000, dividing 20000 (e.g. starting-100-jitter-drop, ending-250), \
+                 or the EPOS4 car's epos4-convert[-drift]|\
+                 epos4-status[-drift][-jitter][-drop][-negcurrent|-negref]"
             )
         };
         let mut parts = name.split('-');
@@ -416,6 +418,7 @@ impl LoggerKind {
                 car: LoggedCar::Direct,
                 drifting_clock: false,
                 instant_current: false,
+                negated: generator::Negated::None,
             },
         };
         for p in parts {
@@ -433,6 +436,13 @@ impl LoggerKind {
                 // The current sampled at the row's instant (the direct drive's loggers).
                 "instant" if logger.car == LoggedCar::Direct && !logger.instant_current => {
                     logger.instant_current = true
+                }
+                // A team's signs (not convert's, which writes the car's).
+                "negcurrent" if logger.negated == generator::Negated::None => {
+                    logger.negated = generator::Negated::Current
+                }
+                "negref" if logger.negated == generator::Negated::None => {
+                    logger.negated = generator::Negated::Reference
                 }
                 _ => return Err(bad()),
             }
@@ -462,6 +472,11 @@ impl LoggerKind {
                 }
                 if l.instant_current {
                     s.push_str("-instant");
+                }
+                match l.negated {
+                    generator::Negated::None => {}
+                    generator::Negated::Current => s.push_str("-negcurrent"),
+                    generator::Negated::Reference => s.push_str("-negref"),
                 }
                 s
             }
@@ -630,20 +645,23 @@ impl LoggersReport {
         for l in &self.loggers {
             let n = l.report.cases.len();
             let right = l.report.cases.iter().filter(|r| r.correct).count();
-            let chatter = l
-                .report
-                .cases
-                .iter()
-                .filter(|r| {
-                    r.logger
-                        .as_ref()
-                        .and_then(|b| b.car.as_ref())
-                        .is_some_and(|c| c.current_chatter.is_some())
-                })
-                .count();
+            let read_so = |what: fn(&super::drive::CarChoice) -> bool| {
+                l.report
+                    .cases
+                    .iter()
+                    .filter(|r| {
+                        r.logger
+                            .as_ref()
+                            .and_then(|b| b.car.as_ref())
+                            .is_some_and(what)
+                    })
+                    .count()
+            };
+            let chatter = read_so(|c| c.current_chatter.is_some());
+            let columns = read_so(|c| c.columns.is_some_and(|s| s.any()));
             let _ = writeln!(
                 s,
-                "logger {}: {right} of {n} right, {} changed against ours{}{}",
+                "logger {}: {right} of {n} right, {} changed against ours{}{}{}",
                 l.kind,
                 l.changed_vs_ours.len(),
                 if l.changed_vs_ours.is_empty() {
@@ -662,6 +680,11 @@ impl LoggersReport {
                     format!(
                         "; {chatter} read as instantaneous samples of the current loop's chatter"
                     )
+                } else {
+                    String::new()
+                },
+                if columns > 0 {
+                    format!("; {columns} with a column read negated or left out")
                 } else {
                     String::new()
                 }
