@@ -174,6 +174,27 @@ fn a_motor_angle_of_the_other_sign_or_unit_is_read_so() {
     assert_eq!(read.motor, None);
 }
 
+/// A current in another unit (here x100: centiamperes) is read as logged, and the car line
+/// asks whether the column is the motor's current in amperes; a torque constant as far off as
+/// the world's (x0.7) is not asked about.
+#[test]
+fn a_current_in_another_unit_is_asked_about_not_read_otherwise() {
+    let scaled = |k: f64| {
+        written(&team(), move |l| {
+            for x in &mut l.current_a {
+                *x *= k;
+            }
+        })
+    };
+    let s = signs_of(&scaled(100.0));
+    assert!(s.effort_unit_suspect && !s.any(), "{s:?}");
+    assert!((s.effort_scale - 100.0).abs() < 10.0, "{s:?}");
+    assert!(s.describe().contains("in amperes?"), "{}", s.describe());
+    let s = signs_of(&scaled(0.7));
+    assert!(!s.effort_unit_suspect && !s.any(), "{s:?}");
+    assert_eq!(s.describe(), "");
+}
+
 /// The record as read: a reversed column negated, the others as logged.
 #[test]
 fn reading_a_column_negated_changes_that_column_alone() {

@@ -51,6 +51,13 @@ pub const REVERSED_SCALE_SE: f64 = 6.0;
 /// degrees reads x57.3), and is left out.
 pub const MOTOR_SLOPE_RANGE: std::ops::RangeInclusive<f64> = 0.5..=2.0;
 
+/// The effort scales a current in amperes can take: a torque constant or Table 4 off as far
+/// as any car's (the world's logs read x0.31-1.22, its `parameters` cars the lowest). A
+/// current beyond them by six standard errors is in another unit (milliamperes read x1000, a
+/// drive's per-mille of its rated current something else): it is read as logged, and the car
+/// line asks.
+pub const PHYSICAL_SCALE: std::ops::RangeInclusive<f64> = 0.2..=5.0;
+
 /// How the log's columns were read.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
 pub struct ColumnSigns {
@@ -80,6 +87,9 @@ pub struct ColumnSigns {
     /// standard error.
     pub effort_scale: f64,
     pub effort_scale_se: f64,
+    /// The current's scale lies outside [`PHYSICAL_SCALE`] (either sign) by six standard
+    /// errors: not in the rig's unit, read as logged.
+    pub effort_unit_suspect: bool,
 }
 
 impl ColumnSigns {
@@ -113,7 +123,8 @@ impl ColumnSigns {
         r
     }
 
-    /// One clause for the report's car line; empty where every column is read as logged.
+    /// One clause for the report's car line; empty where every column is read as logged and
+    /// the current's scale is one a car gives.
     pub fn describe(&self) -> String {
         let mut parts: Vec<String> = Vec::new();
         if self.reference_reversed {
@@ -157,6 +168,17 @@ impl ColumnSigns {
                 "the motor angle left out: through the gearing it turns x{:.2} the nominal \
                  model's motor, no gearing's (a motor angle in degrees for radians reads x57.3)",
                 self.motor_slope.unwrap_or(f64::NAN)
+            ));
+        }
+        if self.effort_unit_suspect {
+            parts.push(format!(
+                "the current is x{:.3} the nominal model's (standard error {:.3}), beyond what \
+                 a torque constant or Table 4 off gives (x{}-{}): is the column the motor's \
+                 current, in amperes?",
+                self.effort_scale,
+                self.effort_scale_se,
+                PHYSICAL_SCALE.start(),
+                PHYSICAL_SCALE.end()
             ));
         }
         parts.join("; ")
@@ -204,6 +226,9 @@ pub fn read(rig: &Rig, rec: &Record) -> Option<ColumnSigns> {
         motor_slope: motor.map(|(_, s)| s),
         effort_scale: factor,
         effort_scale_se: standard_error,
+        effort_unit_suspect: factor.abs() - REVERSED_SCALE_SE * standard_error
+            > *PHYSICAL_SCALE.end()
+            || factor.abs() + REVERSED_SCALE_SE * standard_error < *PHYSICAL_SCALE.start(),
     };
     // Every column against the model that the reference drives: the reference is the one
     // reversed.

@@ -422,8 +422,8 @@ impl CarChoice {
         if let Some(c) = &self.current_chatter {
             line.push_str(&format!("; {}", c.describe()));
         }
-        if let Some(c) = self.columns.filter(super::columns::ColumnSigns::any) {
-            line.push_str(&format!("; {}", c.describe()));
+        if let Some(c) = self.columns.map(|c| c.describe()).filter(|c| !c.is_empty()) {
+            line.push_str(&format!("; {c}"));
         }
         match self.reference_shift_rows {
             Some(0) => line.push_str(
