@@ -563,6 +563,21 @@ fn gap_reads_a_current_logged_with_the_other_sign_as_the_car_has_it() {
         out.contains("the current read with its sign reversed"),
         "{out}"
     );
+    // `identify` reads it so too, and fits what it fits on the log as written.
+    let identified = |name: &str| {
+        let o = host_sim(&["identify", s(&dir.path().join(name))]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        stdout(&o)
+    };
+    let (own, read) = (identified("own.csv"), identified("negated.csv"));
+    assert!(
+        read.starts_with("columns: the current read with its sign reversed"),
+        "{read}"
+    );
+    assert_eq!(
+        read.lines().skip(1).collect::<Vec<_>>(),
+        own.lines().collect::<Vec<_>>()
+    );
 }
 
 /// A team's logger that names its columns otherwise (`time_s`, `current`) is refused with the

@@ -691,6 +691,14 @@ pub fn identify(args: &IdentifyArgs) -> Result<()> {
         None => Rig::paper(),
     };
     let rec = load_log(&rig, &args.log)?;
+    // A column the logger wrote with the other sign, read as the car has it, as `gap` reads it.
+    let rec = match super::columns::read(&rig, &rec) {
+        Some(c) if !c.describe().is_empty() => {
+            println!("columns: {}", c.describe());
+            c.apply(&rec)
+        }
+        _ => rec,
+    };
     let id = super::identify::identify(&rig, &rec, args.iterations, true)?;
     print!("{}", id.summary());
     if let Some(path) = &args.json {
