@@ -37,18 +37,22 @@ use super::score::{Scale, Scorer, effort_scale};
 use crate::sim::Controller;
 
 /// A column whose correlation with the nominal model's is below this goes the other way
-/// (a noise column reads about zero).
+/// (a noise column reads about zero). At their lags the independent world's logs (the first
+/// 20 cars under five loggers of either drive, the first 40 with an effect no candidate has)
+/// read the column at 0.845 or more, the motor angle at 0.845 or more.
 pub const REVERSED_CORRELATION: f64 = -0.5;
 
 /// A current whose effort scale is below this, and below zero by [`REVERSED_SCALE_SE`]
-/// standard errors, was logged with the other sign.
-pub const REVERSED_SCALE: f64 = -0.3;
+/// standard errors, was logged with the other sign. The same logs read x0.31-1.40, the
+/// lowest a `parameters` car's at 7 standard errors from zero; negated, x-0.34 and below.
+pub const REVERSED_SCALE: f64 = -0.15;
 /// ... the standard errors below zero it must be.
-pub const REVERSED_SCALE_SE: f64 = 6.0;
+pub const REVERSED_SCALE_SE: f64 = 4.0;
 
 /// The motor angle's slope on the model's, both through the gearing in the column's unit,
-/// that a gearing gives. Outside, the motor column is not in the rig's unit (a motor angle in
-/// degrees reads x57.3), and is left out.
+/// that a gearing gives (the same logs read 0.88-1.02: the belt's and the torsion bar's
+/// twist). Outside, the motor column is not in the rig's unit (a motor angle in degrees reads
+/// x57.3), and is left out.
 pub const MOTOR_SLOPE_RANGE: std::ops::RangeInclusive<f64> = 0.5..=2.0;
 
 /// The effort scales a current in amperes can take: a torque constant or Table 4 off as far
@@ -57,6 +61,8 @@ pub const MOTOR_SLOPE_RANGE: std::ops::RangeInclusive<f64> = 0.5..=2.0;
 /// drive's per-mille of its rated current something else): it is read as logged, and the car
 /// line asks.
 pub const PHYSICAL_SCALE: std::ops::RangeInclusive<f64> = 0.2..=5.0;
+/// ... the standard errors beyond them it must be.
+pub const UNIT_SCALE_SE: f64 = 6.0;
 
 /// How the log's columns were read.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
@@ -87,8 +93,8 @@ pub struct ColumnSigns {
     /// standard error.
     pub effort_scale: f64,
     pub effort_scale_se: f64,
-    /// The current's scale lies outside [`PHYSICAL_SCALE`] (either sign) by six standard
-    /// errors: not in the rig's unit, read as logged.
+    /// The current's scale lies outside [`PHYSICAL_SCALE`] (either sign) by
+    /// [`UNIT_SCALE_SE`] standard errors: not in the rig's unit, read as logged.
     pub effort_unit_suspect: bool,
 }
 
@@ -226,9 +232,8 @@ pub fn read(rig: &Rig, rec: &Record) -> Option<ColumnSigns> {
         motor_slope: motor.map(|(_, s)| s),
         effort_scale: factor,
         effort_scale_se: standard_error,
-        effort_unit_suspect: factor.abs() - REVERSED_SCALE_SE * standard_error
-            > *PHYSICAL_SCALE.end()
-            || factor.abs() + REVERSED_SCALE_SE * standard_error < *PHYSICAL_SCALE.start(),
+        effort_unit_suspect: factor.abs() - UNIT_SCALE_SE * standard_error > *PHYSICAL_SCALE.end()
+            || factor.abs() + UNIT_SCALE_SE * standard_error < *PHYSICAL_SCALE.start(),
     };
     // Every column against the model that the reference drives: the reference is the one
     // reversed.
