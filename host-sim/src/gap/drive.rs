@@ -15,7 +15,7 @@ use super::drive_clock::{self, ClockRefit};
 use super::model::{Effects, MAX_SYNC_DRIFT};
 use super::reference_window::{self, ReferenceWindow};
 use super::rig::{CarDrive, Epos4Readout, Rig, RigModel};
-use super::{Fit, Record, Scorer, parallel_map, simulate};
+use super::{CurrentSamples, Fit, Record, ReferenceConvention, Scorer, parallel_map, simulate};
 use crate::sim::Controller;
 
 /// What a log's comment lines before its header say of the car and the logger.
@@ -23,10 +23,10 @@ use crate::sim::Controller;
 pub struct LogHeader {
     pub drive: Option<CarDrive>,
     pub controller: Option<Controller>,
-    /// `# current: ...` as written (interval-mean, instantaneous, ...).
-    pub current: Option<String>,
-    /// `# reference: ...` as written.
-    pub reference: Option<String>,
+    /// `# current: ...`: what the current column holds.
+    pub current: Option<CurrentSamples>,
+    /// `# reference: ...`: which reference a row at a reference instant holds.
+    pub reference: Option<ReferenceConvention>,
     /// `# sync-drift: +35.2 ppm`: how fast the EPOS4 car's SYNC grid walks against the
     /// reference frames, s per s, as `steer-can convert` reads it off the bus.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -62,27 +62,23 @@ impl LogHeader {
                         format!("header `# controller: {v}`: expected `paper` or `ecu`")
                     })?)
                 }
-                "current" => match v {
-                    "interval-mean" | "sync-sample" | "instantaneous" => {
-                        h.current = Some(v.to_string())
-                    }
-                    _ => {
-                        return Err(format!(
+                "current" => {
+                    h.current = Some(CurrentSamples::from_name(v).ok_or_else(|| {
+                        format!(
                             "header `# current: {v}`: expected `interval-mean`, `sync-sample` \
                              or `instantaneous`"
-                        ));
-                    }
-                },
-                "reference" => match v {
-                    "period-ending" | "period-starting" => h.reference = Some(v.to_string()),
-                    _ => {
-                        return Err(format!(
+                        )
+                    })?)
+                }
+                "reference" => {
+                    h.reference = Some(ReferenceConvention::from_name(v).ok_or_else(|| {
+                        format!(
                             "header `# reference: {v}`: expected `period-ending` (each row holds \
                              the reference of the period that ends there) or `period-starting` \
                              (the one that starts there)"
-                        ));
-                    }
-                },
+                        )
+                    })?)
+                }
                 "sync-drift" => {
                     h.sync_drift = Some(
                         v.strip_suffix("ppm")
@@ -714,16 +710,12 @@ pub(super) fn head(rec: &Record, seconds: f64) -> Record {
 /// What the log's file says of its timing, for [`choose`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LogSays {
-    /// The header states the reference convention (`# reference: ...`).
-    pub reference_stated: bool,
-    /// ... and states `period-starting`: each row holds the reference that starts there.
-    pub reference_starting: bool,
-    /// The header states what the current column holds (`# current: ...`), and so how an
-    /// EPOS4 car's samples were read into the rows (`steer-can convert`'s way).
-    pub current_stated: bool,
-    /// The header says the current column holds instantaneous samples
-    /// (`# current: instantaneous`).
-    pub current_instantaneous: bool,
+    /// The reference convention the header states (`# reference: ...`); `None`: fitted.
+    pub reference: Option<ReferenceConvention>,
+    /// What the header says the current column holds (`# current: ...`), and so how an
+    /// EPOS4 car's samples were read into the rows (`steer-can convert`'s way where it says
+    /// anything).
+    pub current: Option<CurrentSamples>,
     pub timing: super::LogTiming,
     /// How fast an EPOS4 car's SYNC grid walks against the reference frames, s per s, where
     /// the header says (`# sync-drift:`); the model runs it
@@ -771,7 +763,7 @@ pub fn choose(
     let mut chatter = super::chatter::read(
         rig,
         rec,
-        says.current_stated.then_some(says.current_instantaneous),
+        says.current.map(|c| c == CurrentSamples::Instantaneous),
     );
     let mut by_angles = rec.clone();
     by_angles.current_chatter = chatter.is_some();
@@ -796,9 +788,9 @@ pub fn choose(
     let at_reference_rate = row_dt > 0.75 * rec.dt && row_dt < 1.5 * rec.dt;
     // A convention the header states is taken; a row holding the reference that starts there
     // is the next period's, one row later than ours.
-    let shifts: Vec<usize> = match (says.reference_stated, at_reference_rate) {
-        (false, true) => vec![0, 1],
-        (true, true) if says.reference_starting => vec![1],
+    let shifts: Vec<usize> = match (says.reference, at_reference_rate) {
+        (None, true) => vec![0, 1],
+        (Some(ReferenceConvention::PeriodStarting), true) => vec![1],
         _ => vec![0],
     };
     let records: Vec<Record> = shifts.iter().map(|&k| shifted_reference(rec, k)).collect();
@@ -901,7 +893,7 @@ pub fn choose(
                 // fitted with the phase, before the cars are compared (a stale column read as
                 // convert's looks like a late reference, which the direct drive then fits).
                 let best = match best.sync_after_push_s {
-                    Some(s) if !says.current_stated => {
+                    Some(s) if says.current.is_none() => {
                         let (fitted, readout) =
                             fit_readout(&with_car(rig, d, c, s), &shorts[index_of(k)], threads);
                         Tried {
@@ -1414,10 +1406,8 @@ pub fn choose_for_log(
         None => header.controller.map(|c| (c, Source::Header)),
     };
     let says = LogSays {
-        reference_stated: header.reference.is_some(),
-        reference_starting: header.reference.as_deref() == Some("period-starting"),
-        current_stated: header.current.is_some(),
-        current_instantaneous: header.current.as_deref() == Some("instantaneous"),
+        reference: header.reference,
+        current: header.current,
         timing,
         sync_drift: header.sync_drift,
         column_sampled_s: header.column_sampled_s,
@@ -1517,13 +1507,16 @@ mod tests {
 
     #[test]
     fn a_current_or_a_reference_convention_the_reader_does_not_know_is_refused() {
-        for kind in ["interval-mean", "sync-sample", "instantaneous"] {
-            let h = header(&format!("current: {kind}")).unwrap();
-            assert_eq!(h.current.as_deref(), Some(kind));
+        for kind in CurrentSamples::ALL {
+            let h = header(&format!("current: {}", kind.name())).unwrap();
+            assert_eq!(h.current, Some(kind));
         }
-        for convention in ["period-ending", "period-starting"] {
-            let h = header(&format!("reference: {convention}")).unwrap();
-            assert_eq!(h.reference.as_deref(), Some(convention));
+        for convention in [
+            ReferenceConvention::PeriodEnding,
+            ReferenceConvention::PeriodStarting,
+        ] {
+            let h = header(&format!("reference: {}", convention.name())).unwrap();
+            assert_eq!(h.reference, Some(convention));
         }
         assert_refused(
             &["current: peak", "current: mean", "current: "],

@@ -145,35 +145,7 @@ pub struct GenCase {
     pub logger: Logger,
 }
 
-/// Which reference a row stamped at a reference instant holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ReferenceConvention {
-    /// The reference in force over the row interval that ends at the row: at a reference
-    /// instant, still the previous sample (host-sim's and steer-can's logs).
-    PeriodEnding,
-    /// The reference that starts at the row: at a reference instant, already the sample the
-    /// ECU starts to use there.
-    PeriodStarting,
-}
-
-impl ReferenceConvention {
-    /// The name a header line `# reference: ...` gives it.
-    pub fn name(self) -> &'static str {
-        match self {
-            ReferenceConvention::PeriodEnding => "period-ending",
-            ReferenceConvention::PeriodStarting => "period-starting",
-        }
-    }
-
-    /// Its short name, `ending` or `starting`.
-    pub fn short(self) -> &'static str {
-        match self {
-            ReferenceConvention::PeriodEnding => "ending",
-            ReferenceConvention::PeriodStarting => "starting",
-        }
-    }
-}
+pub use super::record::ReferenceConvention;
 
 /// How a log is written from the world: the logger's part of a log's timing.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

@@ -49,7 +49,7 @@ pub use diagnose::{Screen, diagnose, screen};
 pub use diagnosis::{Candidate, Diagnosis, Options, Verdict, VerdictKind};
 pub use effects::EffectKind;
 pub(crate) use record::interp_at;
-pub use record::{CurrentSamples, LogTiming, Record};
+pub use record::{CurrentSamples, LogTiming, Record, ReferenceConvention};
 pub use score::{Fit, Noise, Offset, Scale, Scorer, combined_gof, repeatability, simulate};
 pub use search::Progress;
 pub(crate) use search::parallel_map;

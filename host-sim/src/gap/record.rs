@@ -36,16 +36,84 @@ pub struct Record {
     pub current_chatter: bool,
 }
 
-/// What a log's current column holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// What a log's current column holds (the header's `# current:` line).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum CurrentSamples {
-    /// The mean over the interval that ends at the row's time (the 0x102 frame, the EPOS4's
-    /// averaged current, host-sim's own logs): the default.
+    /// The mean over the interval that ends at the row's time (the 0x102 frame, host-sim's
+    /// own logs): the default.
     #[default]
     IntervalMean,
+    /// The EPOS4's own sample at each SYNC, as `steer-can convert` places it in the rows:
+    /// binned as an interval mean, read as the EPOS4 readout says
+    /// ([`super::rig::Epos4Readout`]).
+    SyncSample,
     /// Instantaneous samples (`# current: instantaneous`): the inner loop's chatter is then
     /// in them, which the likelihood weighs by its measured noise.
     Instantaneous,
+}
+
+impl CurrentSamples {
+    /// Every kind, in the order a header's error lists them.
+    pub const ALL: [CurrentSamples; 3] = [
+        CurrentSamples::IntervalMean,
+        CurrentSamples::SyncSample,
+        CurrentSamples::Instantaneous,
+    ];
+
+    /// The name a header line `# current: ...` gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            CurrentSamples::IntervalMean => "interval-mean",
+            CurrentSamples::SyncSample => "sync-sample",
+            CurrentSamples::Instantaneous => "instantaneous",
+        }
+    }
+
+    /// The kind a header line names; `None` for a name this reader does not know.
+    pub fn from_name(name: &str) -> Option<CurrentSamples> {
+        Self::ALL.into_iter().find(|c| c.name() == name.trim())
+    }
+}
+
+/// Which reference a row stamped at a reference instant holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReferenceConvention {
+    /// The reference in force over the row interval that ends at the row: at a reference
+    /// instant, still the previous sample (host-sim's and steer-can's logs).
+    PeriodEnding,
+    /// The reference that starts at the row: at a reference instant, already the sample the
+    /// ECU starts to use there.
+    PeriodStarting,
+}
+
+impl ReferenceConvention {
+    /// The name a header line `# reference: ...` gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            ReferenceConvention::PeriodEnding => "period-ending",
+            ReferenceConvention::PeriodStarting => "period-starting",
+        }
+    }
+
+    /// The convention a header line names; `None` for a name this reader does not know.
+    pub fn from_name(name: &str) -> Option<ReferenceConvention> {
+        [
+            ReferenceConvention::PeriodEnding,
+            ReferenceConvention::PeriodStarting,
+        ]
+        .into_iter()
+        .find(|c| c.name() == name.trim())
+    }
+
+    /// Its short name, `ending` or `starting`.
+    pub fn short(self) -> &'static str {
+        match self {
+            ReferenceConvention::PeriodEnding => "ending",
+            ReferenceConvention::PeriodStarting => "starting",
+        }
+    }
 }
 
 /// Linear interpolation of `y(t)` at `tk`, held at the ends.
@@ -971,7 +1039,7 @@ impl Record {
             })
             .collect();
         let effort = match current {
-            CurrentSamples::IntervalMean => (0..n)
+            CurrentSamples::IntervalMean | CurrentSamples::SyncSample => (0..n)
                 .map(|k| {
                     let (a, b) = (end(k) - step, end(k));
                     let (mut sum, mut w) = (0.0, 0.0);

@@ -645,14 +645,13 @@ impl Rig {
         let effort = col(&self.columns.effort, true)?.unwrap_or_default();
         // `# current: instantaneous` before the header: the current column holds instants,
         // not the interval means the project's logs carry.
-        let current = if table.comments.iter().any(|c| {
-            c.split_once(':')
-                .is_some_and(|(k, v)| k.trim() == "current" && v.trim() == "instantaneous")
-        }) {
-            CurrentSamples::Instantaneous
-        } else {
-            CurrentSamples::IntervalMean
-        };
+        let current = table
+            .comments
+            .iter()
+            .filter_map(|c| c.split_once(':'))
+            .filter(|(k, _)| k.trim() == "current")
+            .find_map(|(_, v)| CurrentSamples::from_name(v))
+            .unwrap_or_default();
         let motor = match &self.columns.motor {
             Some(c) => col(c, false)?,
             None => None,
