@@ -306,6 +306,11 @@ fn lagged(sim: &SimOut, rec: &Record, lag: i64) -> (SimOut, Record) {
     )
 }
 
+/// A column varies where its spread about its mean exceeds this share of its square about
+/// zero: above the rounding of a mean of one value (1e-32 of it on 100 rows), far below any
+/// sensor's resolution over its range.
+const VARIES: f64 = 1e-20;
+
 /// The correlation of `y` with `x` and the slope of `y` on `x` over the rows from `skip`
 /// where both are finite; `None` with fewer than 10 such rows or without variance in either.
 fn regression(x: &[f64], y: &[f64], skip: usize) -> Option<(f64, f64)> {
@@ -320,16 +325,22 @@ fn regression(x: &[f64], y: &[f64], skip: usize) -> Option<(f64, f64)> {
         return None;
     }
     let n = rows.len() as f64;
-    let (mx, my) = rows
+    let (sum_x, sum_y) = rows
         .iter()
-        .fold((0.0, 0.0), |(sx, sy), (a, b)| (sx + a / n, sy + b / n));
+        .fold((0.0, 0.0), |(sx, sy), (a, b)| (sx + a, sy + b));
+    let (mx, my) = (sum_x / n, sum_y / n);
     let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+    let (mut xx, mut yy) = (0.0, 0.0);
     for (a, b) in &rows {
         sxx += (a - mx) * (a - mx);
         syy += (b - my) * (b - my);
         sxy += (a - mx) * (b - my);
+        xx += a * a;
+        yy += b * b;
     }
-    (sxx > 0.0 && syy > 0.0).then(|| (sxy / (sxx * syy).sqrt(), sxy / sxx))
+    // A column that holds one value varies by its mean's rounding alone.
+    let varies = |about_mean: f64, about_zero: f64| about_mean > VARIES * about_zero;
+    (varies(sxx, xx) && varies(syy, yy)).then(|| (sxy / (sxx * syy).sqrt(), sxy / sxx))
 }
 
 #[cfg(test)]
@@ -343,6 +354,7 @@ mod tests {
         let (c, s) = regression(&x, &y, 0).expect("read");
         assert!((c + 1.0).abs() < 1e-9 && (s + 2.0).abs() < 1e-9, "{c} {s}");
         assert_eq!(regression(&x, &[1.0; 100], 0), None);
+        assert_eq!(regression(&[0.1; 100], &y, 0), None);
         assert_eq!(regression(&x[..9], &y[..9], 0), None);
         let mut holed = y.clone();
         holed[5] = f64::NAN;
