@@ -370,6 +370,13 @@ fn values_beyond_physical_bounds_are_refused_with_their_line() {
         let col = format!("column `{name}`");
         assert_refused(&o, &[s(&log), "line 321", &col, "physical bound"]);
     }
+    // A current in milliamperes, as an EPOS4 reports it: the refusal asks.
+    let mut milli = lines.clone();
+    set_field(&mut milli, 321, 4, "15200");
+    let log = dir.path().join("milliamperes.csv");
+    write_lines(&log, &milli);
+    let o = host_sim(&["gap", s(&log), "--threads", "2"]);
+    assert_refused(&o, &["line 321", "column `current_a`", "milliamperes"]);
 
     let track = dir.path().join("track.csv");
     std::fs::write(&track, "t,ref_sw_deg\n0,0\n1,1e300\n2,0\n").unwrap();

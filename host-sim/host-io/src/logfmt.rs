@@ -272,11 +272,18 @@ impl fmt::Display for LogError {
                 value,
                 bound,
                 unit,
-            } => write!(
-                f,
-                "line {line}, column `{column}`: {value:e} is outside the physical bound of \
-                 +-{bound:e} {unit} for this column"
-            ),
+            } => {
+                write!(
+                    f,
+                    "line {line}, column `{column}`: {value:e} is outside the physical bound of \
+                     +-{bound:e} {unit} for this column"
+                )?;
+                // A drive's current in its own unit: an EPOS4 reports milliamperes.
+                if *unit == "A" && value.abs() < 1e3 * bound {
+                    write!(f, "; is it in milliamperes (an EPOS4 reports mA)?")?;
+                }
+                Ok(())
+            }
             Self::MissingNamedColumn {
                 expected,
                 found_header,
