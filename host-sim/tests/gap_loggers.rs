@@ -35,6 +35,7 @@ fn team(reference: ReferenceConvention, rate_hz: u32, jitter: bool, drop: bool) 
         drifting_clock: false,
         instant_current: false,
         negated: generator::Negated::None,
+        held_frames: false,
     }
 }
 
@@ -272,6 +273,7 @@ fn logger_kinds_are_named_as_they_are_given() {
         "ending-100-negcurrent",
         "starting-100-jitter-drop-instant-negref",
         "epos4-status-drift-negcurrent",
+        "starting-1000-jitter-drop-held",
     ] {
         assert_eq!(LoggerKind::parse(name).unwrap().name(), name);
     }
@@ -296,6 +298,8 @@ fn logger_kinds_are_named_as_they_are_given() {
         "ending-100-instant-instant",
         "ending-100-negcurrent-negref",
         "epos4-convert-negcurrent",
+        "ending-100-held",
+        "epos4-status-held",
     ] {
         assert!(LoggerKind::parse(bad).is_err(), "{bad:?}");
     }

@@ -72,10 +72,11 @@ pub struct GapArgs {
     pub unmodelled: bool,
     /// selftest: diagnose each car from the files of these loggers, as `gap FILE` reads them
     /// (ours always, first): `ours`, `drawn` (a team's logger drawn with each case), or
-    /// `ending|starting-RATE[-jitter][-drop][-instant][-negcurrent|-negref]` (RATE in Hz,
-    /// 100-1000, dividing 20000; `-instant`: the current sampled at each row's instant, not
-    /// its interval's mean; `-negcurrent`, `-negref`: the current or the reference written
-    /// with the other sign); or the world's EPOS4 car (its own drive at 25 kHz / 2.5 kHz) as
+    /// `ending|starting-RATE[-jitter][-drop][-instant][-held][-negcurrent|-negref]` (RATE in
+    /// Hz, 100-1000, dividing 20000; `-instant`: the current sampled at each row's instant,
+    /// not its interval's mean; `-held`: each row holding the car's last 100 Hz status frame;
+    /// `-negcurrent`, `-negref`: the current or the reference written with the other sign);
+    /// or the world's EPOS4 car (its own drive at 25 kHz / 2.5 kHz) as
     /// `epos4-convert` (steer-can convert's rows and header) or
     /// `epos4-status[-jitter][-drop][-negcurrent|-negref]` (a row as each TPDO arrives, no
     /// header), either with

@@ -160,6 +160,11 @@ pub struct Logger {
     /// A team's signs: the current written negated (a current sensor mounted the other way
     /// round) or the reference (the vehicle computer's convention against the car's).
     pub negated: Negated,
+    /// The direct drive above 100 Hz only: the logger writes its rows faster than the car's
+    /// status frames come (one a reference period, [`FRAME_LATENCY_S`] after its end), each
+    /// row holding the last frame received: the column at the frame's period end, the
+    /// current its period's mean. A vehicle computer's logger of the CAN bus.
+    pub held_frames: bool,
     /// Stamp jitter, s: each stamp lies within +-this of the row's place on the logger's grid
     /// (uniform), the rows kept in order as a receiver stamps frames in the order they come.
     pub jitter_s: f64,
@@ -230,6 +235,7 @@ impl Logger {
             drifting_clock: false,
             instant_current: false,
             negated: Negated::None,
+            held_frames: false,
         }
     }
 
@@ -267,6 +273,7 @@ impl Logger {
             drifting_clock: false,
             instant_current: false,
             negated: Negated::None,
+            held_frames: false,
         }
     }
 
@@ -288,6 +295,9 @@ impl Logger {
         }
         if self.instant_current {
             s.push_str(" current at the instant");
+        }
+        if self.held_frames {
+            s.push_str(" holding 100 Hz frames");
         }
         match self.negated {
             Negated::None => {}
@@ -755,12 +765,58 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
             }
         }
     }
+    if logger.held_frames {
+        hold_frames(&mut rows, case.skew_s);
+    }
     stamp_and_lose(
         &mut rows,
         logger,
         seed ^ (case.index as u64).wrapping_mul(0x2545_f491_4f6c_dd1d),
     );
     rows
+}
+
+/// From the end of a reference period to the row that first holds its status frame, s: the
+/// frame's time on the bus and the receiver's.
+pub const FRAME_LATENCY_S: f64 = 0.0005;
+
+/// `rows` (sampled on the car's clock `skew_s` before their stamps) as a logger of the car's
+/// status frames writes them: each row holds the last frame received, the column at the
+/// frame's period end and the current the mean of that period's rows. The reference, the
+/// logger's own, stays as sampled. Rows before the first frame hold their own samples.
+fn hold_frames(rows: &mut Rows, skew_s: f64) {
+    let period = 1.0 / steering_ecu::paper_mode::REFERENCE_HZ as f64;
+    let car_time = |j: usize| rows.grid_s[j] - skew_s;
+    let n = rows.t.len();
+    let (mut sw, mut motor, mut current) = (
+        rows.sw_deg.clone(),
+        rows.motor_rad.clone(),
+        rows.current_a.clone(),
+    );
+    // The frame of period `k` (ending at `k * period`): the last row at or before its end,
+    // and the mean current of the rows in the period.
+    let frame = |k: f64| -> Option<(f64, f64, f64)> {
+        let end = k * period;
+        let upto = |time: f64| rows.grid_s.partition_point(|g| g - skew_s <= time + 1e-9);
+        let (from, to) = (upto(end - period), upto(end));
+        let last = to.checked_sub(1)?;
+        let within = &rows.current_a[from.min(last)..to];
+        let mean = within.iter().sum::<f64>() / within.len().max(1) as f64;
+        Some((rows.sw_deg[last], rows.motor_rad[last], mean))
+    };
+    let mut held: Option<(f64, f64, f64)> = None;
+    let mut k_held = 0.0;
+    for j in 0..n {
+        let k = ((car_time(j) - FRAME_LATENCY_S) / period).floor();
+        if k >= 1.0 && k != k_held {
+            held = frame(k).or(held);
+            k_held = k;
+        }
+        if let Some((a, m, i)) = held {
+            (sw[j], motor[j], current[j]) = (a, m, i);
+        }
+    }
+    (rows.sw_deg, rows.motor_rad, rows.current_a) = (sw, motor, current);
 }
 
 /// The logger's receiver: each row stamped within +-`jitter_s` of its grid place (in whole

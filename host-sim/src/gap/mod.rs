@@ -29,6 +29,7 @@ pub mod finding;
 pub mod fit;
 pub mod generator;
 pub mod generator_epos4;
+pub mod held;
 pub mod identify;
 pub mod locate;
 pub mod model;

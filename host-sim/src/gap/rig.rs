@@ -774,17 +774,52 @@ impl Rig {
             }
             None => true,
         });
+        // The rows' timing; on the paper rig, the rows as read (held frames at their
+        // arrivals).
+        let mut timing = stamped.unwrap_or_else(|| super::LogTiming::of(&t));
         let record = match &self.model {
             RigModel::Paper(m) => {
                 let per = m.plant.motor_per_pinion();
-                let motor_deg = motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
                 let powered_from = powered_from(&table, &self.columns, &t, 0.01);
-                Record {
+                // Rows faster than the car's frames, each holding the last: read at the rows
+                // where a frame arrived.
+                let mut car: Vec<&[f64]> = vec![&output, &effort];
+                car.extend(motor.as_deref());
+                let held = super::held::arrivals(&t, &car, self.grid_s());
+                if let Some(rows) = &held {
+                    notes.push(format!(
+                        "{name}: {} of {} rows repeat the row before in every column of the \
+                         car (a logger faster than the car's frames, each row holding the \
+                         last); read at the {} rows where a frame arrived",
+                        t.len() - rows.len(),
+                        t.len(),
+                        rows.len()
+                    ));
+                }
+                let (t, reference, output, effort, motor) = match &held {
+                    Some(rows) => {
+                        let at = |v: &[f64]| super::held::at(v, rows);
+                        (
+                            at(&t),
+                            at(&reference),
+                            at(&output),
+                            at(&effort),
+                            motor.as_deref().map(at),
+                        )
+                    }
+                    None => (t, reference, output, effort, motor),
+                };
+                let motor_deg = motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
+                let record = Record {
                     powered_from,
                     ..Record::from_samples(
                         &t, &reference, &output, &effort, motor_deg, 0.01, current,
                     )
+                };
+                if held.is_some() {
+                    timing = super::LogTiming::of(&t);
                 }
+                record
             }
             RigModel::Emps(_) => Record {
                 dt: self.grid_s(),
@@ -815,7 +850,7 @@ impl Rig {
             record,
             notes,
             comments: table.comments.clone(),
-            timing: stamped.unwrap_or_else(|| super::LogTiming::of(&t)),
+            timing,
         })
     }
 }

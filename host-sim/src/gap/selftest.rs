@@ -365,11 +365,12 @@ pub enum LoggerKind {
 }
 
 impl LoggerKind {
-    /// `ours`, `drawn`, or `ending|starting-RATE[-jitter][-drop][-instant][-negcurrent|-negref]`:
+    /// `ours`, `drawn`, or `ending|starting-RATE[-jitter][-drop][-instant][-held][-negcurrent|-negref]`:
     /// a team's logger with that reference convention and rate (Hz, 100-1000, a whole number
     /// of the plant's 20 kHz ticks a row: 100, 200, 250, 400, 500, 1000, ...), stamps +-1 ms if
     /// `jitter`, 1 % of rows lost if `drop`, the current's instantaneous sample at each row if
-    /// `instant`, the current or the reference written negated if `negcurrent` or `negref`,
+    /// `instant`, each row holding the car's last 100 Hz status frame if `held` (above
+    /// 100 Hz), the current or the reference written negated if `negcurrent` or `negref`,
     /// no header lines.
     pub fn parse(name: &str) -> Result<LoggerKind, String> {
         let name = name.trim();
@@ -381,7 +382,7 @@ impl LoggerKind {
         let bad = || {
             format!(
                 "logger {name:?}: expected `ours`, `drawn`, \
-                 ending|starting-RATE[-jitter][-drop][-instant][-negcurrent|-negref] with RATE \
+                 ending|starting-RATE[-jitter][-drop][-instant][-held][-negcurrent|-negref] with RATE \
                  in Hz, 100-1000, dividing 20000 (e.g. starting-100-jitter-drop, ending-250), \
                  or the EPOS4 car's epos4-convert[-drift]|\
                  epos4-status[-drift][-jitter][-drop][-negcurrent|-negref]"
@@ -419,6 +420,7 @@ impl LoggerKind {
                 drifting_clock: false,
                 instant_current: false,
                 negated: generator::Negated::None,
+                held_frames: false,
             },
         };
         for p in parts {
@@ -436,6 +438,14 @@ impl LoggerKind {
                 // The current sampled at the row's instant (the direct drive's loggers).
                 "instant" if logger.car == LoggedCar::Direct && !logger.instant_current => {
                     logger.instant_current = true
+                }
+                // A logger of the car's frames, faster than they come.
+                "held"
+                    if logger.car == LoggedCar::Direct
+                        && logger.rate_hz > 100
+                        && !logger.held_frames =>
+                {
+                    logger.held_frames = true
                 }
                 // A team's signs (not convert's, which writes the car's).
                 "negcurrent" if logger.negated == generator::Negated::None => {
@@ -472,6 +482,9 @@ impl LoggerKind {
                 }
                 if l.instant_current {
                     s.push_str("-instant");
+                }
+                if l.held_frames {
+                    s.push_str("-held");
                 }
                 match l.negated {
                     generator::Negated::None => {}
