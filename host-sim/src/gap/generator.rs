@@ -713,6 +713,9 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
     let mut integral_at_last_row = 0.0;
     let mut tick: u64 = 0;
     let mut tick_at_last_row: u64 = 0;
+    let ticks_per_period = CURRENT_LOOP_HZ as u64 / steering_ecu::paper_mode::REFERENCE_HZ as u64;
+    let mut frames: Vec<Frame> = Vec::new();
+    let mut integral_at_last_frame = 0.0;
     for n in 0..n_pos {
         // The ECU receives sample m at position tick m * 20 + delay: before the first one,
         // it holds the rest angle (the first sample).
@@ -731,6 +734,22 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
             ode.rk4(&mut x, v, h);
             current_integral += 0.5 * (i0 + x[0]) * h;
             tick += 1;
+            // The car's status frame at each reference period's end: the column and motor
+            // sampled there, the current the period's mean.
+            if logger.held_frames && tick.is_multiple_of(ticks_per_period) {
+                let col =
+                    x[3] * p.screw_to_pinion() + (ANGLE_NOISE_DEG * rng.normal()).to_radians();
+                let sw = encoder.angle(sensor.raw_from_angle(col));
+                let mean =
+                    (current_integral - integral_at_last_frame) / (ticks_per_period as f64 * h);
+                integral_at_last_frame = current_integral;
+                frames.push(Frame {
+                    t: tick as f64 * h,
+                    sw_deg: (sw.0 as f64).to_degrees(),
+                    motor_rad: motor_from_hall(hall_from_motor(x[1])).0 as f64,
+                    current_a: mean + offset_a + CURRENT_NOISE_A * rng.normal(),
+                });
+            }
             // A row: the logger's clock ticks every row interval from the first push, but
             // what it stamps `t` was sampled `skew` earlier (it stamps on receipt).
             let stamp = tick + skew_ticks;
@@ -766,7 +785,7 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
         }
     }
     if logger.held_frames {
-        hold_frames(&mut rows, case.skew_s);
+        hold_frames(&mut rows, &frames, skew_ticks as f64 * h);
     }
     stamp_and_lose(
         &mut rows,
@@ -780,43 +799,30 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
 /// frame's time on the bus and the receiver's.
 pub const FRAME_LATENCY_S: f64 = 0.0005;
 
+/// The car's status frame of one reference period.
+struct Frame {
+    /// The period's end, s on the car's clock.
+    t: f64,
+    sw_deg: f64,
+    motor_rad: f64,
+    /// The period's mean current, A.
+    current_a: f64,
+}
+
 /// `rows` (sampled on the car's clock `skew_s` before their stamps) as a logger of the car's
-/// status frames writes them: each row holds the last frame received, the column at the
-/// frame's period end and the current the mean of that period's rows. The reference, the
-/// logger's own, stays as sampled. Rows before the first frame hold their own samples.
-fn hold_frames(rows: &mut Rows, skew_s: f64) {
-    let period = 1.0 / steering_ecu::paper_mode::REFERENCE_HZ as f64;
-    let car_time = |j: usize| rows.grid_s[j] - skew_s;
-    let n = rows.t.len();
-    let (mut sw, mut motor, mut current) = (
-        rows.sw_deg.clone(),
-        rows.motor_rad.clone(),
-        rows.current_a.clone(),
-    );
-    // The frame of period `k` (ending at `k * period`): the last row at or before its end,
-    // and the mean current of the rows in the period.
-    let frame = |k: f64| -> Option<(f64, f64, f64)> {
-        let end = k * period;
-        let upto = |time: f64| rows.grid_s.partition_point(|g| g - skew_s <= time + 1e-9);
-        let (from, to) = (upto(end - period), upto(end));
-        let last = to.checked_sub(1)?;
-        let within = &rows.current_a[from.min(last)..to];
-        let mean = within.iter().sum::<f64>() / within.len().max(1) as f64;
-        Some((rows.sw_deg[last], rows.motor_rad[last], mean))
-    };
-    let mut held: Option<(f64, f64, f64)> = None;
-    let mut k_held = 0.0;
-    for j in 0..n {
-        let k = ((car_time(j) - FRAME_LATENCY_S) / period).floor();
-        if k >= 1.0 && k != k_held {
-            held = frame(k).or(held);
-            k_held = k;
-        }
-        if let Some((a, m, i)) = held {
-            (sw[j], motor[j], current[j]) = (a, m, i);
+/// status `frames` writes them: each row holds the last frame received ([`FRAME_LATENCY_S`]
+/// after its period's end). The reference, the logger's own, stays as sampled; rows before
+/// the first frame hold their own samples.
+fn hold_frames(rows: &mut Rows, frames: &[Frame], skew_s: f64) {
+    for j in 0..rows.t.len() {
+        let car_time = rows.grid_s[j] - skew_s;
+        let received = frames.partition_point(|f| f.t + FRAME_LATENCY_S <= car_time + 1e-9);
+        if let Some(f) = received.checked_sub(1).map(|i| &frames[i]) {
+            rows.sw_deg[j] = f.sw_deg;
+            rows.motor_rad[j] = f.motor_rad;
+            rows.current_a[j] = f.current_a;
         }
     }
-    (rows.sw_deg, rows.motor_rad, rows.current_a) = (sw, motor, current);
 }
 
 /// The logger's receiver: each row stamped within +-`jitter_s` of its grid place (in whole

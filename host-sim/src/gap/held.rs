@@ -9,10 +9,10 @@
 //!
 //! Such a log holds its frames on rows where nothing changes. Where most rows repeat the row
 //! before in every car column and the rows where something changes come about one period
-//! apart, the log is read at those rows alone, each stamped when its frame arrived: a log at
-//! the frames' rate, as a logger of them writes it. Two frames (the angles' and the
-//! current's) that land on rows closer than a quarter period are one arrival, at the later
-//! row, which holds both.
+//! apart, the log is read at those rows alone, as a logger of the frames writes it: each
+//! frame at the row before its first row (the logger's last row before it came: its stamp
+//! and its reference), a frame whose row before was lost left out. Two frames (the angles' and the current's) that land
+//! on rows closer than a quarter period are one arrival, at the later row, which holds both.
 
 /// Fewest rows that must repeat the row before in every car column for the log to be read
 /// as held frames: a logger at twice the frames' rate repeats half its rows, and a logger of
@@ -57,9 +57,31 @@ pub fn arrivals(t: &[f64], columns: &[&[f64]], period_s: f64) -> Option<Vec<usiz
     (gaps.len() >= 20 && ARRIVAL_SPACING.contains(&(spacing / period_s))).then_some(rows)
 }
 
+/// `rows` (a frame's first rows, [`arrivals`]) less those whose row before lies more than a
+/// row spacing and the stamps' jitter (`jitter_s`, RMS) earlier: a row was lost between
+/// them, so the frame came anywhere in two rows' time (a 200 Hz logger's 10 ms). Such a
+/// frame is left out, as a row a logger of the frames lost.
+pub fn unambiguous(t: &[f64], rows: &[usize], jitter_s: f64) -> Vec<usize> {
+    let spacing = host_io::grid::median_gap(t);
+    let limit = spacing + (0.5 * spacing).max(4.0 * jitter_s);
+    rows.iter()
+        .copied()
+        .filter(|&k| k == 0 || t[k] - t[k - 1] <= limit)
+        .collect()
+}
+
 /// `values` at `rows`.
 pub fn at(values: &[f64], rows: &[usize]) -> Vec<f64> {
     rows.iter().map(|&k| values[k]).collect()
+}
+
+/// The row before each of `rows` (the log's first row, with none before it, itself): the
+/// logger's last row before the frame came, whose stamp and reference the frame takes, as a
+/// logger of the frames stamps each when it comes. Where the rows divide the period (200 Hz,
+/// 500 Hz, 1 kHz) that row sits at one phase of the period; where they do not (250 Hz,
+/// 400 Hz) its phase walks, and the frames' with it (gap/NOTES.md).
+pub fn before(rows: &[usize]) -> Vec<usize> {
+    rows.iter().map(|&k| k.saturating_sub(1)).collect()
 }
 
 #[cfg(test)]
@@ -106,6 +128,25 @@ mod tests {
         for &k in &rows[1..] {
             assert_ne!(w[k], w[k - 1], "the later row of the two holds both");
         }
+    }
+
+    #[test]
+    fn a_frame_whose_row_before_was_lost_is_left_out() {
+        // 200 Hz rows, frames first held on every other row; the row before the arrival at
+        // row 41 lost, and the arrival row 60 itself.
+        let t: Vec<f64> = (0..200)
+            .filter(|k| *k != 40 && *k != 60)
+            .map(|k| 0.005 * k as f64)
+            .collect();
+        let first = |k: usize| t.iter().position(|x| (x - 0.005 * k as f64).abs() < 1e-9);
+        let rows: Vec<usize> = (1..100)
+            .filter_map(|f| first(2 * f + 1).or(first(2 * f + 2)))
+            .collect();
+        let kept = unambiguous(&t, &rows, 0.0);
+        assert_eq!(rows.len() - kept.len(), 2, "{rows:?}");
+        assert!(!kept.contains(&first(41).unwrap()) && !kept.contains(&first(61).unwrap()));
+        // Read with the stamps' jitter at 0.6 ms RMS (+-1 ms), the same two.
+        assert_eq!(unambiguous(&t, &rows, 0.6e-3).len(), rows.len() - 2);
     }
 
     #[test]

@@ -785,23 +785,33 @@ impl Rig {
                 // where a frame arrived.
                 let mut car: Vec<&[f64]> = vec![&output, &effort];
                 car.extend(motor.as_deref());
-                let held = super::held::arrivals(&t, &car, self.grid_s());
-                if let Some(rows) = &held {
+                let arrived = super::held::arrivals(&t, &car, self.grid_s());
+                let held = arrived.as_ref().map(|rows| {
+                    let kept = super::held::unambiguous(&t, rows, timing.jitter_s);
                     notes.push(format!(
                         "{name}: {} of {} rows repeat the row before in every column of the \
                          car (a logger faster than the car's frames, each row holding the \
-                         last); read at the {} rows where a frame arrived",
+                         last); read at the {} rows where a frame arrived{}",
                         t.len() - rows.len(),
                         t.len(),
-                        rows.len()
+                        kept.len(),
+                        match rows.len() - kept.len() {
+                            0 => String::new(),
+                            n => format!(
+                                " ({n} frames left out: a row lost just before each hides \
+                                 when it came)"
+                            ),
+                        }
                     ));
-                }
+                    kept
+                });
                 let (t, reference, output, effort, motor) = match &held {
                     Some(rows) => {
                         let at = |v: &[f64]| super::held::at(v, rows);
+                        let before = super::held::before(rows);
                         (
-                            at(&t),
-                            at(&reference),
+                            super::held::at(&t, &before),
+                            super::held::at(&reference, &before),
                             at(&output),
                             at(&effort),
                             motor.as_deref().map(at),
