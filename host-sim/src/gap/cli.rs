@@ -288,7 +288,10 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         .unwrap_or(0);
     let columns = car.as_ref().and_then(|c| c.columns);
     let val = val.map(|v| {
-        let v = columns.map_or(v.clone(), |c| c.apply(&v));
+        let v = match columns {
+            Some(c) => c.apply(&v),
+            None => v,
+        };
         super::drive::shifted_reference(&v, shift)
     });
     // The validation log's own stretches where its column is a row off the drive's latch (its
@@ -693,9 +696,9 @@ pub fn identify(args: &IdentifyArgs) -> Result<()> {
     };
     let rec = load_log(&rig, &args.log)?;
     // A column the logger wrote with the other sign, read as the car has it, as `gap` reads it.
-    let rec = match super::columns::read(&rig, &rec) {
-        Some(c) if !c.describe().is_empty() => {
-            println!("columns: {}", c.describe());
+    let rec = match super::columns::read(&rig, &rec).map(|c| (c.describe(), c)) {
+        Some((said, c)) if !said.is_empty() => {
+            println!("columns: {said}");
             c.apply(&rec)
         }
         _ => rec,

@@ -11,8 +11,9 @@
 //! before in every car column and the rows where something changes come about one period
 //! apart, the log is read at those rows alone, as a logger of the frames writes it: each
 //! frame at the row before its first row (the logger's last row before it came: its stamp
-//! and its reference), a frame whose row before was lost left out. Two frames (the angles' and the current's) that land
-//! on rows closer than a quarter period are one arrival, at the later row, which holds both.
+//! and its reference), a frame whose row before was lost left out. Two frames (the angles'
+//! and the current's) that land on rows closer than a quarter period are one arrival, at the
+//! later row, which holds both.
 
 /// Fewest rows that must repeat the row before in every car column for the log to be read
 /// as held frames: a logger at twice the frames' rate repeats half its rows, and a logger of
@@ -52,9 +53,8 @@ pub fn arrivals(t: &[f64], columns: &[&[f64]], period_s: f64) -> Option<Vec<usiz
             _ => rows.push(k),
         }
     }
-    let gaps: Vec<f64> = rows.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();
-    let spacing = host_io::grid::median_gap(&rows.iter().map(|&k| t[k]).collect::<Vec<_>>());
-    (gaps.len() >= 20 && ARRIVAL_SPACING.contains(&(spacing / period_s))).then_some(rows)
+    let spacing = host_io::grid::median_gap(&at(t, &rows));
+    (rows.len() > 20 && ARRIVAL_SPACING.contains(&(spacing / period_s))).then_some(rows)
 }
 
 /// `rows` (a frame's first rows, [`arrivals`]) less those whose row before lies more than a
@@ -89,7 +89,7 @@ mod tests {
     use super::*;
 
     /// A 1 kHz log of `seconds` holding frames that arrive every 10 ms, 4.3 ms into each
-    /// period; each frame's values `f(frame)`.
+    /// period, frame `f` holding `sin(0.37 f)`.
     fn held_log(seconds: f64) -> (Vec<f64>, Vec<f64>) {
         let n = (seconds * 1000.0) as usize;
         let t: Vec<f64> = (0..n).map(|k| 0.001 * (k + 1) as f64).collect();
