@@ -405,7 +405,7 @@ impl std::fmt::Display for RigError {
                 period_s,
             } => write!(
                 f,
-                "{path}: rows {:.2} ms apart (median), further apart than the reference's \
+                "{path}: rows {:.2} ms apart, further apart than the reference's \
                  {:.0} ms period: the samples the car steered to between two rows are not in \
                  the log, and a diagnosis against a guess of them would be the guess's; log \
                  a row at least every period ({:.0} Hz or faster)",
@@ -712,14 +712,23 @@ impl Rig {
                     grid_s: self.grid_s(),
                 });
             }
-            if let RigModel::Paper(_) = self.model
-                && spacing_s > (1.0 + super::record::ONE_ROW_A_STEP) * self.grid_s()
-            {
-                return Err(RigError::SparserThanReference {
-                    path: name,
-                    spacing_s,
-                    period_s: self.grid_s(),
-                });
+            if let RigModel::Paper(_) = self.model {
+                // The rows' period is the grid's where the stamps form one: with a stamp's
+                // jitter a few tenths of a period (a PC's clock), the median gap of a
+                // row-a-period log wanders 1 % either side of its period.
+                let timing = stamped.unwrap_or_else(|| super::LogTiming::of(&t));
+                let row_dt_s = if timing.is_regular() {
+                    timing.row_dt_s
+                } else {
+                    spacing_s
+                };
+                if row_dt_s > (1.0 + super::record::ONE_ROW_A_STEP) * self.grid_s() {
+                    return Err(RigError::SparserThanReference {
+                        path: name,
+                        spacing_s: row_dt_s,
+                        period_s: self.grid_s(),
+                    });
+                }
             }
             // A stretch with no row, or with a required sample `nan`, is filled by a line
             // between its ends; over more than a few reference periods that line is a guess
