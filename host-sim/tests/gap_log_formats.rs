@@ -1,5 +1,6 @@
 //! A team's own logger writes the car's log in ways ours does not: a PC's clock that stamps
-//! rows with jitter of a few milliseconds. The independent world's car (`gap::generator`, an
+//! rows with jitter of a few milliseconds; a row for each CAN frame, the other frames' cells
+//! left empty. The independent world's car (`gap::generator`, an
 //! RK4 plant under the firmware's cascade) written so, read as `host-sim gap FILE` reads it.
 #![allow(clippy::unwrap_used)] // a failed unwrap is a failed test
 
@@ -34,6 +35,25 @@ fn median_gap(t: &[f64]) -> f64 {
     gaps[gaps.len() / 2]
 }
 
+/// The log at `path` read at the car's 10 ms period and its car, fitted as `host-sim gap
+/// FILE` fits it, `none`.
+fn effect_free_at_the_cars_period(path: &std::path::Path) {
+    let loaded = Rig::paper().load_log(path).unwrap();
+    assert!(
+        (loaded.timing.row_dt_s - 0.01).abs() < 2e-5,
+        "{:?}",
+        loaded.timing
+    );
+    let (d, choice) = gap_file::diagnose_file(path, None, None);
+    assert_eq!(
+        d.verdict.kind,
+        VerdictKind::None,
+        "{:?}: {}",
+        d.verdict.effects,
+        choice.describe()
+    );
+}
+
 /// Stamps +-3 ms about a 100 Hz grid (a PC stamping frames as its USB adapter hands them
 /// over): the median gap of such a log wanders about 1 % either side of the period, so a row
 /// a period was refused as "further apart than the reference's period" whenever it came out
@@ -50,18 +70,52 @@ fn a_hundred_hertz_log_with_stamps_jittering_three_milliseconds_is_read_at_its_p
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("pc.csv");
     log_of(&case, seed, &logger).save(&path).unwrap();
+    effect_free_at_the_cars_period(&path);
+}
+
+/// The case's 100 Hz rows (the team's logger above, stamps +-1 ms) written as a recording's
+/// decoded frames are exported: a row for the reference's frame at each stamp, one for the
+/// angles' frame 3 ms later and one for the current's 5 ms later, each leaving the other
+/// frames' cells empty. Each empty cell was read as a line between its column's samples
+/// (the reference of a row between two frames, halfway between them) and the log refused
+/// as holding no row with every column. Each signal now holds until its next frame, the log
+/// is read at the rows where the car's frames arrived, and the effect-free car is `none`,
+/// with the timing of the rows a frame.
+#[test]
+fn a_log_of_a_row_for_each_can_frame_is_read_at_the_cars_frames() {
+    let case = GenCase::nominal(sweep_of(12.0), 100);
+    let rows = rows_logged(
+        &case,
+        5,
+        &pc_logger(host_sim::gap::generator::LOGGER_JITTER_S),
+    );
+    let mut text = String::from("t,ref_sw_deg,sw_deg,motor_rad,current_a\n");
+    for k in 0..rows.t.len() {
+        let t = rows.t[k];
+        text += &format!("{:.6},{:.4},,,\n", t, rows.reference[k]);
+        text += &format!(
+            "{:.6},,{:.4},{:.5},\n",
+            t + 0.003,
+            rows.sw_deg[k],
+            rows.motor_rad[k]
+        );
+        text += &format!("{:.6},,,,{:.4}\n", t + 0.005, rows.current_a[k]);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("frames.csv");
+    std::fs::write(&path, text).unwrap();
     let loaded = Rig::paper().load_log(&path).unwrap();
     assert!(
-        (loaded.timing.row_dt_s - 0.01).abs() < 2e-5,
+        loaded
+            .notes
+            .iter()
+            .any(|n| n.contains("a row for each CAN frame"))
+            && loaded
+                .notes
+                .iter()
+                .any(|n| n.contains("where the car's frames arrived")),
         "{:?}",
-        loaded.timing
+        loaded.notes
     );
-    let (d, choice) = gap_file::diagnose_file(&path, None, None);
-    assert_eq!(
-        d.verdict.kind,
-        VerdictKind::None,
-        "{:?}: {}",
-        d.verdict.effects,
-        choice.describe()
-    );
+    effect_free_at_the_cars_period(&path);
 }

@@ -37,7 +37,9 @@
 //!   empty field, as a spreadsheet or pandas writes a missing value) for a sensor dropout; it
 //!   is read as `f64::NAN`. Infinities are refused everywhere: no sensor reports one,
 //!   so one in a file means a bug upstream. A tool that cannot use a gap fills it with
-//!   [`fill_missing`] (linear between the neighbours) and says how many samples it filled.
+//!   [`fill_missing`] (linear between the neighbours) and says how many samples it filled; a
+//!   log whose rows each hold one CAN frame's columns, the others' left empty, with
+//!   [`hold_missing`] (each signal holds until its next frame).
 //! * **Physical bounds.** Every value, time included, must lie within a bound set by the unit at
 //!   the end of its column's name ([`bound_for`]): the time column 1e10 s (a Unix clock's
 //!   seconds, as a wall-clock logger stamps its rows, up to the year 2286), `_s` 1e6 s,
@@ -779,6 +781,26 @@ pub fn fill_missing(values: &mut [f64]) -> Option<usize> {
     let tail = values[last_good];
     filled += values.len() - last_good - 1;
     values[last_good + 1..].fill(tail);
+    Some(filled)
+}
+
+/// As [`fill_missing`], but each `nan` after the first sample takes the last sample before
+/// it (a value that holds until the next comes, as a CAN signal does between its frames); the
+/// ones before the first sample take the first. The count filled; `None` if all are `nan`.
+pub fn hold_missing(values: &mut [f64]) -> Option<usize> {
+    let first = values.iter().position(|v| !v.is_nan())?;
+    let head = values[first];
+    values[..first].fill(head);
+    let mut filled = first;
+    let mut last = head;
+    for v in &mut values[first..] {
+        if v.is_nan() {
+            *v = last;
+            filled += 1;
+        } else {
+            last = *v;
+        }
+    }
     Some(filled)
 }
 
@@ -1610,6 +1632,18 @@ mod tests {
         assert_eq!(fill_missing(&mut clean), Some(0));
         assert_eq!(fill_missing(&mut [nan, nan]), None);
         assert_eq!(fill_missing(&mut []), None);
+    }
+
+    #[test]
+    fn missing_samples_are_held_from_the_last_and_counted() {
+        let nan = f64::NAN;
+        let mut v = [nan, 1.0, nan, nan, 4.0, 5.0, nan];
+        assert_eq!(hold_missing(&mut v), Some(4));
+        assert_eq!(v, [1.0, 1.0, 1.0, 1.0, 4.0, 5.0, 5.0]);
+        let mut clean = [1.0, 2.0];
+        assert_eq!(hold_missing(&mut clean), Some(0));
+        assert_eq!(hold_missing(&mut [nan, nan]), None);
+        assert_eq!(hold_missing(&mut []), None);
     }
 
     #[test]

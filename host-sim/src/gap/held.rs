@@ -18,7 +18,12 @@
 /// Fewest rows that must repeat the row before in every car column for the log to be read
 /// as held frames: a logger at twice the frames' rate repeats half its rows, and a logger of
 /// real samples almost none (a current's noise changes it every row).
-const MIN_HELD_SHARE: f64 = 0.4;
+pub const HELD_SHARE: f64 = 0.4;
+
+/// [`HELD_SHARE`] for a log known to hold a row for each CAN frame (its other frames' cells
+/// empty): each period's reference frame has a row that holds the car's columns, so with the
+/// car's columns in two frames of their own a third of the rows hold them.
+pub const FRAMES_HELD_SHARE: f64 = 0.2;
 
 /// The arrivals' median spacing, as a share of the frames' period, that held frames show
 /// (frames lost, or two at once, move it little).
@@ -29,9 +34,15 @@ const ONE_ARRIVAL: f64 = 0.25;
 
 /// The rows of a log (`t` increasing, `columns` the car's columns, each as long as `t`) at
 /// which a new frame arrived, where the log holds frames of period `period_s` on rows that
-/// come faster; `None` for a log of samples (each row its own), or one whose rows come no
-/// faster than its frames.
-pub fn arrivals(t: &[f64], columns: &[&[f64]], period_s: f64) -> Option<Vec<usize>> {
+/// come faster, at least `held_share` of its rows holding the row before ([`HELD_SHARE`],
+/// [`FRAMES_HELD_SHARE`]); `None` for a log of samples (each row its own), or one whose rows
+/// come no faster than its frames.
+pub fn arrivals(
+    t: &[f64],
+    columns: &[&[f64]],
+    period_s: f64,
+    held_share: f64,
+) -> Option<Vec<usize>> {
     let n = t.len();
     if n < 20 || columns.is_empty() || columns.iter().any(|c| c.len() != n) {
         return None;
@@ -42,7 +53,7 @@ pub fn arrivals(t: &[f64], columns: &[&[f64]], period_s: f64) -> Option<Vec<usiz
     }
     let changed = |k: usize| columns.iter().any(|c| c[k] != c[k - 1]);
     let held = (1..n).filter(|&k| !changed(k)).count();
-    if (held as f64) < MIN_HELD_SHARE * (n - 1) as f64 {
+    if (held as f64) < held_share * (n - 1) as f64 {
         return None;
     }
     // The rows where a frame arrived; the first row holds the first frame seen.
@@ -106,7 +117,7 @@ mod tests {
     #[test]
     fn held_frames_are_read_where_they_arrive() {
         let (t, v) = held_log(2.0);
-        let rows = arrivals(&t, &[&v], 0.01).expect("held");
+        let rows = arrivals(&t, &[&v], 0.01, HELD_SHARE).expect("held");
         // 200 periods: an arrival in each, the first row besides.
         assert!((199..=201).contains(&rows.len()), "{}", rows.len());
         for w in rows[1..].windows(2) {
@@ -123,7 +134,7 @@ mod tests {
         let (t, v) = held_log(2.0);
         // The current's frame lands a row after the angles'.
         let w: Vec<f64> = (0..v.len()).map(|k| v[k.saturating_sub(1)]).collect();
-        let rows = arrivals(&t, &[&v, &w], 0.01).expect("held");
+        let rows = arrivals(&t, &[&v, &w], 0.01, HELD_SHARE).expect("held");
         assert!((199..=201).contains(&rows.len()), "{}", rows.len());
         for &k in &rows[1..] {
             assert_ne!(w[k], w[k - 1], "the later row of the two holds both");
@@ -153,17 +164,17 @@ mod tests {
     fn a_log_of_samples_or_at_the_frames_rate_is_read_as_it_is() {
         let t: Vec<f64> = (0..2000).map(|k| 0.001 * k as f64).collect();
         let samples: Vec<f64> = t.iter().map(|s| (7.0 * s).sin()).collect();
-        assert_eq!(arrivals(&t, &[&samples], 0.01), None);
+        assert_eq!(arrivals(&t, &[&samples], 0.01, HELD_SHARE), None);
         // 100 Hz rows: nothing held.
         let t100: Vec<f64> = (0..500).map(|k| 0.01 * k as f64).collect();
         let v100: Vec<f64> = t100.iter().map(|s| (7.0 * s).sin()).collect();
-        assert_eq!(arrivals(&t100, &[&v100], 0.01), None);
+        assert_eq!(arrivals(&t100, &[&v100], 0.01, HELD_SHARE), None);
         // A car at rest for most of a log of samples: its rows repeat, but no frames arrive
         // a period apart.
         let mut rest = samples.clone();
         for x in rest.iter_mut().skip(100) {
             *x = 0.0;
         }
-        assert_eq!(arrivals(&t, &[&rest], 0.01), None);
+        assert_eq!(arrivals(&t, &[&rest], 0.01, HELD_SHARE), None);
     }
 }

@@ -4,7 +4,7 @@
 //! servo pendulum.
 
 use super::{CurrentSamples, Record};
-use crate::logfmt::{LogError, Table, TimeOrder, fill_missing};
+use crate::logfmt::{LogError, Table, TimeOrder, fill_missing, hold_missing};
 use crate::plant::PlantParams;
 use std::path::Path;
 use steering_ecu::gains::EposGains;
@@ -601,6 +601,19 @@ impl Rig {
                 _ => RigError::Log(e),
             })?;
         let mut notes = Vec::new();
+        // A log whose rows each hold one CAN frame's columns, the other frames' left empty
+        // (a recording's decoded signals exported row by row): each signal holds from its
+        // frame to its next, as the car saw it, not a line between them.
+        let blank = blank_share(&table, &self.columns);
+        let frames = matches!(self.model, RigModel::Paper(_)) && blank >= FRAMES_BLANK_SHARE;
+        if frames {
+            notes.push(format!(
+                "{name}: {:.0} % of rows leave a column of the car or the reference empty (a \
+                 row for each CAN frame, holding that frame's columns?); each empty sample is \
+                 read as its column's last",
+                100.0 * blank
+            ));
+        }
         // Missing samples are filled so that no NaN reaches the simulation and the costs; a
         // required column with no sample at all is refused, an optional one is left out.
         let mut col = |c: &str, required: bool| -> Result<Option<Vec<f64>>, RigError> {
@@ -616,8 +629,14 @@ impl Rig {
                 };
             };
             let mut values = values.to_vec();
-            match fill_missing(&mut values) {
+            let filled = if frames {
+                hold_missing(&mut values)
+            } else {
+                fill_missing(&mut values)
+            };
+            match filled {
                 Some(0) => {}
+                Some(_) if frames => {}
                 Some(n) => notes.push(format!(
                     "{name}: column `{c}`: {n} missing samples (nan) of {} filled by linear \
                      interpolation between their neighbours",
@@ -734,19 +753,29 @@ impl Rig {
             // between its ends; over more than a few reference periods that line is a guess
             // the model would be scored against (2 s of a 100 Hz track missing turned an
             // effect-free car `unexplained`).
-            let required: Vec<&[f64]> = [
+            // Each column by its own samples: a log of a row per CAN frame holds the
+            // reference and the car's columns in rows of their own.
+            let hole = [
                 &self.columns.reference,
                 &self.columns.output,
                 &self.columns.effort,
             ]
             .iter()
             .filter_map(|c| table.column(c))
-            .collect();
-            let present: Vec<f64> = (0..t.len())
-                .filter(|&j| required.iter().all(|v| !v[j].is_nan()))
-                .map(|j| t[j])
-                .collect();
-            if let Some((from, to)) = longest_hole(&t, &present, spacing_s)
+            .filter_map(|v| {
+                let present: Vec<f64> = (0..t.len())
+                    .filter(|&j| !v[j].is_nan())
+                    .map(|j| t[j])
+                    .collect();
+                let spacing = if frames {
+                    host_io::grid::median_gap(&present)
+                } else {
+                    spacing_s
+                };
+                longest_hole(&t, &present, spacing)
+            })
+            .max_by(|a, b| (a.1 - a.0).total_cmp(&(b.1 - b.0)));
+            if let Some((from, to)) = hole
                 && ((to - from) / self.grid_s()).round() > MAX_HOLE_STEPS
             {
                 let whole_s = first - t[0];
@@ -794,24 +823,38 @@ impl Rig {
                 // where a frame arrived.
                 let mut car: Vec<&[f64]> = vec![&output, &effort];
                 car.extend(motor.as_deref());
-                let arrived = super::held::arrivals(&t, &car, self.grid_s());
+                let held_share = if frames {
+                    super::held::FRAMES_HELD_SHARE
+                } else {
+                    super::held::HELD_SHARE
+                };
+                let arrived = super::held::arrivals(&t, &car, self.grid_s(), held_share);
                 let held = arrived.as_ref().map(|rows| {
                     let kept = super::held::unambiguous(&t, rows, timing.jitter_s);
-                    notes.push(format!(
-                        "{name}: {} of {} rows repeat the row before in every column of the \
-                         car (a logger faster than the car's frames, each row holding the \
-                         last); read at the {} rows where a frame arrived{}",
-                        t.len() - rows.len(),
-                        t.len(),
-                        kept.len(),
-                        match rows.len() - kept.len() {
-                            0 => String::new(),
-                            n => format!(
-                                " ({n} frames left out: a row lost just before each hides \
-                                 when it came)"
-                            ),
-                        }
-                    ));
+                    let left_out = match rows.len() - kept.len() {
+                        0 => String::new(),
+                        n => format!(
+                            " ({n} frames left out: a row lost just before each hides when \
+                             it came)"
+                        ),
+                    };
+                    notes.push(if frames {
+                        format!(
+                            "{name}: read at the {} of {} rows where the car's frames \
+                             arrived{left_out}",
+                            kept.len(),
+                            t.len(),
+                        )
+                    } else {
+                        format!(
+                            "{name}: {} of {} rows repeat the row before in every column of \
+                             the car (a logger faster than the car's frames, each row holding \
+                             the last); read at the {} rows where a frame arrived{left_out}",
+                            t.len() - rows.len(),
+                            t.len(),
+                            kept.len(),
+                        )
+                    });
                     kept
                 });
                 let (t, reference, output, effort, motor) = match &held {
@@ -892,6 +935,43 @@ fn longest_hole(t: &[f64], present: &[f64], spacing: f64) -> Option<(f64, f64)> 
         .flatten()
         .filter(|(a, b)| b > a)
         .max_by(|a, b| (a.1 - a.0).total_cmp(&(b.1 - b.0)))
+}
+
+/// From this share of rows leaving the reference or a column of the car empty, a log is read
+/// as a row for each CAN frame, each empty sample holding its column's last: a sensor's
+/// dropouts leave a few rows so, a log of two frames half of them.
+const FRAMES_BLANK_SHARE: f64 = 0.25;
+
+/// The share of a log's rows, from the first by which the reference and each column of the
+/// car have a sample, that leave one of them empty (`nan`).
+fn blank_share(table: &Table, columns: &Columns) -> f64 {
+    let named = [
+        Some(&columns.reference),
+        Some(&columns.output),
+        Some(&columns.effort),
+        columns.motor.as_ref(),
+    ];
+    let present: Vec<&[f64]> = named
+        .into_iter()
+        .flatten()
+        .filter_map(|c| table.column(c))
+        .collect();
+    let Some(start) = present
+        .iter()
+        .map(|v| v.iter().position(|x| !x.is_nan()))
+        .collect::<Option<Vec<usize>>>()
+        .and_then(|firsts| firsts.into_iter().max())
+    else {
+        return 0.0;
+    };
+    let rows = present.first().map_or(0, |v| v.len());
+    if rows <= start {
+        return 0.0;
+    }
+    let blank = (start..rows)
+        .filter(|&j| present.iter().any(|v| v[j].is_nan()))
+        .count();
+    blank as f64 / (rows - start) as f64
 }
 
 /// The one value every sample holds, if they all hold the same.
