@@ -661,3 +661,25 @@ fn gap_refuses_a_log_not_separated_by_commas_and_names_its_separator() {
         assert_refused(&o, &[name, named, "comma-separated"]);
     }
 }
+
+/// A column in radians beside a reference in degrees (a team's logger writing the encoder's
+/// angle as its driver gives it): the car turns its column x0.017 of what the model does for
+/// that reference, which no fault of a car does. Read as logged, the world's sweep with play
+/// was named play and rack friction; `gap` and `identify` now refuse it, with the figure and
+/// the units to check.
+#[test]
+fn gap_refuses_a_column_in_another_unit_than_its_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rows = step_log(dir.path());
+    for line in 2..=rows.len() {
+        let sw: f64 = rows[line - 1].split(',').nth(2).unwrap().parse().unwrap();
+        set_field(&mut rows, line, 2, &format!("{:.6}", sw.to_radians()));
+    }
+    let o = gap_of(dir.path(), "radians.csv", &rows);
+    assert_refused(
+        &o,
+        &["radians.csv", "the column turns x0.017", "not in one unit"],
+    );
+    let o = host_sim(&["identify", s(&dir.path().join("radians.csv"))]);
+    assert_refused(&o, &["radians.csv", "not in one unit"]);
+}

@@ -90,6 +90,7 @@ fn columns_written_as_the_car_has_them_are_read_as_logged() {
     ] {
         let s = signs_of(&written(&logger, |_| {}));
         assert!(!s.any(), "{}: {s:?}", logger.describe());
+        assert_eq!(s.refusal(), None, "{}: {s:?}", logger.describe());
         assert!(s.output_correlation > 0.9, "{}: {s:?}", logger.describe());
         assert!(s.effort_scale > 0.5, "{}: {s:?}", logger.describe());
     }
@@ -107,7 +108,7 @@ fn a_late_car_is_read_at_its_lag_not_as_a_column_of_the_other_sign() {
     let dir = tempfile::tempdir().unwrap();
     let mut log = log_of(&case, 5, &team());
     let s = columns::read(&Rig::paper(), &record_of(&log, dir.path())).unwrap();
-    assert!(!s.any(), "{s:?}");
+    assert!(!s.any() && s.refusal().is_none(), "{s:?}");
     assert!((0.05..=0.08).contains(&s.lag_s), "{s:?}");
     assert!(s.output_correlation > 0.9 && s.effort_scale > 0.5, "{s:?}");
     negate(&mut log.current_a);
@@ -211,4 +212,31 @@ fn reading_a_column_negated_changes_that_column_alone() {
         (&rec.reference, &rec.output, &rec.motor)
     );
     assert_eq!(ColumnSigns::default().apply(&rec), rec);
+}
+
+/// A column in radians beside a reference in degrees, or in degrees beside one in radians,
+/// is refused, with the figure; the same log in one unit, and with its column negated, is
+/// not.
+#[test]
+fn a_column_in_another_unit_than_its_reference_is_refused() {
+    let scaled = |k: f64| {
+        signs_of(&written(&team(), |l| {
+            for x in &mut l.sw_deg {
+                *x *= k;
+            }
+        }))
+    };
+    for (k, slope) in [(1f64.to_radians(), 0.0175), (1f64.to_degrees(), 57.3)] {
+        let s = scaled(k);
+        assert!((s.output_slope / slope - 1.0).abs() < 0.2, "{s:?}");
+        assert!(
+            s.refusal().is_some_and(|r| r.contains("not in one unit")),
+            "{s:?}"
+        );
+    }
+    for k in [1.0, -1.0] {
+        let s = scaled(k);
+        assert!((s.output_slope.abs() - 1.0).abs() < 0.1, "{s:?}");
+        assert_eq!(s.refusal(), None, "{s:?}");
+    }
 }

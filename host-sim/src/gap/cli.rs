@@ -157,9 +157,20 @@ fn car_for(
         }
         return Ok((rig.clone(), rec.clone(), None));
     }
-    Ok(super::drive::choose_for_log(
-        rig, rec, header, timing, drive, controller, opts,
-    ))
+    let (rig, rec, choice) =
+        super::drive::choose_for_log(rig, rec, header, timing, drive, controller, opts);
+    if let Some(why) = choice
+        .as_ref()
+        .and_then(|c| c.columns.as_ref())
+        .and_then(|c| c.refusal())
+    {
+        let log = args
+            .log
+            .as_deref()
+            .map_or(String::new(), |p| format!("{}: ", p.display()));
+        return Err(format!("{log}{why}").into());
+    }
+    Ok((rig, rec, choice))
 }
 
 /// `--drive` and `--controller`, read.
@@ -696,7 +707,11 @@ pub fn identify(args: &IdentifyArgs) -> Result<()> {
     };
     let rec = load_log(&rig, &args.log)?;
     // A column the logger wrote with the other sign, read as the car has it, as `gap` reads it.
-    let rec = match super::columns::read(&rig, &rec).map(|c| (c.describe(), c)) {
+    let columns = super::columns::read(&rig, &rec);
+    if let Some(why) = columns.as_ref().and_then(|c| c.refusal()) {
+        return Err(format!("{}: {why}", args.log.display()).into());
+    }
+    let rec = match columns.map(|c| (c.describe(), c)) {
         Some((said, c)) if !said.is_empty() => {
             println!("columns: {said}");
             c.apply(&rec)

@@ -1,4 +1,4 @@
-//! A column a team's logger wrote with the other sign, or a motor angle in another unit.
+//! A column a team's logger wrote with the other sign, or in another unit.
 //!
 //! A steering loop that works moves its column with the reference, its motor with its column
 //! through the gearing, and draws the current the model's physics draws: each of these goes
@@ -21,6 +21,10 @@
 //!   than the rig's (degrees for radians) puts far from one;
 //! - the current: the effort scale (`score::effort_scale`), whose sign no Table 4
 //!   error and no candidate turns.
+//!
+//! - the column's slope on the model's: a car turns its column about as the model does
+//!   whatever its faults, so a slope far from one is a column in another unit than its
+//!   reference (radians beside degrees), on which no diagnosis is possible: it is refused.
 //!
 //! A column that goes the other way by far more than chance is read negated, and the car line
 //! says so with the figure; where the column, the motor angle and the current all oppose the
@@ -55,6 +59,15 @@ pub const REVERSED_SCALE_SE: f64 = 4.0;
 /// x57.3), and is left out.
 pub const MOTOR_SLOPE_RANGE: std::ops::RangeInclusive<f64> = 0.5..=2.0;
 
+/// The column's slope on the nominal model's that a steering column in the reference's unit
+/// gives, whatever the car's faults, with a wide margin: the world's logs read 0.42-1.07 at
+/// their lags (the first 40 cars under ours, the drawn loggers and the EPOS4 car as a row per
+/// TPDO; the lowest a car with 1 kN of rack friction and a tyre on a 5 deg sweep). Outside,
+/// the column is in another unit than the reference (a column in radians beside a reference
+/// in degrees reads x0.017, the other way round x57), and no diagnosis of the car is possible
+/// on it: the log is refused.
+pub const OUTPUT_SLOPE_RANGE: std::ops::RangeInclusive<f64> = 0.1..=10.0;
+
 /// The effort scales a current in amperes can take: a torque constant or Table 4 off as far
 /// as any car's (the world's logs read x0.31-1.22, its `parameters` cars the lowest). A
 /// current beyond them by six standard errors is in another unit (milliamperes read x1000, a
@@ -81,8 +94,10 @@ pub struct ColumnSigns {
     /// How far the log follows the nominal model, s: the lag at which its column is the
     /// closest to the model's (a reference that reached the car late lags it).
     pub lag_s: f64,
-    /// The column's correlation with the nominal model's at that lag, as logged.
+    /// The column's correlation with the nominal model's at that lag, as logged, and its
+    /// slope on it.
     pub output_correlation: f64,
+    pub output_slope: f64,
     /// The motor angle's correlation with the nominal model's and its slope on it, at the
     /// same lag, as logged.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -99,6 +114,23 @@ pub struct ColumnSigns {
 }
 
 impl ColumnSigns {
+    /// Why the log cannot be diagnosed as logged: its column is in another unit than its
+    /// reference ([`OUTPUT_SLOPE_RANGE`]).
+    pub fn refusal(&self) -> Option<String> {
+        (!OUTPUT_SLOPE_RANGE.contains(&self.output_slope.abs())).then(|| {
+            format!(
+                "the column turns x{:.3} the nominal model's for the logged reference (a car \
+                 turns its column x{}-{} of it, whatever its faults): the column and the \
+                 reference are not in one unit (a column in radians beside a reference in \
+                 degrees reads x0.017, the other way round x57); log both as the steering \
+                 column's angle in degrees",
+                self.output_slope,
+                OUTPUT_SLOPE_RANGE.start(),
+                OUTPUT_SLOPE_RANGE.end()
+            )
+        })
+    }
+
     /// Any column read otherwise than logged.
     pub fn any(&self) -> bool {
         self.reference_reversed
@@ -208,6 +240,7 @@ pub fn read(rig: &Rig, rec: &Record) -> Option<ColumnSigns> {
     let (lag, output_correlation) = best_lag(&sim.output, &on.output, skip)?;
     let output_reversed = output_correlation < REVERSED_CORRELATION;
     let (model, log) = lagged(&sim, &on, lag);
+    let (_, output_slope) = regression(&model.output, &log.output, skip)?;
     let motor = log
         .motor
         .as_deref()
@@ -228,6 +261,7 @@ pub fn read(rig: &Rig, rec: &Record) -> Option<ColumnSigns> {
         motor_left_out,
         lag_s: lag as f64 * rec.dt,
         output_correlation,
+        output_slope,
         motor_correlation: motor.map(|(c, _)| c),
         motor_slope: motor.map(|(_, s)| s),
         effort_scale: factor,
