@@ -41,6 +41,7 @@ mod refits;
 pub mod rig;
 pub mod ripple;
 pub mod rng;
+mod rounded;
 mod score;
 mod search;
 pub mod selftest;

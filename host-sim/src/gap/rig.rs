@@ -871,6 +871,18 @@ impl Rig {
                     }
                     None => (t, reference, output, effort, motor),
                 };
+                // A reference the logger printed coarser than the car received it.
+                let reference = match super::rounded::step_of(&reference) {
+                    Some(step) => {
+                        notes.push(format!(
+                            "{name}: the reference column holds whole multiples of {step} deg, \
+                             coarser than the 0.01 deg the car receives: read as the smoothest \
+                             line within half a step of each row"
+                        ));
+                        super::rounded::smoothed_within(&reference, step)
+                    }
+                    None => reference,
+                };
                 let motor_deg = motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
                 let record = Record {
                     powered_from,
