@@ -657,7 +657,8 @@ impl Rig {
             Ok(Some(values))
         };
         let mut t = col(&self.columns.time, true)?.unwrap_or_default();
-        // The stamps' timing where they had to be placed in order (read before they were).
+        // The stamps' timing, where they had to be placed in order (read before they were)
+        // or the rows' spacing was checked against the reference's period.
         let mut stamped: Option<super::LogTiming> = None;
         let reference = col(&self.columns.reference, true)?.unwrap_or_default();
         let output = col(&self.columns.output, true)?.unwrap_or_default();
@@ -735,7 +736,7 @@ impl Rig {
                 // The rows' period is the grid's where the stamps form one: with a stamp's
                 // jitter a few tenths of a period (a PC's clock), the median gap of a
                 // row-a-period log wanders 1 % either side of its period.
-                let timing = stamped.unwrap_or_else(|| super::LogTiming::of(&t));
+                let timing = *stamped.get_or_insert_with(|| super::LogTiming::of(&t));
                 let row_dt_s = if timing.is_regular() {
                     timing.row_dt_s
                 } else {
