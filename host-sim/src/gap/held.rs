@@ -14,6 +14,11 @@
 //! and its reference), a frame whose row before was lost left out. Two frames (the angles'
 //! and the current's) that land on rows closer than a quarter period are one arrival, at the
 //! later row, which holds both.
+//!
+//! A recording's decoded frames exported row by row hold the same: a row for each frame, the
+//! other frames' cells left empty. Where a quarter of the rows leave a column empty
+//! ([`blank_share`]) the paper rig's reader holds each empty cell at its column's last value
+//! and reads the log here, with one row a period holding the car's columns enough.
 
 /// Fewest rows that must repeat the row before in every car column for the log to be read
 /// as held frames: a logger at twice the frames' rate repeats half its rows, and a logger of
@@ -24,6 +29,11 @@ pub const HELD_SHARE: f64 = 0.4;
 /// empty): each period's reference frame has a row that holds the car's columns, so with the
 /// car's columns in two frames of their own a third of the rows hold them.
 pub const FRAMES_HELD_SHARE: f64 = 0.2;
+
+/// From this share of rows leaving the reference or a column of the car empty, a log is read
+/// as a row for each CAN frame, each empty sample holding its column's last: a sensor's
+/// dropouts leave a few rows so, a log of two frames half of them.
+pub const FRAMES_BLANK_SHARE: f64 = 0.25;
 
 /// The arrivals' median spacing, as a share of the frames' period, that held frames show
 /// (frames lost, or two at once, move it little).
@@ -79,6 +89,27 @@ pub fn unambiguous(t: &[f64], rows: &[usize], jitter_s: f64) -> Vec<usize> {
         .copied()
         .filter(|&k| k == 0 || t[k] - t[k - 1] <= limit)
         .collect()
+}
+
+/// The share of a log's rows, from the first by which each of `columns` (each as long as the
+/// log) has a sample, that leave one of them empty (`nan`); 0 where one never has a sample.
+pub fn blank_share(columns: &[&[f64]]) -> f64 {
+    let Some(start) = columns
+        .iter()
+        .map(|v| v.iter().position(|x| !x.is_nan()))
+        .collect::<Option<Vec<usize>>>()
+        .and_then(|firsts| firsts.into_iter().max())
+    else {
+        return 0.0;
+    };
+    let rows = columns.iter().map(|v| v.len()).min().unwrap_or(0);
+    if rows <= start {
+        return 0.0;
+    }
+    let blank = (start..rows)
+        .filter(|&j| columns.iter().any(|v| v[j].is_nan()))
+        .count();
+    blank as f64 / (rows - start) as f64
 }
 
 /// `values` at `rows`.
@@ -158,6 +189,21 @@ mod tests {
         assert!(!kept.contains(&first(41).unwrap()) && !kept.contains(&first(61).unwrap()));
         // Read with the stamps' jitter at 0.6 ms RMS (+-1 ms), the same two.
         assert_eq!(unambiguous(&t, &rows, 0.6e-3).len(), rows.len() - 2);
+    }
+
+    #[test]
+    fn empty_cells_are_counted_from_the_row_every_column_has_begun() {
+        let nan = f64::NAN;
+        // A reference frame's row, then the car's; the car's first frame comes on row 1.
+        let reference = [0.1, nan, 0.2, nan, 0.3, nan];
+        let column = [nan, 1.0, nan, 2.0, nan, 3.0];
+        assert_eq!(blank_share(&[&reference, &column]), 1.0);
+        // A dropout of one row in five, after the car began on row 2.
+        let full = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
+        let dropout = [nan, nan, 3.0, nan, 5.0, 6.0, 7.0];
+        assert!((blank_share(&[&full, &dropout]) - 0.2).abs() < 1e-12);
+        assert_eq!(blank_share(&[&full, &[nan; 7]]), 0.0);
+        assert_eq!(blank_share(&[]), 0.0);
     }
 
     #[test]

@@ -604,8 +604,19 @@ impl Rig {
         // A log whose rows each hold one CAN frame's columns, the other frames' left empty
         // (a recording's decoded signals exported row by row): each signal holds from its
         // frame to its next, as the car saw it, not a line between them.
-        let blank = blank_share(&table, &self.columns);
-        let frames = matches!(self.model, RigModel::Paper(_)) && blank >= FRAMES_BLANK_SHARE;
+        let named: Vec<&[f64]> = [
+            Some(&self.columns.reference),
+            Some(&self.columns.output),
+            Some(&self.columns.effort),
+            self.columns.motor.as_ref(),
+        ]
+        .into_iter()
+        .flatten()
+        .filter_map(|c| table.column(c))
+        .collect();
+        let blank = super::held::blank_share(&named);
+        let frames =
+            matches!(self.model, RigModel::Paper(_)) && blank >= super::held::FRAMES_BLANK_SHARE;
         if frames {
             notes.push(format!(
                 "{name}: {:.0} % of rows leave a column of the car or the reference empty (a \
@@ -948,43 +959,6 @@ fn longest_hole(t: &[f64], present: &[f64], spacing: f64) -> Option<(f64, f64)> 
         .flatten()
         .filter(|(a, b)| b > a)
         .max_by(|a, b| (a.1 - a.0).total_cmp(&(b.1 - b.0)))
-}
-
-/// From this share of rows leaving the reference or a column of the car empty, a log is read
-/// as a row for each CAN frame, each empty sample holding its column's last: a sensor's
-/// dropouts leave a few rows so, a log of two frames half of them.
-const FRAMES_BLANK_SHARE: f64 = 0.25;
-
-/// The share of a log's rows, from the first by which the reference and each column of the
-/// car have a sample, that leave one of them empty (`nan`).
-fn blank_share(table: &Table, columns: &Columns) -> f64 {
-    let named = [
-        Some(&columns.reference),
-        Some(&columns.output),
-        Some(&columns.effort),
-        columns.motor.as_ref(),
-    ];
-    let present: Vec<&[f64]> = named
-        .into_iter()
-        .flatten()
-        .filter_map(|c| table.column(c))
-        .collect();
-    let Some(start) = present
-        .iter()
-        .map(|v| v.iter().position(|x| !x.is_nan()))
-        .collect::<Option<Vec<usize>>>()
-        .and_then(|firsts| firsts.into_iter().max())
-    else {
-        return 0.0;
-    };
-    let rows = present.first().map_or(0, |v| v.len());
-    if rows <= start {
-        return 0.0;
-    }
-    let blank = (start..rows)
-        .filter(|&j| present.iter().any(|v| v[j].is_nan()))
-        .count();
-    blank as f64 / (rows - start) as f64
 }
 
 /// The one value every sample holds, if they all hold the same.
