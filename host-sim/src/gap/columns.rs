@@ -237,10 +237,9 @@ pub fn read(rig: &Rig, rec: &Record) -> Option<ColumnSigns> {
         &on,
         &Effects::nominal(),
     );
-    let (lag, output_correlation) = best_lag(&sim.output, &on.output, skip)?;
+    let (lag, output_correlation, output_slope) = best_lag(&sim.output, &on.output, skip)?;
     let output_reversed = output_correlation < REVERSED_CORRELATION;
     let (model, log) = lagged(&sim, &on, lag);
-    let (_, output_slope) = regression(&model.output, &log.output, skip)?;
     let motor = log
         .motor
         .as_deref()
@@ -287,17 +286,18 @@ pub fn read(rig: &Rig, rec: &Record) -> Option<ColumnSigns> {
 const LAGS_ROWS: std::ops::RangeInclusive<i64> = -2..=50;
 
 /// The lag (rows the log follows the model by) at which the log's column is the most
-/// correlated with the model's, either sign, and that correlation; `None` where it is under
-/// [`REVERSED_CORRELATION`] in size at every lag. A column of the other sign reads as close
-/// at the same lag, the opposite way: the sign of the closest lag is the column's.
-fn best_lag(model: &[f64], log: &[f64], skip: usize) -> Option<(i64, f64)> {
+/// correlated with the model's, either sign, that correlation and the column's slope on the
+/// model's there; `None` where the correlation is under [`REVERSED_CORRELATION`] in size at
+/// every lag. A column of the other sign reads as close at the same lag, the opposite way:
+/// the sign of the closest lag is the column's.
+fn best_lag(model: &[f64], log: &[f64], skip: usize) -> Option<(i64, f64, f64)> {
     LAGS_ROWS
         .filter_map(|lag| {
             let (m, l) = pairs_at(model, log, lag);
-            regression(&m, &l, skip).map(|(c, _)| (lag, c))
+            regression(&m, &l, skip).map(|(c, slope)| (lag, c, slope))
         })
         .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
-        .filter(|(_, c)| c.abs() >= REVERSED_CORRELATION.abs())
+        .filter(|(_, c, _)| c.abs() >= REVERSED_CORRELATION.abs())
 }
 
 /// `model[k]` beside `log[k + lag]`, where both are in range.

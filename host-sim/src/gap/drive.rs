@@ -1511,10 +1511,7 @@ mod tests {
             let h = header(&format!("current: {}", kind.name())).unwrap();
             assert_eq!(h.current, Some(kind));
         }
-        for convention in [
-            ReferenceConvention::PeriodEnding,
-            ReferenceConvention::PeriodStarting,
-        ] {
+        for convention in ReferenceConvention::ALL {
             let h = header(&format!("reference: {}", convention.name())).unwrap();
             assert_eq!(h.reference, Some(convention));
         }

@@ -716,6 +716,14 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
     let ticks_per_period = CURRENT_LOOP_HZ as u64 / steering_ecu::paper_mode::REFERENCE_HZ as u64;
     let mut frames: Vec<Frame> = Vec::new();
     let mut integral_at_last_frame = 0.0;
+    // The column as the ECU's encoder reads it, deg: the encoder sits at the pinion end of
+    // the torsion bar (delta_P of section 3.2), not at the steering wheel.
+    let column_deg = |screw_rad: f64, rng: &mut rng::Rng| {
+        let col = screw_rad * p.screw_to_pinion() + (ANGLE_NOISE_DEG * rng.normal()).to_radians();
+        (encoder.angle(sensor.raw_from_angle(col)).0 as f64).to_degrees()
+    };
+    // The motor as its Hall counts read it, rad.
+    let motor_rad = |motor: f64| motor_from_hall(hall_from_motor(motor)).0 as f64;
     for n in 0..n_pos {
         // The ECU receives sample m at position tick m * 20 + delay: before the first one,
         // it holds the rest angle (the first sample).
@@ -737,16 +745,14 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
             // The car's status frame at each reference period's end: the column and motor
             // sampled there, the current the period's mean.
             if logger.held_frames && tick.is_multiple_of(ticks_per_period) {
-                let col =
-                    x[3] * p.screw_to_pinion() + (ANGLE_NOISE_DEG * rng.normal()).to_radians();
-                let sw = encoder.angle(sensor.raw_from_angle(col));
+                let sw_deg = column_deg(x[3], &mut rng);
                 let mean =
                     (current_integral - integral_at_last_frame) / (ticks_per_period as f64 * h);
                 integral_at_last_frame = current_integral;
                 frames.push(Frame {
                     t: tick as f64 * h,
-                    sw_deg: (sw.0 as f64).to_degrees(),
-                    motor_rad: motor_from_hall(hall_from_motor(x[1])).0 as f64,
+                    sw_deg,
+                    motor_rad: motor_rad(x[1]),
                     current_a: mean + offset_a + CURRENT_NOISE_A * rng.normal(),
                 });
             }
@@ -759,11 +765,7 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
                 // The reference the logger sent, by its convention.
                 let k = (((t + reference_lead * row_s) * 100.0).floor().max(0.0) as usize)
                     .min(case.reference.len() - 1);
-                // The column encoder sits at the pinion end of the torsion bar (delta_P of
-                // section 3.2), not at the steering wheel.
-                let col =
-                    x[3] * p.screw_to_pinion() + (ANGLE_NOISE_DEG * rng.normal()).to_radians();
-                let sw = encoder.angle(sensor.raw_from_angle(col));
+                let sw_deg = column_deg(x[3], &mut rng);
                 let span = (tick - tick_at_last_row).max(1) as f64 * h;
                 let mean_current = (current_integral - integral_at_last_row) / span;
                 integral_at_last_row = current_integral;
@@ -771,9 +773,8 @@ pub fn rows_logged(case: &GenCase, seed: u64, logger: &Logger) -> Rows {
                 rows.t.push(t);
                 rows.grid_s.push(t);
                 rows.reference.push(case.reference[k]);
-                rows.sw_deg.push((sw.0 as f64).to_degrees());
-                rows.motor_rad
-                    .push(motor_from_hall(hall_from_motor(x[1])).0 as f64);
+                rows.sw_deg.push(sw_deg);
+                rows.motor_rad.push(motor_rad(x[1]));
                 let current = if logger.instant_current {
                     x[0]
                 } else {

@@ -89,6 +89,12 @@ pub enum ReferenceConvention {
 }
 
 impl ReferenceConvention {
+    /// Both conventions.
+    pub const ALL: [ReferenceConvention; 2] = [
+        ReferenceConvention::PeriodEnding,
+        ReferenceConvention::PeriodStarting,
+    ];
+
     /// The name a header line `# reference: ...` gives it.
     pub fn name(self) -> &'static str {
         match self {
@@ -99,12 +105,7 @@ impl ReferenceConvention {
 
     /// The convention a header line names; `None` for a name this reader does not know.
     pub fn from_name(name: &str) -> Option<ReferenceConvention> {
-        [
-            ReferenceConvention::PeriodEnding,
-            ReferenceConvention::PeriodStarting,
-        ]
-        .into_iter()
-        .find(|c| c.name() == name.trim())
+        Self::ALL.into_iter().find(|c| c.name() == name.trim())
     }
 
     /// Its short name, `ending` or `starting`.
