@@ -10,7 +10,6 @@ mod gap_file;
 #[path = "support/world_sweep.rs"]
 mod world_sweep;
 
-use host_sim::gap::VerdictKind;
 use host_sim::gap::generator::{
     GenCase, LOGGER_DROP_CHANCE, LOGGER_JITTER_S, Logger, ReferenceConvention, log_of, rows_logged,
 };
@@ -93,14 +92,7 @@ fn a_logger_faster_than_the_cars_frames_is_read_at_their_arrivals() {
             "{:?}",
             loaded.timing
         );
-        let (d, choice) = gap_file::diagnose_file(&path, None, None);
-        assert_eq!(
-            d.verdict.kind,
-            VerdictKind::None,
-            "{rate}: {:?}: {}",
-            d.verdict.effects,
-            choice.describe()
-        );
+        gap_file::assert_none(&path, &rate);
     }
     // A logger of real samples at 1 kHz is read as it is.
     let path = dir.path().join("samples.csv");

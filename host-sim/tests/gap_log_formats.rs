@@ -9,7 +9,6 @@ mod gap_file;
 #[path = "support/world_sweep.rs"]
 mod world_sweep;
 
-use host_sim::gap::VerdictKind;
 use host_sim::gap::generator::{
     GenCase, LOGGER_DROP_CHANCE, Logger, ReferenceConvention, log_of, rows_logged,
 };
@@ -44,19 +43,7 @@ fn effect_free_at_the_cars_period(path: &std::path::Path) {
         "{:?}",
         loaded.timing
     );
-    effect_free(path);
-}
-
-/// The log at `path`, its car fitted as `host-sim gap FILE` fits it, `none`.
-fn effect_free(path: &std::path::Path) {
-    let (d, choice) = gap_file::diagnose_file(path, None, None);
-    assert_eq!(
-        d.verdict.kind,
-        VerdictKind::None,
-        "{:?}: {}",
-        d.verdict.effects,
-        choice.describe()
-    );
+    gap_file::assert_none(path, &path.display().to_string());
 }
 
 /// Stamps +-3 ms about a 100 Hz grid (a PC stamping frames as its USB adapter hands them
@@ -155,5 +142,5 @@ fn a_reference_printed_to_a_tenth_of_a_degree_is_read_as_the_line_it_rounds() {
         "{:?}",
         loaded.notes
     );
-    effect_free(&path);
+    gap_file::assert_none(&path, "tenths.csv");
 }

@@ -6,7 +6,7 @@
 
 use host_sim::gap::drive::{self, CarChoice};
 use host_sim::gap::rig::{CarDrive, Rig};
-use host_sim::gap::{Diagnosis, EffectKind, Options, diagnose};
+use host_sim::gap::{Diagnosis, EffectKind, Options, VerdictKind, diagnose};
 use host_sim::sim::Controller;
 use std::path::Path;
 
@@ -35,5 +35,20 @@ pub fn diagnose_file(
     let d = diagnose(&rig, &rec, None, &opts);
     let choice = choice.unwrap().on_the_clock_of(&d);
     println!("{}\n{}", choice.describe(), d.summary());
+    (d, choice)
+}
+
+/// [`diagnose_file`] with the car fitted, asserted `none` (`what` names the log in the
+/// message); the diagnosis and the car, for what a test checks beside.
+#[allow(dead_code)] // each test binary takes what it needs
+pub fn assert_none(path: &Path, what: &str) -> (Diagnosis, CarChoice) {
+    let (d, choice) = diagnose_file(path, None, None);
+    assert_eq!(
+        d.verdict.kind,
+        VerdictKind::None,
+        "{what}: {:?}: {}",
+        d.verdict.effects,
+        choice.describe()
+    );
     (d, choice)
 }
