@@ -662,6 +662,41 @@ fn gap_refuses_a_log_not_separated_by_commas_and_names_its_separator() {
     }
 }
 
+/// The step log with field `column` of every row rewritten in another unit by `unit`,
+/// written as `name`: `gap` and `identify` must both refuse it, naming the file and saying
+/// `said` (the unit to log comes last; `identify` must say it too).
+fn refused_in_another_unit(column: usize, unit: fn(f64) -> f64, name: &str, said: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rows = step_log(dir.path());
+    for line in 2..=rows.len() {
+        let v: f64 = rows[line - 1]
+            .split(',')
+            .nth(column)
+            .unwrap()
+            .parse()
+            .unwrap();
+        set_field(&mut rows, line, column, &format!("{:.6}", unit(v)));
+    }
+    let o = gap_of(dir.path(), name, &rows);
+    assert_refused(&o, &[&[name], said].concat());
+    let o = host_sim(&["identify", s(&dir.path().join(name))]);
+    assert_refused(&o, &[name, said[said.len() - 1]]);
+}
+
+/// A current in centiamperes (x100 of amperes), under the reader's +-1e4 A bound as a
+/// milliampere column of a gentle sweep is: read as logged it was all residual, the log was
+/// taken for the loop's chatter and a verdict came from the angles alone. `gap` and
+/// `identify` now refuse it, with the figure and the unit to log.
+#[test]
+fn gap_refuses_a_current_in_another_unit_than_amperes() {
+    refused_in_another_unit(
+        4,
+        |a| a * 100.0,
+        "centiamperes.csv",
+        &["the current is x", "log it in amperes"],
+    );
+}
+
 /// A column in radians beside a reference in degrees (a team's logger writing the encoder's
 /// angle as its driver gives it): the car turns its column x0.017 of what the model does for
 /// that reference, which no fault of a car does. Read as logged, the world's sweep with play
@@ -669,17 +704,10 @@ fn gap_refuses_a_log_not_separated_by_commas_and_names_its_separator() {
 /// the units to check.
 #[test]
 fn gap_refuses_a_column_in_another_unit_than_its_reference() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut rows = step_log(dir.path());
-    for line in 2..=rows.len() {
-        let sw: f64 = rows[line - 1].split(',').nth(2).unwrap().parse().unwrap();
-        set_field(&mut rows, line, 2, &format!("{:.6}", sw.to_radians()));
-    }
-    let o = gap_of(dir.path(), "radians.csv", &rows);
-    assert_refused(
-        &o,
-        &["radians.csv", "the column turns x0.017", "not in one unit"],
+    refused_in_another_unit(
+        2,
+        f64::to_radians,
+        "radians.csv",
+        &["the column turns x0.017", "not in one unit"],
     );
-    let o = host_sim(&["identify", s(&dir.path().join("radians.csv"))]);
-    assert_refused(&o, &["radians.csv", "not in one unit"]);
 }

@@ -168,11 +168,11 @@ fn a_motor_angle_of_the_other_sign_or_unit_is_read_so() {
     assert_eq!(read.motor, None);
 }
 
-/// A current in another unit (here x100: centiamperes) is read as logged, and the car line
-/// asks whether the column is the motor's current in amperes; a torque constant as far off as
-/// the world's (x0.7) is not asked about.
+/// A current in another unit (x100: centiamperes; x1000: milliamperes, which on this sweep
+/// stay under the reader's +-1e4 A bound) is refused with its figure; a torque constant as
+/// far off as the world's (x0.7) is not.
 #[test]
-fn a_current_in_another_unit_is_asked_about_not_read_otherwise() {
+fn a_current_in_another_unit_than_amperes_is_refused() {
     let scaled = |k: f64| {
         written(&team(), move |l| {
             for x in &mut l.current_a {
@@ -180,13 +180,18 @@ fn a_current_in_another_unit_is_asked_about_not_read_otherwise() {
             }
         })
     };
-    let s = signs_of(&scaled(100.0));
-    assert!(s.effort_unit_suspect && !s.any(), "{s:?}");
-    assert!((s.effort_scale - 100.0).abs() < 10.0, "{s:?}");
-    assert!(s.describe().contains("in amperes?"), "{}", s.describe());
+    for k in [100.0, 1000.0] {
+        let s = signs_of(&scaled(k));
+        assert!(s.effort_unit_suspect && !s.any(), "{s:?}");
+        assert!((s.effort_scale / k - 1.0).abs() < 0.1, "{s:?}");
+        assert!(
+            s.refusal().is_some_and(|r| r.contains("log it in amperes")),
+            "{s:?}"
+        );
+    }
     let s = signs_of(&scaled(0.7));
     assert!(!s.effort_unit_suspect && !s.any(), "{s:?}");
-    assert_eq!(s.describe(), "");
+    assert_eq!((s.describe().as_str(), s.refusal()), ("", None));
 }
 
 /// The record as read: a reversed column negated, the others as logged.

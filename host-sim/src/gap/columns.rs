@@ -20,7 +20,8 @@
 //!   correlations with the model's, and the motor's slope, which a motor angle in another unit
 //!   than the rig's (degrees for radians) puts far from one;
 //! - the current: the effort scale (`score::effort_scale`), whose sign no Table 4
-//!   error and no candidate turns.
+//!   error and no candidate turns, and whose size far outside what any car gives is a current
+//!   in another unit than amperes (milliamperes): refused, as a column in another unit is.
 //!
 //! - the column's slope on the model's: a car turns its column about as the model does
 //!   whatever its faults, so a slope far from one is a column in another unit than its
@@ -70,9 +71,11 @@ pub const OUTPUT_SLOPE_RANGE: std::ops::RangeInclusive<f64> = 0.1..=10.0;
 
 /// The effort scales a current in amperes can take: a torque constant or Table 4 off as far
 /// as any car's (the world's logs read x0.31-1.22, its `parameters` cars the lowest). A
-/// current beyond them by six standard errors is in another unit (milliamperes read x1000, a
-/// drive's per-mille of its rated current something else): it is read as logged, and the car
-/// line asks.
+/// current beyond them by six standard errors is in another unit (milliamperes read x1000,
+/// centiamperes x100, a drive's per-mille of its rated current something else), on which no
+/// diagnosis of the car is possible: the log is refused. Read as logged, such a current is
+/// all residual: the log was read as the loop's chatter, its current weighed as noise, and
+/// a verdict from the angles alone looked like any other.
 pub const PHYSICAL_SCALE: std::ops::RangeInclusive<f64> = 0.2..=5.0;
 /// ... the standard errors beyond them it must be.
 pub const UNIT_SCALE_SE: f64 = 6.0;
@@ -109,16 +112,17 @@ pub struct ColumnSigns {
     pub effort_scale: f64,
     pub effort_scale_se: f64,
     /// The current's scale lies outside [`PHYSICAL_SCALE`] (either sign) by
-    /// [`UNIT_SCALE_SE`] standard errors: not in the rig's unit, read as logged.
+    /// [`UNIT_SCALE_SE`] standard errors: not in the rig's unit; the log is refused.
     pub effort_unit_suspect: bool,
 }
 
 impl ColumnSigns {
     /// Why the log cannot be diagnosed as logged: its column is in another unit than its
-    /// reference ([`OUTPUT_SLOPE_RANGE`]).
+    /// reference ([`OUTPUT_SLOPE_RANGE`]), or its current is not in amperes
+    /// ([`PHYSICAL_SCALE`]).
     pub fn refusal(&self) -> Option<String> {
-        (!OUTPUT_SLOPE_RANGE.contains(&self.output_slope.abs())).then(|| {
-            format!(
+        if !OUTPUT_SLOPE_RANGE.contains(&self.output_slope.abs()) {
+            return Some(format!(
                 "the column turns x{:.3} the nominal model's for the logged reference (a car \
                  turns its column x{}-{} of it, whatever its faults): the column and the \
                  reference are not in one unit (a column in radians beside a reference in \
@@ -127,6 +131,18 @@ impl ColumnSigns {
                 self.output_slope,
                 OUTPUT_SLOPE_RANGE.start(),
                 OUTPUT_SLOPE_RANGE.end()
+            ));
+        }
+        self.effort_unit_suspect.then(|| {
+            format!(
+                "the current is x{:.3} the nominal model's (standard error {:.3}) for the \
+                 logged reference, beyond what a torque constant or Table 4 off gives \
+                 (x{}-{}): it is not the motor's current in amperes (milliamperes read \
+                 x1000, centiamperes x100); log it in amperes",
+                self.effort_scale,
+                self.effort_scale_se,
+                PHYSICAL_SCALE.start(),
+                PHYSICAL_SCALE.end()
             )
         })
     }
@@ -161,8 +177,7 @@ impl ColumnSigns {
         r
     }
 
-    /// One clause for the report's car line; empty where every column is read as logged and
-    /// the current's scale is one a car gives.
+    /// One clause for the report's car line; empty where every column is read as logged.
     pub fn describe(&self) -> String {
         let mut parts: Vec<String> = Vec::new();
         if self.reference_reversed {
@@ -206,17 +221,6 @@ impl ColumnSigns {
                 "the motor angle left out: through the gearing it turns x{:.2} the nominal \
                  model's motor, no gearing's (a motor angle in degrees for radians reads x57.3)",
                 self.motor_slope.unwrap_or(f64::NAN)
-            ));
-        }
-        if self.effort_unit_suspect {
-            parts.push(format!(
-                "the current is x{:.3} the nominal model's (standard error {:.3}), beyond what \
-                 a torque constant or Table 4 off gives (x{}-{}): is the column the motor's \
-                 current, in amperes?",
-                self.effort_scale,
-                self.effort_scale_se,
-                PHYSICAL_SCALE.start(),
-                PHYSICAL_SCALE.end()
             ));
         }
         parts.join("; ")
