@@ -144,3 +144,64 @@ fn a_reference_printed_to_a_tenth_of_a_degree_is_read_as_the_line_it_rounds() {
     );
     gap_file::assert_none(&path, "tenths.csv");
 }
+
+/// The case's rows as a team's tools write them beside columns of their own: pandas'
+/// `to_csv` (its row index first, under an empty name), R's `write.csv` (every name and the
+/// row names in double quotes), a state word as text, a comma at each line's end. Each was
+/// refused (an empty column name, a quoted one, "cannot read `AS_DRIVING`"); each is now read
+/// as the plain file is, record for record: the rig reads its own columns and skips the
+/// others unread.
+#[test]
+fn columns_a_teams_tools_add_are_skipped_and_the_rigs_columns_read_as_written() {
+    let case = GenCase::nominal(sweep_of(12.0), 100);
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dir.path().join("plain.csv");
+    log_of(&case, 1, &pc_logger(0.001)).save(&plain).unwrap();
+    let expected = Rig::paper().load_log(&plain).unwrap().record;
+    let text = std::fs::read_to_string(&plain).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header = lines.next().unwrap();
+    let rows: Vec<&str> = lines.collect();
+    let quoted = |l: &str| {
+        l.split(',')
+            .map(|f| format!("\"{f}\""))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let written: [(&str, String, Vec<String>); 4] = [
+        (
+            "pandas",
+            format!(",{header}"),
+            rows.iter()
+                .enumerate()
+                .map(|(i, r)| format!("{i},{r}"))
+                .collect(),
+        ),
+        (
+            "r",
+            format!("\"\",{}", quoted(header)),
+            rows.iter()
+                .enumerate()
+                .map(|(i, r)| format!("\"{}\",{r}", i + 1))
+                .collect(),
+        ),
+        (
+            "state",
+            format!("{header},state"),
+            rows.iter().map(|r| format!("{r},AS_DRIVING")).collect(),
+        ),
+        (
+            "trailing",
+            format!("{header},"),
+            rows.iter().map(|r| format!("{r},")).collect(),
+        ),
+    ];
+    for (name, head, body) in written {
+        let path = dir.path().join(format!("{name}.csv"));
+        std::fs::write(&path, format!("{head}\n{}\n", body.join("\n"))).unwrap();
+        let loaded = Rig::paper()
+            .load_log(&path)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(loaded.record == expected, "{name}: read otherwise");
+    }
+}

@@ -56,7 +56,10 @@
 //!   recognises gzip by its magic bytes whatever the name. A gzip file cut short (an interrupted
 //!   copy) is refused as truncated, not read as far as it goes.
 //! * **Other column names.** [`Table`] reads any CSV of numeric columns with one named time
-//!   column by these same rules (a rig's logs for `host-sim gap`, a track reference).
+//!   column by these same rules (a rig's logs for `host-sim gap`, a track reference). It may
+//!   read only the columns its caller names ([`Reads::Only`]), skipping the others unread (a
+//!   team's logger writes columns of its own), and reads names and fields in double quotes
+//!   without them.
 //! * **Precision.** The writer rounds the required columns to fixed decimals well below what is
 //!   measured (see the constants below), and an extra column whose name ends in one of their
 //!   units or in `_v` (1 mV) likewise; any other extra column (a state code, a count) is
@@ -505,7 +508,7 @@ impl Log {
     /// Reads a log in the format of the module doc from plain (not compressed) CSV text.
     pub fn read_from(r: impl BufRead) -> Result<Log, LogError> {
         let table = read_table(r, TimeOrder::Increasing, |line| {
-            Ok((parse_header(line)?, 0))
+            Ok(Layout::every(parse_header(line)?, 0))
         })?;
         let mut columns = table.columns.into_iter();
         let mut next = || columns.next().unwrap_or_default();
@@ -639,10 +642,13 @@ impl Log {
 /// names: a rig's logs for `host-sim gap` and a track reference name their own columns.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Table {
-    /// Column names, in file order.
+    /// The names of the columns read, in file order.
     pub names: Vec<String>,
     /// One vector per name, all as long as the time column.
     pub columns: Vec<Vec<f64>>,
+    /// The header's other columns, skipped unread ([`Reads::Only`]), in file order, as named
+    /// (an unnamed one as an empty name).
+    pub unread: Vec<String>,
     /// The file's line number of each row, for errors found after reading.
     pub lines: Vec<usize>,
     /// The comment lines before the header, without their `#` (a log may say
@@ -661,6 +667,19 @@ pub enum TimeOrder {
     AsStamped,
 }
 
+/// Which of a table's columns the reader reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reads<'a> {
+    /// Every column: each must be named, once, and hold numbers (a track reference).
+    All,
+    /// The time column and these, where the header has them. Any other column is skipped
+    /// unread, its name and fields unchecked, and listed in [`Table::unread`]: a team's
+    /// logger writes columns of its own beside the ones a diagnosis reads (the row index
+    /// pandas' `to_csv` writes under an empty name, a state as text, the empty column of a
+    /// comma at each line's end).
+    Only(&'a [&'a str]),
+}
+
 impl Table {
     /// Reads plain CSV text whose header names `time_column`.
     pub fn read_from(r: impl BufRead, time_column: &str) -> Result<Table, LogError> {
@@ -673,10 +692,32 @@ impl Table {
         time_column: &str,
         order: TimeOrder,
     ) -> Result<Table, LogError> {
+        Table::read_from_reading(r, time_column, Reads::All, order)
+    }
+
+    /// As [`Table::read_from_ordered`], reading the columns `reads` names. A name or a field
+    /// in double quotes (R's `write.csv`, a spreadsheet quoting every field) is read without
+    /// them.
+    pub fn read_from_reading(
+        r: impl BufRead,
+        time_column: &str,
+        reads: Reads<'_>,
+        order: TimeOrder,
+    ) -> Result<Table, LogError> {
         read_table(r, order, |line| {
-            let names: Vec<String> = line.split(',').map(|f| f.trim().to_string()).collect();
+            let names: Vec<String> = line
+                .split(',')
+                .map(|f| unquoted(f.trim()).to_string())
+                .collect();
+            let read: Vec<bool> = names
+                .iter()
+                .map(|n| match reads {
+                    Reads::All => true,
+                    Reads::Only(wanted) => n == time_column || wanted.contains(&n.as_str()),
+                })
+                .collect();
             let mut seen: Vec<&str> = Vec::new();
-            for name in &names {
+            for (name, _) in names.iter().zip(&read).filter(|(_, r)| **r) {
                 check_column_name(name, &seen)?;
                 seen.push(name);
             }
@@ -686,7 +727,12 @@ impl Table {
                     found_header: line.to_string(),
                 }
             })?;
-            Ok((names, time))
+            Ok(Layout {
+                names,
+                time,
+                read,
+                unquote: true,
+            })
         })
     }
 
@@ -701,7 +747,20 @@ impl Table {
         time_column: &str,
         order: TimeOrder,
     ) -> Result<Table, LogError> {
-        read_file(path, |r| Table::read_from_ordered(r, time_column, order))
+        Table::load_reading(path, time_column, Reads::All, order)
+    }
+
+    /// As [`Table::load_ordered`], reading the columns `reads` names
+    /// ([`Table::read_from_reading`]).
+    pub fn load_reading(
+        path: &Path,
+        time_column: &str,
+        reads: Reads<'_>,
+        order: TimeOrder,
+    ) -> Result<Table, LogError> {
+        read_file(path, |r| {
+            Table::read_from_reading(r, time_column, reads, order)
+        })
     }
 
     /// The first row whose time `time` is not after the row's before it, as the error
@@ -862,18 +921,50 @@ fn read_file<T>(
     result.map_err(|e| e.in_file(path))
 }
 
+/// A header as a reader takes it.
+struct Layout {
+    /// Every field's name, in file order.
+    names: Vec<String>,
+    /// The time column's field.
+    time: usize,
+    /// For each field, whether it is read.
+    read: Vec<bool>,
+    /// Fields in double quotes are read without them.
+    unquote: bool,
+}
+
+impl Layout {
+    /// Every field read, as written.
+    fn every(names: Vec<String>, time: usize) -> Layout {
+        Layout {
+            read: vec![true; names.len()],
+            names,
+            time,
+            unquote: false,
+        }
+    }
+}
+
+/// `field` without one pair of double quotes around it.
+fn unquoted(field: &str) -> &str {
+    field
+        .strip_prefix('"')
+        .and_then(|f| f.strip_suffix('"'))
+        .unwrap_or(field)
+}
+
 /// The one CSV reader behind [`Log`] and [`Table`]: `header` checks the first line that is
-/// neither blank nor a comment and returns the names and the index of the time column.
+/// neither blank nor a comment and says which fields are read and which is the time.
 fn read_table(
     mut r: impl BufRead,
     order: TimeOrder,
-    header: impl FnOnce(&str) -> Result<(Vec<String>, usize), LogError>,
+    header: impl FnOnce(&str) -> Result<Layout, LogError>,
 ) -> Result<Table, LogError> {
     let mut text = String::new();
     let mut line_no = 0;
     let mut comments = Vec::new();
 
-    let (names, time) = loop {
+    let layout = loop {
         line_no += 1;
         if next_line(&mut r, &mut text, line_no)? {
             return Err(LogError::Empty);
@@ -896,6 +987,24 @@ fn read_table(
             break header(line)?;
         }
     };
+    let Layout {
+        names: fields,
+        time: time_field,
+        read,
+        unquote,
+    } = layout;
+    // Each field's slot among the columns read.
+    let slots: Vec<Option<usize>> = read
+        .iter()
+        .scan(0, |next, &r| {
+            let slot = r.then_some(*next);
+            *next += usize::from(r);
+            Some(slot)
+        })
+        .collect();
+    let time = slots[time_field].unwrap_or_default();
+    let (read_names, unread): (Vec<_>, Vec<_>) = fields.iter().zip(&read).partition(|(_, r)| **r);
+    let names: Vec<String> = read_names.into_iter().map(|(n, _)| n.clone()).collect();
     let bounds: Vec<(f64, &'static str)> = names
         .iter()
         .enumerate()
@@ -911,6 +1020,7 @@ fn read_table(
     let mut table = Table {
         columns: vec![Vec::new(); names.len()],
         names,
+        unread: unread.into_iter().map(|(n, _)| n.clone()).collect(),
         lines: Vec::new(),
         comments,
     };
@@ -925,16 +1035,22 @@ fn read_table(
             continue;
         }
         let found = line.split(',').count();
-        if found != table.names.len() {
+        if found != fields.len() {
             return Err(LogError::WrongFieldCount {
                 line: line_no,
-                expected: table.names.len(),
+                expected: fields.len(),
                 found,
             });
         }
-        for (i, (field, value)) in line.split(',').zip(&mut values).enumerate() {
+        let read_fields = line
+            .split(',')
+            .zip(&slots)
+            .filter_map(|(field, slot)| slot.map(|i| (field, i)));
+        for ((field, i), value) in read_fields.zip(&mut values) {
             let name = &table.names[i];
-            *value = parse_value(field.trim(), line_no, name)?;
+            let field = field.trim();
+            let field = if unquote { unquoted(field) } else { field };
+            *value = parse_value(field, line_no, name)?;
             let (bound, unit) = bounds[i];
             if value.abs() > bound {
                 return Err(LogError::OutOfBounds {
@@ -1594,6 +1710,46 @@ mod tests {
             matches!(err, LogError::NonMonotonicTime { line: 4, .. }),
             "{err:?}"
         );
+    }
+
+    #[test]
+    fn a_table_read_for_some_columns_skips_the_others_unread() {
+        let read_x = |text: &str| {
+            Table::read_from_reading(
+                text.as_bytes(),
+                "t",
+                Reads::Only(&["x"]),
+                TimeOrder::Increasing,
+            )
+        };
+        // pandas' row index under an empty name, a state as text, a comma at the line's end.
+        let text = ",t,x,state,\n0,0.0,1,AS_READY,\n1,0.01,2,AS_DRIVING,\n";
+        let table = read_x(text).expect("the columns read are valid");
+        assert_eq!(table.names, ["t", "x"]);
+        assert_eq!(table.column("x"), Some(&[1.0, 2.0][..]));
+        assert_eq!(table.unread, ["", "state", ""]);
+        // Every column read: the unnamed one is refused, as before.
+        let err = Table::read_from(text.as_bytes(), "t").expect_err("an empty name");
+        assert!(matches!(err, LogError::BadColumnName { .. }), "{err:?}");
+        // A bad number in a column read is still refused, with its line.
+        let err = read_x(",t,x\n0,0.0,1\n1,0.01,y\n").expect_err("a bad number");
+        assert!(
+            matches!(err, LogError::BadNumber { line: 3, .. }),
+            "{err:?}"
+        );
+        // A column read twice is ambiguous.
+        let err = read_x("t,x,x\n0,1,2\n").expect_err("x twice");
+        assert!(matches!(err, LogError::BadColumnName { .. }), "{err:?}");
+    }
+
+    #[test]
+    fn a_table_reads_names_and_fields_in_double_quotes_without_them() {
+        let text = "\"t\",\"x\"\n\"0\",\"1.5\"\n0.01,2\n";
+        let table = Table::read_from(text.as_bytes(), "t").expect("quoted");
+        assert_eq!(table.names, ["t", "x"]);
+        assert_eq!(table.column("x"), Some(&[1.5, 2.0][..]));
+        // The project's own format is written without quotes and read so.
+        assert!(read_str("\"t\",ref_sw_deg,sw_deg,motor_rad,current_a\n").is_err());
     }
 
     #[test]

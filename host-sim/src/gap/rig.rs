@@ -4,7 +4,7 @@
 //! servo pendulum.
 
 use super::{CurrentSamples, Record};
-use crate::logfmt::{LogError, Table, TimeOrder, fill_missing, hold_missing};
+use crate::logfmt::{LogError, Reads, Table, TimeOrder, fill_missing, hold_missing};
 use crate::plant::PlantParams;
 use std::path::Path;
 use steering_ecu::gains::EposGains;
@@ -588,8 +588,23 @@ impl Rig {
             RigModel::Paper(_) => TimeOrder::AsStamped,
             _ => TimeOrder::Increasing,
         };
+        // The rig's columns alone are read: a team's logger writes others of its own beside
+        // them (a row index without a name, a state as text), which tell the diagnosis
+        // nothing.
+        let c = &self.columns;
+        let reads: Vec<&str> = [&c.reference, &c.output, &c.effort]
+            .into_iter()
+            .chain(
+                [&c.motor, &c.disturbance, &c.supply, &c.torque_enable]
+                    .into_iter()
+                    .flatten(),
+            )
+            .map(String::as_str)
+            .collect();
         let table =
-            Table::load_ordered(path, &self.columns.time, order).map_err(|e| match e.root() {
+            Table::load_reading(path, &c.time, Reads::Only(&reads), order).map_err(|e| match e
+                .root()
+            {
                 LogError::MissingNamedColumn {
                     expected,
                     found_header,
@@ -633,7 +648,7 @@ impl Rig {
                     Err(RigError::MissingColumn {
                         path: name.clone(),
                         column: c.to_string(),
-                        found: table.names.join(","),
+                        found: [&table.names[..], &table.unread[..]].concat().join(","),
                     })
                 } else {
                     Ok(None)
