@@ -147,12 +147,13 @@ fn a_reference_printed_to_a_tenth_of_a_degree_is_read_as_the_line_it_rounds() {
 
 /// The case's rows as a team's tools write them beside columns of their own: pandas'
 /// `to_csv` (its row index first, under an empty name), R's `write.csv` (every name and the
-/// row names in double quotes), a state word as text, a comma at each line's end. Each was
-/// refused (an empty column name, a quoted one, "cannot read `AS_DRIVING`"); each is now read
-/// as the plain file is, record for record: the rig reads its own columns and skips the
-/// others unread.
+/// row names in double quotes), a state word as text, a comma at each line's end; and each
+/// row stamped with its clock's date and time. Each was refused (an empty column name, a
+/// quoted one, "cannot read `AS_DRIVING`", a date); each is now read as the plain file is,
+/// record for record: the rig reads its own columns and skips the others unread, and reads a
+/// date and time as a wall clock's seconds.
 #[test]
-fn columns_a_teams_tools_add_are_skipped_and_the_rigs_columns_read_as_written() {
+fn a_teams_tools_columns_are_skipped_and_its_clocks_dates_read_as_seconds() {
     let case = GenCase::nominal(sweep_of(12.0), 100);
     let dir = tempfile::tempdir().unwrap();
     let plain = dir.path().join("plain.csv");
@@ -168,7 +169,14 @@ fn columns_a_teams_tools_add_are_skipped_and_the_rigs_columns_read_as_written() 
             .collect::<Vec<_>>()
             .join(",")
     };
-    let written: [(&str, String, Vec<String>); 4] = [
+    // The stamp as a clock's `isoformat()` writes it: the sweep lasts under a minute.
+    let clock = |r: &&str| {
+        let (t, rest) = r.split_once(',').unwrap();
+        let t: f64 = t.parse().unwrap();
+        assert!((0.0..60.0).contains(&t), "{t}");
+        format!("2026-12-07T18:10:{t:09.6},{rest}")
+    };
+    let written: [(&str, String, Vec<String>); 5] = [
         (
             "pandas",
             format!(",{header}"),
@@ -194,6 +202,11 @@ fn columns_a_teams_tools_add_are_skipped_and_the_rigs_columns_read_as_written() 
             "trailing",
             format!("{header},"),
             rows.iter().map(|r| format!("{r},")).collect(),
+        ),
+        (
+            "clock",
+            header.to_string(),
+            rows.iter().map(clock).collect(),
         ),
     ];
     for (name, head, body) in written {

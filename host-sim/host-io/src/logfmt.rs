@@ -58,8 +58,8 @@
 //! * **Other column names.** [`Table`] reads any CSV of numeric columns with one named time
 //!   column by these same rules (a rig's logs for `host-sim gap`, a track reference). It may
 //!   read only the columns its caller names ([`Reads::Only`]), skipping the others unread (a
-//!   team's logger writes columns of its own), and reads names and fields in double quotes
-//!   without them.
+//!   team's logger writes columns of its own), reads names and fields in double quotes
+//!   without them, and a time column's date and time (ISO 8601) as Unix seconds.
 //! * **Precision.** The writer rounds the required columns to fixed decimals well below what is
 //!   measured (see the constants below), and an extra column whose name ends in one of their
 //!   units or in `_v` (1 mV) likewise; any other extra column (a state code, a count) is
@@ -1050,7 +1050,12 @@ fn read_table(
             let name = &table.names[i];
             let field = field.trim();
             let field = if unquote { unquoted(field) } else { field };
-            *value = parse_value(field, line_no, name)?;
+            *value = match parse_value(field, line_no, name) {
+                // A table's time may be a date and time (a logger stamping rows with its
+                // clock's `isoformat()`).
+                Err(e) if unquote && i == time => unix_seconds(field).ok_or(e)?,
+                v => v?,
+            };
             let (bound, unit) = bounds[i];
             if value.abs() > bound {
                 return Err(LogError::OutOfBounds {
@@ -1155,6 +1160,61 @@ fn check_column_name(name: &str, earlier: &[&str]) -> Result<(), LogError> {
         }),
         None => Ok(()),
     }
+}
+
+/// Seconds since 1970-01-01 00:00 UTC of a date and time as ISO 8601 writes them
+/// (`2026-12-07 18:10:01.123456`, or with `T` between the date and the time), with an
+/// optional `Z` or `+01:00`-style offset; a time without one is read as UTC (a log's stamps
+/// count only against each other). `None` for anything else.
+fn unix_seconds(text: &str) -> Option<f64> {
+    let (date, time) = text.split_once(['T', ' '])?;
+    let mut ymd = date.split('-');
+    let year: i64 = digits(ymd.next()?)?.parse().ok()?;
+    let month: i64 = digits(ymd.next()?)?.parse().ok()?;
+    let day: i64 = digits(ymd.next()?)?.parse().ok()?;
+    if ymd.next().is_some() || !(1..=12).contains(&month) || !(1..=31).contains(&day) {
+        return None;
+    }
+    let (clock, offset_s) = match time.strip_suffix('Z') {
+        Some(clock) => (clock, 0),
+        None => match time.rfind(['+', '-']) {
+            Some(at) => {
+                let (hours, minutes) = time[at + 1..].split_once(':')?;
+                let size = 3600 * i64::from(digits(hours)?.parse::<u8>().ok()?)
+                    + 60 * i64::from(digits(minutes)?.parse::<u8>().ok()?);
+                (
+                    &time[..at],
+                    if &time[at..=at] == "-" { -size } else { size },
+                )
+            }
+            None => (time, 0),
+        },
+    };
+    let mut hms = clock.split(':');
+    let hour: i64 = digits(hms.next()?)?.parse().ok()?;
+    let minute: i64 = digits(hms.next()?)?.parse().ok()?;
+    let second = hms.next()?;
+    let second: f64 = second
+        .chars()
+        .all(|c| c.is_ascii_digit() || c == '.')
+        .then(|| second.parse().ok())??;
+    if hms.next().is_some() || hour > 23 || minute > 59 || second >= 61.0 {
+        return None;
+    }
+    // Days from 1970-01-01 in the proleptic Gregorian calendar, the year counted from March
+    // so that the leap day falls at its end.
+    let y = if month <= 2 { year - 1 } else { year };
+    let era = y.div_euclid(400);
+    let year_of_era = y - 400 * era;
+    let day_of_year = (153 * ((month + 9) % 12) + 2) / 5 + day - 1;
+    let day_of_era = 365 * year_of_era + year_of_era / 4 - year_of_era / 100 + day_of_year;
+    let days = 146_097 * era + day_of_era - 719_468;
+    Some((86_400 * days + 3600 * hour + 60 * minute - offset_s) as f64 + second)
+}
+
+/// `text` where it is one or more ASCII digits.
+fn digits(text: &str) -> Option<&str> {
+    (!text.is_empty() && text.bytes().all(|b| b.is_ascii_digit())).then_some(text)
 }
 
 fn parse_value(field: &str, line: usize, column: &str) -> Result<f64, LogError> {
@@ -1740,6 +1800,45 @@ mod tests {
         // A column read twice is ambiguous.
         let err = read_x("t,x,x\n0,1,2\n").expect_err("x twice");
         assert!(matches!(err, LogError::BadColumnName { .. }), "{err:?}");
+    }
+
+    #[test]
+    fn a_date_and_time_is_read_as_unix_seconds() {
+        // 2026-12-07 18:10:01 UTC is 1 796 667 001 s (date -u -d '2026-12-07 18:10:01' +%s).
+        let at = 1_796_667_001.0;
+        for (text, expected) in [
+            ("2026-12-07 18:10:01", at),
+            ("2026-12-07T18:10:01.25", at + 0.25),
+            ("2026-12-07T18:10:01.000123Z", at + 0.000123),
+            ("2026-12-07T19:10:01+01:00", at),
+            ("2026-12-07T13:40:01-04:30", at),
+            ("1970-01-01 00:00:00", 0.0),
+            ("2024-02-29 00:00:00", 1_709_164_800.0),
+            ("2000-03-01 00:00:00", 951_868_800.0),
+        ] {
+            let read = unix_seconds(text).unwrap_or(f64::NAN);
+            assert!((read - expected).abs() < 1e-6, "{text}: {read}");
+        }
+        for text in [
+            "2026-12-07",
+            "18:10:01",
+            "2026-13-07 18:10:01",
+            "2026-12-07 24:00:00",
+            "2026-12-07 18:10:1e1",
+            "2026-12-07 18:10:01:02",
+            "2026-12-07T18:10:01+0100",
+            "today 18:10:01",
+        ] {
+            assert_eq!(unix_seconds(text), None, "{text}");
+        }
+        let text = "t,x\n2026-12-07 18:10:01.00,1\n2026-12-07 18:10:01.01,2\n";
+        let table = Table::read_from(text.as_bytes(), "t").expect("stamps of a clock");
+        let t = table.column("t").expect("t");
+        assert!((t[1] - t[0] - 0.01).abs() < 1e-6, "{t:?}");
+        // A date is a stamp, not a value: elsewhere it is refused, as is any text.
+        let text = "t,x\n0,2026-12-07 18:10:01\n";
+        let err = Table::read_from(text.as_bytes(), "t").expect_err("a date as x");
+        assert!(matches!(err, LogError::BadNumber { .. }), "{err:?}");
     }
 
     #[test]
