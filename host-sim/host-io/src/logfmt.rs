@@ -59,7 +59,8 @@
 //!   column by these same rules (a rig's logs for `host-sim gap`, a track reference). It may
 //!   read only the columns its caller names ([`Reads::Only`]), skipping the others unread (a
 //!   team's logger writes columns of its own), reads names and fields in double quotes
-//!   without them, and a time column's date and time (ISO 8601) as Unix seconds.
+//!   without them, and a time column's date and time (ISO 8601) as Unix seconds, a time of
+//!   day as seconds from its midnight.
 //! * **Precision.** The writer rounds the required columns to fixed decimals well below what is
 //!   measured (see the constants below), and an extra column whose name ends in one of their
 //!   units or in `_v` (1 mV) likewise; any other extra column (a state code, a count) is
@@ -1165,9 +1166,12 @@ fn check_column_name(name: &str, earlier: &[&str]) -> Result<(), LogError> {
 /// Seconds since 1970-01-01 00:00 UTC of a date and time as ISO 8601 writes them
 /// (`2026-12-07 18:10:01.123456`, or with `T` between the date and the time), with an
 /// optional `Z` or `+01:00`-style offset; a time without one is read as UTC (a log's stamps
-/// count only against each other). `None` for anything else.
+/// count only against each other). A time of day alone (`18:10:01.25`) is seconds since its
+/// midnight. `None` for anything else.
 fn unix_seconds(text: &str) -> Option<f64> {
-    let (date, time) = text.split_once(['T', ' '])?;
+    let Some((date, time)) = text.split_once(['T', ' ']) else {
+        return seconds_of_day(text);
+    };
     let mut ymd = date.split('-');
     let year: i64 = digits(ymd.next()?)?.parse().ok()?;
     let month: i64 = digits(ymd.next()?)?.parse().ok()?;
@@ -1175,6 +1179,21 @@ fn unix_seconds(text: &str) -> Option<f64> {
     if ymd.next().is_some() || !(1..=12).contains(&month) || !(1..=31).contains(&day) {
         return None;
     }
+    // Days from 1970-01-01 in the proleptic Gregorian calendar, the year counted from March
+    // so that the leap day falls at its end.
+    let y = if month <= 2 { year - 1 } else { year };
+    let era = y.div_euclid(400);
+    let year_of_era = y - 400 * era;
+    let day_of_year = (153 * ((month + 9) % 12) + 2) / 5 + day - 1;
+    let day_of_era = 365 * year_of_era + year_of_era / 4 - year_of_era / 100 + day_of_year;
+    let days = 146_097 * era + day_of_era - 719_468;
+    Some((86_400 * days) as f64 + seconds_of_day(time)?)
+}
+
+/// Seconds since midnight UTC of `HH:MM:SS[.fraction]` with an optional `Z` or
+/// `+01:00`-style offset (before midnight, or a day's worth past it, where the offset
+/// carries it over).
+fn seconds_of_day(time: &str) -> Option<f64> {
     let (clock, offset_s) = match time.strip_suffix('Z') {
         Some(clock) => (clock, 0),
         None => match time.rfind(['+', '-']) {
@@ -1201,15 +1220,7 @@ fn unix_seconds(text: &str) -> Option<f64> {
     if hms.next().is_some() || hour > 23 || minute > 59 || second >= 61.0 {
         return None;
     }
-    // Days from 1970-01-01 in the proleptic Gregorian calendar, the year counted from March
-    // so that the leap day falls at its end.
-    let y = if month <= 2 { year - 1 } else { year };
-    let era = y.div_euclid(400);
-    let year_of_era = y - 400 * era;
-    let day_of_year = (153 * ((month + 9) % 12) + 2) / 5 + day - 1;
-    let day_of_era = 365 * year_of_era + year_of_era / 4 - year_of_era / 100 + day_of_year;
-    let days = 146_097 * era + day_of_era - 719_468;
-    Some((86_400 * days + 3600 * hour + 60 * minute - offset_s) as f64 + second)
+    Some((3600 * hour + 60 * minute - offset_s) as f64 + second)
 }
 
 /// `text` where it is one or more ASCII digits.
@@ -1815,13 +1826,14 @@ mod tests {
             ("1970-01-01 00:00:00", 0.0),
             ("2024-02-29 00:00:00", 1_709_164_800.0),
             ("2000-03-01 00:00:00", 951_868_800.0),
+            ("18:10:01.5", 65_401.5),
         ] {
             let read = unix_seconds(text).unwrap_or(f64::NAN);
             assert!((read - expected).abs() < 1e-6, "{text}: {read}");
         }
         for text in [
             "2026-12-07",
-            "18:10:01",
+            "18:10",
             "2026-13-07 18:10:01",
             "2026-12-07 24:00:00",
             "2026-12-07 18:10:1e1",
