@@ -1176,7 +1176,11 @@ fn unix_seconds(text: &str) -> Option<f64> {
     let year: i64 = digits(ymd.next()?)?.parse().ok()?;
     let month: i64 = digits(ymd.next()?)?.parse().ok()?;
     let day: i64 = digits(ymd.next()?)?.parse().ok()?;
-    if ymd.next().is_some() || !(1..=12).contains(&month) || !(1..=31).contains(&day) {
+    if ymd.next().is_some()
+        || !(1..=9999).contains(&year)
+        || !(1..=12).contains(&month)
+        || !(1..=31).contains(&day)
+    {
         return None;
     }
     // Days from 1970-01-01 in the proleptic Gregorian calendar, the year counted from March
@@ -1840,6 +1844,9 @@ mod tests {
             "2026-12-07 18:10:01:02",
             "2026-12-07T18:10:01+0100",
             "today 18:10:01",
+            "10000-01-01 00:00:00",
+            "9223372036854775807-01-01 00:00:00",
+            "2026-12-07 99999999999999999999:00:00",
         ] {
             assert_eq!(unix_seconds(text), None, "{text}");
         }
