@@ -821,9 +821,7 @@ pub fn from_wall_clock(t: &mut [f64]) -> Option<f64> {
 /// dropout of a few samples in a smooth signal is best guessed by its neighbours, and a step
 /// would look like an effect to the diagnosis.
 pub fn fill_missing(values: &mut [f64]) -> Option<usize> {
-    let first = values.iter().position(|v| !v.is_nan())?;
-    let head = values[first];
-    values[..first].fill(head);
+    let first = fill_head(values)?;
     let mut filled = first;
     let mut last_good = first;
     for i in first + 1..values.len() {
@@ -848,11 +846,9 @@ pub fn fill_missing(values: &mut [f64]) -> Option<usize> {
 /// it (a value that holds until the next comes, as a CAN signal does between its frames); the
 /// ones before the first sample take the first. The count filled; `None` if all are `nan`.
 pub fn hold_missing(values: &mut [f64]) -> Option<usize> {
-    let first = values.iter().position(|v| !v.is_nan())?;
-    let head = values[first];
-    values[..first].fill(head);
+    let first = fill_head(values)?;
     let mut filled = first;
-    let mut last = head;
+    let mut last = values[first];
     for v in &mut values[first..] {
         if v.is_nan() {
             *v = last;
@@ -862,6 +858,15 @@ pub fn hold_missing(values: &mut [f64]) -> Option<usize> {
         }
     }
     Some(filled)
+}
+
+/// The `nan`s before the first sample set to it, [`fill_missing`]'s and [`hold_missing`]'s
+/// rule alike: the index of that sample (as many were filled); `None` if all are `nan`.
+fn fill_head(values: &mut [f64]) -> Option<usize> {
+    let first = values.iter().position(|v| !v.is_nan())?;
+    let head = values[first];
+    values[..first].fill(head);
+    Some(first)
 }
 
 /// The largest stamp the time column may hold, s: a Unix clock's seconds (1.7e9 in 2024) fit
