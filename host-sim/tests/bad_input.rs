@@ -351,7 +351,7 @@ fn gap_refuses_time_that_does_not_increase_with_file_line_and_reason() {
     assert_refused(&o, &["far.csv", "line 800", "column `t`", "physical bound"]);
 }
 
-/// Row 3: a value of 1e300, to `gap` (in any column) and to `track --csv`.
+/// Row 3: a value of 1e300, to `gap` (in any column the paper rig reads) and to `track --csv`.
 #[test]
 fn values_beyond_physical_bounds_are_refused_with_their_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -392,17 +392,22 @@ fn values_beyond_physical_bounds_are_refused_with_their_line() {
     );
 }
 
-/// Row 3 for `track --csv` with a full project log as the reference: an extra column is
-/// checked too, not skipped over.
+/// Row 3 for `track --csv` with a full project log as the reference: the reference column
+/// is checked; a column the track does not read is skipped unread, garbage and all (a team's
+/// own log carries columns of its own).
 #[test]
-fn track_refuses_a_project_log_with_garbage_in_any_column() {
+fn track_checks_a_project_logs_reference_and_skips_its_other_columns() {
     let dir = tempfile::tempdir().unwrap();
     let mut lines = step_log(dir.path());
     set_field(&mut lines, 10, 4, "-1e300");
     let log = dir.path().join("as_reference.csv");
     write_lines(&log, &lines);
     let o = host_sim(&["track", "--csv", s(&log)]);
-    assert_refused(&o, &["as_reference.csv", "line 10", "column `current_a`"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    set_field(&mut lines, 10, 1, "-1e300");
+    write_lines(&log, &lines);
+    let o = host_sim(&["track", "--csv", s(&log)]);
+    assert_refused(&o, &["as_reference.csv", "line 10", "column `ref_sw_deg`"]);
 }
 
 /// A 3 s track reference with enough samples that its gzip is several blocks long.

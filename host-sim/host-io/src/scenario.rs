@@ -1,7 +1,7 @@
 //! The references the actuator is run against, as 100 Hz samples at the steering wheel (deg):
 //! the paper's sine sweep (section 4.2), a driverless track run (section 4.4) and a step.
 
-use crate::logfmt::{LogError, Table};
+use crate::logfmt::{LogError, Reads, Table, TimeOrder};
 use std::f64::consts::PI;
 use std::path::Path;
 use steering_ecu::paper_mode::REFERENCE_HZ;
@@ -195,7 +195,7 @@ impl std::fmt::Display for ReferenceFileError {
             ReferenceFileError::Log(e) => write!(f, "{e}"),
             ReferenceFileError::Header { path, found } => write!(
                 f,
-                "{path}: expected a header starting with `t,ref_sw_deg`, found `{found}`"
+                "{path}: expected a header naming `t` and `ref_sw_deg`, found `{found}`"
             ),
             ReferenceFileError::MissingSample { path, line } => write!(
                 f,
@@ -217,30 +217,39 @@ impl std::fmt::Display for ReferenceFileError {
 
 impl std::error::Error for ReferenceFileError {}
 
-/// A track profile from a CSV with columns `t,ref_sw_deg` (any sampling, further columns
-/// ignored, `#` comments skipped; a full project log works too), resampled to 100 Hz by linear
+/// A track profile from a CSV with columns `t` and `ref_sw_deg` (any sampling, further columns
+/// skipped unread, a pandas row index or a state word among them, names and fields in double
+/// quotes read without them, `#` comments skipped; a full project log works too), resampled
+/// to 100 Hz by linear
 /// interpolation from `t = 0` (the first sample is held before its time; a wall clock's
 /// stamps, Unix seconds, from their first whole second: `logfmt::from_wall_clock`). Read by the log
 /// reader (`logfmt::Table`), so plain or gzip, time strictly increasing, values within their
 /// physical bounds, every error with file and line.
 pub fn track_from_csv(path: &Path) -> Result<Vec<f64>, ReferenceFileError> {
     let name = path.display().to_string();
-    let mut table = Table::load(path, "t").map_err(|e| match e.root() {
+    let table = Table::load_reading(
+        path,
+        "t",
+        Reads::Only(&["ref_sw_deg"]),
+        TimeOrder::Increasing,
+    )
+    .map_err(|e| match e.root() {
         LogError::MissingNamedColumn { found_header, .. } => ReferenceFileError::Header {
             path: name.clone(),
             found: found_header.clone(),
         },
         _ => ReferenceFileError::Log(e),
     })?;
-    if table.names.len() < 2 || table.names[0] != "t" || table.names[1] != "ref_sw_deg" {
+    let (Some(t), Some(r)) = (table.column("t"), table.column("ref_sw_deg")) else {
         return Err(ReferenceFileError::Header {
             path: name,
-            found: table.names.join(","),
+            found: [&table.names[..], &table.unread[..]].concat().join(","),
         });
-    }
+    };
     // A wall clock's stamps (a logger's Unix seconds) from their first whole second.
-    crate::logfmt::from_wall_clock(&mut table.columns[0]);
-    let (t, r) = (&table.columns[0], &table.columns[1]);
+    let mut t = t.to_vec();
+    crate::logfmt::from_wall_clock(&mut t);
+    let t = &t;
     if let Some(row) = r.iter().position(|v| v.is_nan()) {
         return Err(ReferenceFileError::MissingSample {
             path: name,
@@ -382,12 +391,34 @@ mod tests {
         for k in 0..=10 {
             text += &format!("{:.6},{}\n", 1_733_300_000.0 + f64::from(k) * 0.1, 2 * k);
         }
-        std::fs::write(&p, text).unwrap();
-        let wall = track_from_csv(&p).unwrap();
-        assert_eq!(wall.len(), r.len());
+        // `text` written and read back is the track `r`.
+        let same_track = |text: String| {
+            std::fs::write(&p, text).unwrap();
+            let read = track_from_csv(&p).unwrap();
+            assert_eq!(read.len(), r.len());
+            assert!(
+                read.iter().zip(&r).all(|(a, b)| (a - b).abs() < 1e-9),
+                "{read:?}"
+            );
+        };
+        same_track(text);
+        // As pandas writes them (its row index first, unnamed), with a state word beside, the
+        // reference before the time, every name quoted, each row stamped with a date: the
+        // same track.
+        let mut text = String::from(",\"ref_sw_deg\",\"t\",\"state\"\n");
+        for k in 0..=10 {
+            text += &format!(
+                "{k},{},2026-12-07T18:10:{:09.6},AS_DRIVING\n",
+                2 * k,
+                f64::from(k) * 0.1
+            );
+        }
+        same_track(text);
+        std::fs::write(&p, "t,angle\n0,1\n").unwrap();
+        let e = track_from_csv(&p).unwrap_err().to_string();
         assert!(
-            wall.iter().zip(&r).all(|(a, b)| (a - b).abs() < 1e-9),
-            "{wall:?}"
+            e.contains("naming `t` and `ref_sw_deg`") && e.contains("angle"),
+            "{e}"
         );
     }
 
