@@ -192,13 +192,20 @@ pub fn read(path: &Path) -> Result<CandumpFile, BringupError> {
         source,
     })?;
     let mut reader = std::io::BufReader::new(file);
-    let is_gzip = reader
-        .fill_buf()
-        .map_err(|source| BringupError::Io {
-            context: format!("cannot read candump file {}", path.display()),
-            source,
-        })?
-        .starts_with(&[0x1f, 0x8b]);
+    let head = reader.fill_buf().map_err(|source| BringupError::Io {
+        context: format!("cannot read candump file {}", path.display()),
+        source,
+    })?;
+    let (is_gzip, is_blf) = (head.starts_with(&[0x1f, 0x8b]), head.starts_with(BLF_MAGIC));
+    if is_blf {
+        return Err(BringupError::Candump {
+            path: path.to_path_buf(),
+            line: 1,
+            message: "a Vector BLF log (binary), not a candump one; `can_logconvert FILE.blf \
+                      FILE.log` (python-can) writes one"
+                .to_string(),
+        });
+    }
     if is_gzip {
         let unpacked = std::io::BufReader::new(flate2::read::MultiGzDecoder::new(reader));
         read_from(unpacked, path).map_err(|e| match e {
@@ -273,7 +280,14 @@ fn read_at_most(
             out.first_drop_report_line.get_or_insert(line_no);
             continue;
         }
-        match parse_line(line).map_err(err)? {
+        let parsed = parse_line(line).map_err(|message| {
+            // A first line in another tool's format: say which, and what converts it.
+            match foreign_format(line).filter(|_| first.is_none() && out.skipped == 0) {
+                Some(format) => err(format!("{message}: {format}")),
+                None => err(message),
+            }
+        })?;
+        match parsed {
             Line::NotOurs => out.skipped += 1,
             Line::Frame { t_s, frame } => {
                 if t_s < latest_s - BACKWARDS_TOLERANCE_S {
@@ -302,6 +316,39 @@ fn read_at_most(
     out.epoch_s = first.unwrap_or(0.0);
     Ok(out)
 }
+
+/// What another tool's CAN log looks like on its first line, and what writes a candump log
+/// from it (can-utils' `asc2log`, python-can's `can_logconvert`, which picks each file's
+/// format by its suffix); `None` for a line of no format known here.
+fn foreign_format(line: &str) -> Option<&'static str> {
+    let line = line.trim();
+    if line.starts_with("date ") || line.starts_with("base ") {
+        Some(
+            "a Vector ASC log, not a candump one; `asc2log -I FILE.asc -O FILE.log` \
+             (can-utils) or `can_logconvert FILE.asc FILE.log` (python-can) writes one",
+        )
+    } else if line.starts_with(';') {
+        Some(
+            "a PEAK TRC log, not a candump one; `can_logconvert FILE.trc FILE.log` \
+             (python-can) writes one",
+        )
+    } else if line.starts_with("timestamp,arbitration_id") {
+        Some(
+            "python-can's CSV log, not a candump one; `can_logconvert FILE.csv FILE.log` \
+             (python-can) writes one",
+        )
+    } else if line.split(',').any(|name| name.trim() == "ref_sw_deg") {
+        Some(
+            "a steering log already (its header names `ref_sw_deg`), not a recording of the \
+             bus: `host-sim gap FILE` reads it as it is",
+        )
+    } else {
+        None
+    }
+}
+
+/// The first bytes of a Vector BLF log (binary).
+const BLF_MAGIC: &[u8] = b"LOGG";
 
 /// The interface name a recording of the simulated car (`sim`, `sim:PATH`) carries: `can0`,
 /// the car's, so a rehearsal's file goes through the same commands as the car's
@@ -501,6 +548,46 @@ mod tests {
             .collect();
         // Half a millisecond back is within the tolerance: kept, at the latest time.
         assert_eq!(kept, [(0, 0), (10_000, 1), (10_000, 3), (30_000, 4)]);
+    }
+
+    /// Another tool's CAN log is refused at its first line, naming the format and what
+    /// converts it to a candump log.
+    #[test]
+    fn another_tools_can_log_is_named_with_its_converter() {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, bytes, said) in [
+            (
+                "bus.asc",
+                &b"date Mon Dec 7 18:10:01.000 2026\nbase hex  timestamps absolute\n"[..],
+                "asc2log",
+            ),
+            (
+                "bus.trc",
+                b";$FILEVERSION=2.1\n;$STARTTIME=46000.7\n",
+                "PEAK TRC",
+            ),
+            (
+                "bus.csv",
+                b"timestamp,arbitration_id,extended,remote,error,dlc,data\n",
+                "python-can's CSV",
+            ),
+            ("bus.blf", b"LOGG\x90\x00\x00\x00\x01\x02", "BLF"),
+            (
+                "log.csv",
+                b"t,ref_sw_deg,sw_deg,motor_rad,current_a\n0,0,0,0,0\n",
+                "host-sim gap FILE",
+            ),
+        ] {
+            let path = dir.path().join(name);
+            std::fs::write(&path, bytes).unwrap();
+            let e = read(&path).unwrap_err().to_string();
+            assert!(e.contains(name) && e.contains(said), "{name}: {e}");
+        }
+        // A stray line in the middle of a candump log is an error of that line alone.
+        let path = dir.path().join("stray.log");
+        std::fs::write(&path, "(1700000000.000100) can0 101#0102\n; note\n").unwrap();
+        let e = read(&path).unwrap_err().to_string();
+        assert!(e.contains("stray.log") && !e.contains("TRC"), "{e}");
     }
 
     /// What other tools write for `candump -l` logs reads as the same frames.
