@@ -667,6 +667,28 @@ fn gap_refuses_a_log_not_separated_by_commas_and_names_its_separator() {
     }
 }
 
+/// A recording of the bus (candump) given to `gap` or `identify` is no log yet: it is
+/// refused pointing to `steer-can convert`, not as a header that lacks a column named `t`.
+#[test]
+fn gap_points_a_recording_of_the_bus_to_steer_can_convert() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines = [
+        "(1796667001.000100) can0 100#00112233445566".to_string(),
+        "(1796667001.000350) can0 101#0011223344".to_string(),
+    ];
+    let o = gap_of(dir.path(), "bus.candump", &lines);
+    assert_refused(
+        &o,
+        &[
+            "bus.candump",
+            "recording of the CAN bus",
+            "steer-can convert",
+        ],
+    );
+    let o = host_sim(&["identify", s(&dir.path().join("bus.candump"))]);
+    assert_refused(&o, &["bus.candump", "steer-can convert"]);
+}
+
 /// The step log with field `column` of every row rewritten in another unit by `unit`,
 /// written as `name`: `gap` and `identify` must both refuse it, naming the file and saying
 /// `said` (the unit to log comes last; `identify` must say it too).

@@ -342,11 +342,25 @@ pub const MAX_HOLE_STEPS: f64 = 10.0;
 /// between its rows, and stamps in milliseconds read as seconds sit 1000 x too far apart.
 pub const MAX_ROW_STEPS: f64 = 4.0;
 
+/// `line` as a candump log's frame: `(1700000000.123456) can0 101#0011`.
+fn is_candump_line(line: &str) -> bool {
+    let mut parts = line.split_whitespace();
+    let stamp = parts.next().unwrap_or_default();
+    let frame = parts.nth(1).unwrap_or_default();
+    stamp.starts_with('(') && stamp.ends_with(')') && frame.contains('#')
+}
+
 impl std::fmt::Display for RigError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             RigError::Io { path, source } => write!(f, "{path}: {source}"),
             RigError::Parse { path, message } => write!(f, "{path}: {message}"),
+            // A recording of the bus is no log yet: its first line is a candump frame.
+            RigError::MissingColumn { path, found, .. } if is_candump_line(found) => write!(
+                f,
+                "{path}: a recording of the CAN bus (candump), not a log: `steer-can convert \
+                 {path} --out log.csv` writes the log `gap` reads"
+            ),
             RigError::MissingColumn {
                 path,
                 column,
