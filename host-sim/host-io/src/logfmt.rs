@@ -1866,6 +1866,44 @@ mod tests {
     }
 
     #[test]
+    fn no_text_makes_a_reader_panic() {
+        // Short texts drawn from the characters the readers look at (separators, quotes,
+        // signs, a date's and a clock's marks, comments, line ends), each read every way:
+        // any may be refused, none may panic.
+        const ALPHABET: &[u8] = b"0123456789,,,\"-+:.TZ e\n\n#;tx_ab";
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for _ in 0..20_000 {
+            let len = (next() % 64) as usize;
+            let text: String = (0..len)
+                .map(|_| char::from(ALPHABET[(next() % ALPHABET.len() as u64) as usize]))
+                .collect();
+            // Half with a header the readers take, half with whatever came.
+            let text = if next() % 2 == 0 {
+                format!("t,x\n{text}")
+            } else {
+                text
+            };
+            let _ = Table::read_from_reading(
+                text.as_bytes(),
+                "t",
+                Reads::Only(&["x"]),
+                TimeOrder::AsStamped,
+            );
+            let _ = Table::read_from(text.as_bytes(), "t");
+            let _ = read_str(&text);
+            for field in text.split([',', '\n']) {
+                let _ = unix_seconds(field);
+            }
+        }
+    }
+
+    #[test]
     fn a_table_reads_names_and_fields_in_double_quotes_without_them() {
         let text = "\"t\",\"x\"\n\"0\",\"1.5\"\n0.01,2\n";
         let table = Table::read_from(text.as_bytes(), "t").expect("quoted");
