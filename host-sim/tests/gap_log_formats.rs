@@ -255,3 +255,38 @@ fn a_teams_tools_columns_are_skipped_and_its_clocks_dates_read_as_seconds() {
         );
     }
 }
+
+/// The effect-free car's current written through a 10 ms first-order low-pass (a logger
+/// that smooths it, or a drive's averaged current): the current lags the angles, and the
+/// candidate for a late current is named under the `delay` family. The verdict says what
+/// that means for the car: the current is reported late, the reference is not.
+#[test]
+fn a_current_logged_through_a_low_pass_is_said_to_be_reported_late() {
+    let case = GenCase::nominal(sweep_of(12.0), 100);
+    let mut log = log_of(&case, 1, &pc_logger(0.001));
+    let mut y = log.current_a[0];
+    for (i, x) in log.current_a.iter_mut().enumerate() {
+        let dt = if i == 0 {
+            0.01
+        } else {
+            log.t[i] - log.t[i - 1]
+        };
+        y += (*x - y) * dt / (0.01 + dt);
+        *x = y;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("smoothed.csv");
+    log.save(&path).unwrap();
+    let (d, _) = gap_file::diagnose_file(&path, None, None);
+    let late = d
+        .verdict
+        .fitted
+        .as_ref()
+        .is_some_and(|c| c.effect.contains("delay_current"));
+    assert!(late, "{:?}", d.verdict.effects);
+    assert!(
+        d.summary().contains(host_sim::gap::CURRENT_LATE),
+        "{}",
+        d.summary()
+    );
+}

@@ -73,6 +73,13 @@ pub struct Verdict {
 /// balance further apart leave the size uncertain by as much.
 pub const SIZES_AGREE_WITHIN: f64 = 0.2;
 
+/// What a named `delay_current` means for the car, on the verdict's lines: the angles follow
+/// the reference on time and the current lags them, so the reference does not reach the car
+/// late; the current is reported late.
+pub const CURRENT_LATE: &str = "the current lags the angles, which follow the reference on \
+     time: the current is reported late (a logger's low-pass filter, a drive's averaged \
+     current, or one a SYNC old), not the reference reaching the car late";
+
 /// The play a verdict names beside the torque balance's reading of it (`balance` and its
 /// standard error, deg), as one line of the report that says whether the two agree within
 /// [`SIZES_AGREE_WITHIN`].
@@ -451,6 +458,9 @@ impl Diagnosis {
         );
         if let Some(named) = &v.fitted {
             let _ = writeln!(s, "  fitted: {} {}", named.effect, named.params_text(true));
+            if named.kinds.contains(&EffectKind::CurrentDelay) {
+                let _ = writeln!(s, "  {CURRENT_LATE}");
+            }
             if let (Some((_, w)), Some(b)) = (
                 named.play_deg(),
                 self.signature.as_ref().filter(|b| b.holds),

@@ -48,7 +48,7 @@ pub mod selftest;
 pub mod signature;
 
 pub use diagnose::{Screen, diagnose, screen};
-pub use diagnosis::{Candidate, Diagnosis, Options, Verdict, VerdictKind};
+pub use diagnosis::{CURRENT_LATE, Candidate, Diagnosis, Options, Verdict, VerdictKind};
 pub use effects::EffectKind;
 pub(crate) use record::interp_at;
 pub use record::{CurrentSamples, LogTiming, Record, ReferenceConvention};
