@@ -689,12 +689,9 @@ fn gap_points_a_recording_of_the_bus_to_steer_can_convert() {
     assert_refused(&o, &["bus.candump", "steer-can convert"]);
 }
 
-/// The step log with field `column` of every row rewritten in another unit by `unit`,
-/// written as `name`: `gap` and `identify` must both refuse it, naming the file and saying
-/// `said` (the unit to log comes last; `identify` must say it too).
-fn refused_in_another_unit(column: usize, unit: fn(f64) -> f64, name: &str, said: &[&str]) {
-    let dir = tempfile::tempdir().unwrap();
-    let mut rows = step_log(dir.path());
+/// `rows` (a header, then data) with field `column` of every data row rewritten by `unit`.
+fn in_another_unit(rows: &[String], column: usize, unit: fn(f64) -> f64) -> Vec<String> {
+    let mut rows = rows.to_vec();
     for line in 2..=rows.len() {
         let v: f64 = rows[line - 1]
             .split(',')
@@ -704,6 +701,15 @@ fn refused_in_another_unit(column: usize, unit: fn(f64) -> f64, name: &str, said
             .unwrap();
         set_field(&mut rows, line, column, &format!("{:.6}", unit(v)));
     }
+    rows
+}
+
+/// The step log with field `column` of every row rewritten in another unit by `unit`,
+/// written as `name`: `gap` and `identify` must both refuse it, naming the file and saying
+/// `said` (the unit to log comes last; `identify` must say it too).
+fn refused_in_another_unit(column: usize, unit: fn(f64) -> f64, name: &str, said: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = in_another_unit(&step_log(dir.path()), column, unit);
     let o = gap_of(dir.path(), name, &rows);
     assert_refused(&o, &[&[name], said].concat());
     let o = host_sim(&["identify", s(&dir.path().join(name))]);
@@ -722,6 +728,27 @@ fn gap_refuses_a_current_in_another_unit_than_amperes() {
         "centiamperes.csv",
         &["the current is x", "log it in amperes"],
     );
+}
+
+/// A validation log whose current is in another unit than the log's amperes is refused by
+/// the same rule, naming it: read as written, every candidate would fail its validation.
+#[test]
+fn gap_refuses_a_validation_log_with_its_current_in_another_unit() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = step_log(dir.path());
+    let log = dir.path().join("log.csv");
+    write_lines(&log, &rows);
+    let validation = dir.path().join("validation.csv");
+    write_lines(&validation, &in_another_unit(&rows, 4, |a| a * 100.0));
+    let o = host_sim(&[
+        "gap",
+        s(&log),
+        "--validate",
+        s(&validation),
+        "--threads",
+        "2",
+    ]);
+    assert_refused(&o, &["validation.csv (--validate)", "log it in amperes"]);
 }
 
 /// A column in radians beside a reference in degrees (a team's logger writing the encoder's

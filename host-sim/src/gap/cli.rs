@@ -286,7 +286,15 @@ pub fn gap(args: &GapArgs) -> Result<()> {
     };
     let (rec, header, timing) = load_log_with_header(&rig, log)?;
     let val = match &args.validate {
-        Some(p) => Some(load_log(&rig, p)?),
+        Some(p) => {
+            let v = load_log(&rig, p)?;
+            // Its columns' units by the log's rules: a current in milliamperes beside the
+            // log's amperes would make every candidate fail its validation.
+            if let Some(why) = super::columns::read(&rig, &v).and_then(|c| c.refusal()) {
+                return Err(format!("{} (--validate): {why}", p.display()).into());
+            }
+            Some(v)
+        }
         None => None,
     };
     let opts = options(args, &rig)?;
