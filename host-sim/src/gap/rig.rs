@@ -606,14 +606,26 @@ impl Rig {
         // them (a row index without a name, a state as text), which tell the diagnosis
         // nothing.
         let c = &self.columns;
-        let reads: Vec<&str> = [&c.reference, &c.output, &c.effort]
-            .into_iter()
+        // The reference and the car's columns: a row for each CAN frame leaves some empty.
+        let car: Vec<&str> = [
+            Some(&c.reference),
+            Some(&c.output),
+            Some(&c.effort),
+            c.motor.as_ref(),
+        ]
+        .into_iter()
+        .flatten()
+        .map(String::as_str)
+        .collect();
+        let reads: Vec<&str> = car
+            .iter()
+            .copied()
             .chain(
-                [&c.motor, &c.disturbance, &c.supply, &c.torque_enable]
+                [&c.disturbance, &c.supply, &c.torque_enable]
                     .into_iter()
-                    .flatten(),
+                    .flatten()
+                    .map(String::as_str),
             )
-            .map(String::as_str)
             .collect();
         let table =
             Table::load_reading(path, &c.time, Reads::Only(&reads), order).map_err(|e| match e
@@ -633,16 +645,7 @@ impl Rig {
         // A log whose rows each hold one CAN frame's columns, the other frames' left empty
         // (a recording's decoded signals exported row by row): each signal holds from its
         // frame to its next, as the car saw it, not a line between them.
-        let named: Vec<&[f64]> = [
-            Some(&self.columns.reference),
-            Some(&self.columns.output),
-            Some(&self.columns.effort),
-            self.columns.motor.as_ref(),
-        ]
-        .into_iter()
-        .flatten()
-        .filter_map(|c| table.column(c))
-        .collect();
+        let named: Vec<&[f64]> = car.iter().filter_map(|n| table.column(n)).collect();
         let blank = super::held::blank_share(&named);
         let frames =
             matches!(self.model, RigModel::Paper(_)) && blank >= super::held::FRAMES_BLANK_SHARE;
