@@ -1,5 +1,6 @@
 //! The `gap` and `identify` subcommands: arguments and what they print and write.
 
+use super::columns::ColumnSigns;
 use super::drive::{CarChoice, LogHeader, controller_from_name};
 use super::rig::CarDrive;
 use super::rig::Rig;
@@ -159,18 +160,23 @@ fn car_for(
     }
     let (rig, rec, choice) =
         super::drive::choose_for_log(rig, rec, header, timing, drive, controller, opts);
-    if let Some(why) = choice
-        .as_ref()
-        .and_then(|c| c.columns.as_ref())
-        .and_then(|c| c.refusal())
-    {
-        let log = args
+    refuse_columns(
+        choice.as_ref().and_then(|c| c.columns.as_ref()),
+        &args
             .log
             .as_deref()
-            .map_or(String::new(), |p| format!("{}: ", p.display()));
-        return Err(format!("{log}{why}").into());
-    }
+            .map_or(String::new(), |p| format!("{}: ", p.display())),
+    )?;
     Ok((rig, rec, choice))
+}
+
+/// A log whose columns cannot be diagnosed as logged ([`ColumnSigns::refusal`]: one in
+/// another unit than its reference, a current not in amperes), refused after `named`.
+fn refuse_columns(columns: Option<&ColumnSigns>, named: &str) -> Result<()> {
+    match columns.and_then(ColumnSigns::refusal) {
+        Some(why) => Err(format!("{named}{why}").into()),
+        None => Ok(()),
+    }
 }
 
 /// `--drive` and `--controller`, read.
@@ -290,9 +296,10 @@ pub fn gap(args: &GapArgs) -> Result<()> {
             let v = load_log(&rig, p)?;
             // Its columns' units by the log's rules: a current in milliamperes beside the
             // log's amperes would make every candidate fail its validation.
-            if let Some(why) = super::columns::read(&rig, &v).and_then(|c| c.refusal()) {
-                return Err(format!("{} (--validate): {why}", p.display()).into());
-            }
+            refuse_columns(
+                super::columns::read(&rig, &v).as_ref(),
+                &format!("{} (--validate): ", p.display()),
+            )?;
             Some(v)
         }
         None => None,
@@ -716,9 +723,7 @@ pub fn identify(args: &IdentifyArgs) -> Result<()> {
     let rec = load_log(&rig, &args.log)?;
     // A column the logger wrote with the other sign, read as the car has it, as `gap` reads it.
     let columns = super::columns::read(&rig, &rec);
-    if let Some(why) = columns.as_ref().and_then(|c| c.refusal()) {
-        return Err(format!("{}: {why}", args.log.display()).into());
-    }
+    refuse_columns(columns.as_ref(), &format!("{}: ", args.log.display()))?;
     let rec = match columns.map(|c| (c.describe(), c)) {
         Some((said, c)) if !said.is_empty() => {
             println!("columns: {said}");
