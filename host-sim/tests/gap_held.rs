@@ -78,14 +78,7 @@ fn a_logger_faster_than_the_cars_frames_is_read_at_their_arrivals() {
         let path = dir.path().join("held.csv");
         log_of(&case, 5, &logger).save(&path).unwrap();
         let loaded = Rig::paper().load_log(&path).unwrap();
-        assert!(
-            loaded
-                .notes
-                .iter()
-                .any(|n| n.contains("where a frame arrived")),
-            "{:?}",
-            loaded.notes
-        );
+        gap_file::assert_noted(&loaded.notes, "where a frame arrived");
         // The rows read are the frames': one a reference period.
         assert!(
             (loaded.timing.row_dt_s - 0.01).abs() < 5e-4,

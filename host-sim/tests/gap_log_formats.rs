@@ -97,18 +97,8 @@ fn a_log_of_a_row_for_each_can_frame_is_read_at_the_cars_frames() {
     let path = dir.path().join("frames.csv");
     std::fs::write(&path, text).unwrap();
     let loaded = Rig::paper().load_log(&path).unwrap();
-    assert!(
-        loaded
-            .notes
-            .iter()
-            .any(|n| n.contains("a row for each CAN frame"))
-            && loaded
-                .notes
-                .iter()
-                .any(|n| n.contains("where the car's frames arrived")),
-        "{:?}",
-        loaded.notes
-    );
+    gap_file::assert_noted(&loaded.notes, "a row for each CAN frame");
+    gap_file::assert_noted(&loaded.notes, "where the car's frames arrived");
     effect_free_at_the_cars_period(&path);
 }
 
@@ -134,14 +124,7 @@ fn a_reference_printed_to_a_tenth_of_a_degree_is_read_as_the_line_it_rounds() {
     let path = dir.path().join("tenths.csv");
     log.save(&path).unwrap();
     let loaded = Rig::paper().load_log(&path).unwrap();
-    assert!(
-        loaded
-            .notes
-            .iter()
-            .any(|n| n.contains("whole multiples of 0.1 deg")),
-        "{:?}",
-        loaded.notes
-    );
+    gap_file::assert_noted(&loaded.notes, "whole multiples of 0.1 deg");
     gap_file::assert_none(&path, "tenths.csv");
 }
 

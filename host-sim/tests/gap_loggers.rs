@@ -836,11 +836,7 @@ fn a_log_whose_stamps_jitter_past_each_other_is_read_in_its_rows_order() {
             (0, _) => format!("stamps repeat {same} times,"),
             _ => format!("stamps go back {back} times and repeat {same} times,"),
         };
-        assert!(
-            loaded.notes.iter().any(|n| n.contains(&said)),
-            "{said}: {:?}",
-            loaded.notes
-        );
+        gap_file::assert_noted(&loaded.notes, &said);
         // Uniform over +-1 ms: 0.74 ms by the median absolute deviation, 0.58 ms RMS (0.65
         // ms with the rounding to whole milliseconds).
         let jitter_ms = 1e3 * loaded.timing.jitter_s;

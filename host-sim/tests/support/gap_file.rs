@@ -52,3 +52,12 @@ pub fn assert_none(path: &Path, what: &str) -> (Diagnosis, CarChoice) {
     );
     (d, choice)
 }
+
+/// One of the reader's `notes` says `said`.
+#[allow(dead_code)] // each test binary takes what it needs
+pub fn assert_noted(notes: &[String], said: &str) {
+    assert!(
+        notes.iter().any(|n| n.contains(said)),
+        "no note says {said:?}: {notes:?}"
+    );
+}
