@@ -737,22 +737,8 @@ impl Table {
         })
     }
 
-    /// Reads `path`, plain or gzip-compressed (recognised by content); errors name the file.
-    pub fn load(path: &Path, time_column: &str) -> Result<Table, LogError> {
-        Table::load_ordered(path, time_column, TimeOrder::Increasing)
-    }
-
-    /// As [`Table::load`], with the time column's order as `order` asks.
-    pub fn load_ordered(
-        path: &Path,
-        time_column: &str,
-        order: TimeOrder,
-    ) -> Result<Table, LogError> {
-        Table::load_reading(path, time_column, Reads::All, order)
-    }
-
-    /// As [`Table::load_ordered`], reading the columns `reads` names
-    /// ([`Table::read_from_reading`]).
+    /// Reads `path`, plain or gzip-compressed (recognised by content), as
+    /// [`Table::read_from_reading`] reads text; errors name the file.
     pub fn load_reading(
         path: &Path,
         time_column: &str,
