@@ -180,6 +180,7 @@ fn rows_on_the_grid_each_fill_their_own_step() {
         None,
         0.01,
         host_sim::gap::CurrentSamples::IntervalMean,
+        None,
     );
     assert_eq!(rec.len(), 12_000);
     for k in 0..rec.len() {
@@ -217,6 +218,7 @@ fn rows_a_step_apart_on_a_clock_of_their_own_each_fill_their_own_step() {
             Some(y.clone()),
             0.01,
             current,
+            None,
         );
         assert_eq!(rec.len(), 12_000, "{current:?}");
         assert_eq!(
@@ -260,6 +262,7 @@ fn a_1_khz_log_is_read_as_instants_and_interval_means() {
         None,
         0.01,
         host_sim::gap::CurrentSamples::IntervalMean,
+        None,
     );
     assert_eq!(rec.len(), 200);
     for k in 0..rec.len() {

@@ -273,3 +273,73 @@ fn a_current_logged_through_a_low_pass_is_said_to_be_reported_late() {
         d.summary()
     );
 }
+
+/// The world's effect-free sweep at 200 Hz, its header stating its reference convention,
+/// cut from the recording at a row that is not its period's first (a log trimmed to a stretch
+/// of a drive, or a logger started mid-period): the steps were placed from the first row's
+/// stamp, a row (5 ms) off the car's periods, so every step's angles and current were read
+/// 5 ms from where the model takes them (the effect-free track cut so was named
+/// `parameters`, its wheel inertia x0.39). The header's convention now places the periods,
+/// and the cut log reads, step for step, as the whole log does from the same period on.
+#[test]
+fn a_log_cut_mid_period_is_read_on_the_periods_its_header_places() {
+    let case = GenCase::nominal(sweep_of(6.0), 200);
+    let dir = tempfile::tempdir().unwrap();
+    for convention in ReferenceConvention::ALL {
+        let logger = Logger {
+            reference: convention,
+            header: true,
+            ..Logger::ours(200)
+        };
+        let whole = log_of(&case, 5, &logger);
+        let path = dir.path().join(format!("{}.csv", convention.short()));
+        whole.save(&path).unwrap();
+        let full = Rig::paper().load_log(&path).unwrap().record;
+        // Rows 0.005 s apart from 0.005 s: 300 rows cut start the log at the second row of
+        // the period from 1.50 s, 301 at its end.
+        for cut in [300usize, 301] {
+            let mut log = whole.clone();
+            for column in [
+                &mut log.t,
+                &mut log.ref_sw_deg,
+                &mut log.sw_deg,
+                &mut log.motor_rad,
+                &mut log.current_a,
+            ] {
+                column.drain(..cut);
+            }
+            let path = dir.path().join(format!("{}-{cut}.csv", convention.short()));
+            log.save(&path).unwrap();
+            let rec = Rig::paper().load_log(&path).unwrap().record;
+            // The whole log's step 150 is the period from 1.50 s; the cut's first step may
+            // hold a row of it alone, so the comparison starts at the next.
+            // The whole log's step of the cut's first row (the period `k` from `k` x 10 ms):
+            // a row on a period's boundary is the period ending there or the one starting.
+            let t0 = log.t[0];
+            let p0 = match convention {
+                ReferenceConvention::PeriodEnding => (t0 / 0.01 - 1e-6).ceil() as usize - 1,
+                ReferenceConvention::PeriodStarting => (t0 / 0.01 + 1e-6).floor() as usize,
+            };
+            // The cut's first step may hold a row of its period alone, and the last steps a
+            // row of theirs: the comparison is of the steps between.
+            assert!(rec.len() + 2 >= full.len() - p0, "{convention:?} cut {cut}");
+            for k in 1..rec.len() - 2 {
+                let (a, b) = (k, p0 + k);
+                let what = format!("{convention:?} cut {cut}, step {k}");
+                assert_eq!(rec.reference[a], full.reference[b], "{what}: reference");
+                assert!(
+                    (rec.output[a] - full.output[b]).abs() < 1e-9,
+                    "{what}: column {} against {}",
+                    rec.output[a],
+                    full.output[b]
+                );
+                assert!(
+                    (rec.effort[a] - full.effort[b]).abs() < 1e-9,
+                    "{what}: current {} against {}",
+                    rec.effort[a],
+                    full.effort[b]
+                );
+            }
+        }
+    }
+}

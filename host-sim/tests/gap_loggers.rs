@@ -974,6 +974,7 @@ fn a_log_that_lost_its_first_row_has_its_steps_on_the_reference_periods() {
             None,
             0.01,
             host_sim::gap::CurrentSamples::IntervalMean,
+            None,
         );
         // The first step may start before the first row kept.
         let what = format!("{}, first row lost", logger.describe());
@@ -1016,6 +1017,7 @@ fn record_of(t: &[f64], rows: &Rows) -> host_sim::gap::Record {
         None,
         0.01,
         host_sim::gap::CurrentSamples::IntervalMean,
+        None,
     )
 }
 

@@ -943,6 +943,7 @@ pub fn record_of(case: &GenCase, seed: u64) -> Record {
         Some(motor_deg),
         0.01,
         CurrentSamples::IntervalMean,
+        Some(super::ReferenceConvention::PeriodEnding),
     )
 }
 

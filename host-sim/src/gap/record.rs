@@ -867,7 +867,11 @@ impl Record {
     /// spacing), so a log written from t = one row interval on, as host-sim writes them,
     /// lands on the reference periods exactly. Rows need not sit on the grid: angles are
     /// interpolated to the step ends, interval means are weighted by their overlap with
-    /// each step.
+    /// each step. With rows on the reference's period boundaries, `stated` (a header's
+    /// `# reference:` line) says which period a boundary's row holds, wherever the first row
+    /// lies.
+    // The columns, the grid and what the header says of two of them: each a caller's own.
+    #[allow(clippy::too_many_arguments)]
     pub fn from_samples(
         t: &[f64],
         reference: &[f64],
@@ -876,6 +880,7 @@ impl Record {
         motor: Option<Vec<f64>>,
         dt: f64,
         current: CurrentSamples,
+        stated: Option<ReferenceConvention>,
     ) -> Record {
         if t.len() < 2 {
             return Record {
@@ -952,10 +957,6 @@ impl Record {
         let shift = starts.map_or(shift, |(latest, _)| latest);
         let unsure = starts.map_or(0.5 * step, |(_, width)| width);
         let origin = origin + shift;
-        // The period starts against the moved steps.
-        let phase = phase.map(|centre| (centre - shift).rem_euclid(step));
-        let n = (((last - origin + near) / step + 1e-6).floor() as usize).max(1);
-        let end = |k: usize| origin + (k + 1) as f64 * step;
         // The row stamped at `at`, within a quarter of a row spacing.
         let row_at = |at: f64| {
             let j = t.partition_point(|v| *v < at - 0.25 * row_dt);
@@ -966,10 +967,11 @@ impl Record {
         // takes the new sample at once the step that starts there (equals the one after).
         // Only on a regular grid (the rows at their places): a log whose stamps jitter by
         // as much as its spacing has no row that sits on a boundary.
-        let period_starting = several_rows && {
+        let votes = |origin: f64| {
+            let n = (((last - origin + near) / step + 1e-6).floor() as usize).max(1);
             let (mut ending, mut starting) = (0usize, 0usize);
             for k in 0..n {
-                if let Some(j) = row_at(end(k))
+                if let Some(j) = row_at(origin + (k + 1) as f64 * step)
                     && j > 0
                     && j + 1 < t.len()
                 {
@@ -981,8 +983,35 @@ impl Record {
                     }
                 }
             }
-            starting > ending
+            (ending, starting)
         };
+        let (ending, starting) = if several_rows { votes(origin) } else { (0, 0) };
+        // Rows on the periods' boundaries leave each period's start at either end of the two
+        // rows across which the reference changes: the row on it holds the period that ends
+        // there or the one that starts there. The rows alone cannot tell which, and the steps
+        // start one spacing before the first row: right for a log written from the start of
+        // a period, a row off for one cut from a longer recording or begun mid-period (5 ms
+        // at 200 Hz: the reference half a period early or late to the model). A header's
+        // `# reference:` line says which, and the steps move by that row.
+        let moved = match stated {
+            Some(c) if ending + starting > 0 => {
+                match (starting > ending, c == ReferenceConvention::PeriodStarting) {
+                    (true, false) => -row_dt,
+                    (false, true) => row_dt,
+                    _ => 0.0,
+                }
+            }
+            _ => 0.0,
+        };
+        let origin = origin + moved;
+        let period_starting = match stated {
+            Some(c) if ending + starting > 0 => c == ReferenceConvention::PeriodStarting,
+            _ => starting > ending,
+        };
+        // The period starts against the moved steps.
+        let phase = phase.map(|centre| (centre - shift - moved).rem_euclid(step));
+        let n = (((last - origin + near) / step + 1e-6).floor() as usize).max(1);
+        let end = |k: usize| origin + (k + 1) as f64 * step;
         let reference = (0..n)
             .map(|k| {
                 // The row whose interval holds the middle of the step.

@@ -715,6 +715,14 @@ impl Rig {
             .filter(|(k, _)| k.trim() == "current")
             .find_map(|(_, v)| CurrentSamples::from_name(v))
             .unwrap_or_default();
+        // `# reference: period-ending|period-starting`: which period a row on a period's
+        // boundary holds, which places the periods in a log of several rows a period.
+        let stated = table
+            .comments
+            .iter()
+            .filter_map(|c| c.split_once(':'))
+            .filter(|(k, _)| k.trim() == "reference")
+            .find_map(|(_, v)| super::ReferenceConvention::from_name(v));
         let motor = match &self.columns.motor {
             Some(c) => col(c, false)?,
             None => None,
@@ -931,7 +939,7 @@ impl Rig {
                 let record = Record {
                     powered_from,
                     ..Record::from_samples(
-                        &t, &reference, &output, &effort, motor_deg, 0.01, current,
+                        &t, &reference, &output, &effort, motor_deg, 0.01, current, stated,
                     )
                 };
                 if held.is_some() {
