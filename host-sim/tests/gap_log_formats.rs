@@ -274,6 +274,19 @@ fn a_current_logged_through_a_low_pass_is_said_to_be_reported_late() {
     );
 }
 
+/// `log` without its first `rows` rows: a stretch cut from a longer recording.
+fn drop_first_rows(log: &mut host_sim::logfmt::Log, rows: usize) {
+    for column in [
+        &mut log.t,
+        &mut log.ref_sw_deg,
+        &mut log.sw_deg,
+        &mut log.motor_rad,
+        &mut log.current_a,
+    ] {
+        column.drain(..rows);
+    }
+}
+
 /// The world's effect-free sweep at 200 Hz, its header stating its reference convention,
 /// cut from the recording at a row that is not its period's first (a log trimmed to a stretch
 /// of a drive, or a logger started mid-period): the steps were placed from the first row's
@@ -299,15 +312,7 @@ fn a_log_cut_mid_period_is_read_on_the_periods_its_header_places() {
         // the period from 1.50 s, 301 at its end.
         for cut in [300usize, 301] {
             let mut log = whole.clone();
-            for column in [
-                &mut log.t,
-                &mut log.ref_sw_deg,
-                &mut log.sw_deg,
-                &mut log.motor_rad,
-                &mut log.current_a,
-            ] {
-                column.drain(..cut);
-            }
+            drop_first_rows(&mut log, cut);
             let path = dir.path().join(format!("{}-{cut}.csv", convention.short()));
             log.save(&path).unwrap();
             let rec = Rig::paper().load_log(&path).unwrap().record;
@@ -341,5 +346,65 @@ fn a_log_cut_mid_period_is_read_on_the_periods_its_header_places() {
                 );
             }
         }
+    }
+}
+
+/// The same sweep written by a team's logger without a header, cut at a period's last row:
+/// the rows alone cannot say which period a row on a boundary holds, and the steps placed from
+/// the first row were half a period off. The loader reads the log both ways, the car's fit
+/// chooses, and the record diagnosed is the one the header would have placed, with the
+/// convention reported as fitted.
+#[test]
+fn a_headerless_log_cut_mid_period_has_its_convention_fitted_by_the_car() {
+    let case = GenCase::nominal(sweep_of(6.0), 200);
+    let dir = tempfile::tempdir().unwrap();
+    let opts = host_sim::gap::Options {
+        effects: host_sim::gap::EffectKind::for_rig(&Rig::paper()),
+        threads: 2,
+        ..host_sim::gap::Options::default()
+    };
+    for (k, convention) in ReferenceConvention::ALL.into_iter().enumerate() {
+        let mut log = log_of(
+            &case,
+            5,
+            &Logger {
+                reference: convention,
+                header: true,
+                ..Logger::ours(200)
+            },
+        );
+        drop_first_rows(&mut log, 301);
+        let stated = dir
+            .path()
+            .join(format!("{}-header.csv", convention.short()));
+        log.save(&stated).unwrap();
+        log.comments.clear();
+        let bare = dir.path().join(format!("{}.csv", convention.short()));
+        log.save(&bare).unwrap();
+        let placed = Rig::paper().load_log(&stated).unwrap().record;
+        let loaded = Rig::paper().load_log(&bare).unwrap();
+        let both = loaded.by_convention.as_ref().expect("read both ways");
+        assert_eq!(
+            both[k], placed,
+            "{convention:?}: read by the header's convention"
+        );
+        assert_ne!(
+            loaded.record, placed,
+            "{convention:?}: the first row's placement"
+        );
+        let header = host_sim::gap::drive::LogHeader::parse(&loaded.comments).unwrap();
+        let (_, rec, choice) = host_sim::gap::drive::choose_for_log(
+            &Rig::paper(),
+            &loaded,
+            &header,
+            None,
+            None,
+            &opts,
+        );
+        let choice = choice.unwrap();
+        assert_eq!(choice.reference_shift_rows, Some(k), "{convention:?}");
+        assert_eq!(rec.reference, placed.reference, "{convention:?}");
+        assert_eq!(rec.output, placed.output, "{convention:?}");
+        assert_eq!(rec.effort, placed.effort, "{convention:?}");
     }
 }

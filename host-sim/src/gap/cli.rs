@@ -3,7 +3,7 @@
 use super::columns::ColumnSigns;
 use super::drive::{CarChoice, LogHeader, controller_from_name};
 use super::rig::CarDrive;
-use super::rig::Rig;
+use super::rig::{LoadedLog, Rig};
 use super::{EffectKind, Options, diagnose, selftest};
 use crate::report_html::{HtmlReport, num};
 use crate::sim::Controller;
@@ -120,21 +120,18 @@ pub struct IdentifyArgs {
 /// A log on the rig's grid; what the reader had to fill in (missing samples) goes to stderr, so
 /// the figures are never computed on a repaired log without a word.
 fn load_log(rig: &Rig, path: &Path) -> Result<super::Record> {
-    load_log_with_header(rig, path).map(|(record, _, _)| record)
+    load_log_with_header(rig, path).map(|(loaded, _)| loaded.record)
 }
 
 /// [`load_log`] with what the log's header lines say of the car.
-fn load_log_with_header(
-    rig: &Rig,
-    path: &Path,
-) -> Result<(super::Record, LogHeader, super::LogTiming)> {
+fn load_log_with_header(rig: &Rig, path: &Path) -> Result<(LoadedLog, LogHeader)> {
     let loaded = rig.load_log(path)?;
     for note in &loaded.notes {
         eprintln!("warning: {note}");
     }
     let header =
         LogHeader::parse(&loaded.comments).map_err(|e| format!("{}: {e}", path.display()))?;
-    Ok((loaded.record, header, loaded.timing))
+    Ok((loaded, header))
 }
 
 /// The car to diagnose against: the options, else the log's header, else fitted
@@ -142,11 +139,11 @@ fn load_log_with_header(
 fn car_for(
     args: &GapArgs,
     rig: &Rig,
-    rec: &super::Record,
+    loaded: &LoadedLog,
     header: &LogHeader,
-    timing: super::LogTiming,
     opts: &Options,
 ) -> Result<(Rig, super::Record, Option<CarChoice>)> {
+    let rec = &loaded.record;
     let (drive, controller) = car_options(args)?;
     if !matches!(rig.model, super::rig::RigModel::Paper(_)) {
         if args.drive.is_some() || args.controller.is_some() {
@@ -159,7 +156,7 @@ fn car_for(
         return Ok((rig.clone(), rec.clone(), None));
     }
     let (rig, rec, choice) =
-        super::drive::choose_for_log(rig, rec, header, timing, drive, controller, opts);
+        super::drive::choose_for_log(rig, loaded, header, drive, controller, opts);
     refuse_columns(
         choice.as_ref().and_then(|c| c.columns.as_ref()),
         &args
@@ -290,14 +287,15 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         Some(p) => Rig::load(p)?,
         None => Rig::paper(),
     };
-    let (rec, header, timing) = load_log_with_header(&rig, log)?;
+    let (loaded, header) = load_log_with_header(&rig, log)?;
+    let timing = loaded.timing;
     let val = match &args.validate {
         Some(p) => {
-            let v = load_log(&rig, p)?;
+            let (v, _) = load_log_with_header(&rig, p)?;
             // Its columns' units by the log's rules: a current in milliamperes beside the
             // log's amperes would make every candidate fail its validation.
             refuse_columns(
-                super::columns::read(&rig, &v).as_ref(),
+                super::columns::read(&rig, &v.record).as_ref(),
                 &format!("{} (--validate): ", p.display()),
             )?;
             Some(v)
@@ -305,7 +303,7 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         None => None,
     };
     let opts = options(args, &rig)?;
-    let (rig, rec, car) = car_for(args, &rig, &rec, &header, timing, &opts)?;
+    let (rig, rec, car) = car_for(args, &rig, &loaded, &header, &opts)?;
     let mut rig = rig;
     // The validation log is the same car's, written by the same logger.
     let shift = car
@@ -313,7 +311,17 @@ pub fn gap(args: &GapArgs) -> Result<()> {
         .and_then(|c| c.reference_shift_rows)
         .unwrap_or(0);
     let columns = car.as_ref().and_then(|c| c.columns);
+    // Its convention is the log's: at the reference rate its reference moved as the log's, at
+    // several rows a period read that way where its rows leave it open.
     let val = val.map(|v| {
+        let placed = car
+            .as_ref()
+            .and_then(|c| c.reference_shift_rows)
+            .and(v.by_convention);
+        let (v, shift) = match placed {
+            Some(both) => (both[shift.min(1)].clone(), 0),
+            None => (v.record, shift),
+        };
         let v = match columns {
             Some(c) => c.apply(&v),
             None => v,
@@ -688,8 +696,9 @@ fn bench_file(
     let loaded = load_log_with_header(&rig, &path);
     // The file is the bench's own; it goes whatever the diagnosis makes of it.
     let _ = std::fs::remove_file(&path);
-    let (rec, header, timing) = loaded?;
-    let (rig, rec, car) = car_for(args, &rig, &rec, &header, timing, &opts)?;
+    let (loaded, header) = loaded?;
+    let timing = loaded.timing;
+    let (rig, rec, car) = car_for(args, &rig, &loaded, &header, &opts)?;
     let d = diagnose(&rig, &rec, None, &opts);
     let elapsed = started.elapsed().as_secs_f64();
     println!(

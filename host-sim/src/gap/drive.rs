@@ -727,15 +727,17 @@ pub struct LogSays {
 }
 
 /// The car for a log on the paper rig: `drive` and `controller` where given (the command line
-/// or the header), the rest fitted; and, for a log at the reference rate whose header does
-/// not say how its reference column is timed, that convention. Where the drive is fitted and
-/// the two drives' nominal models come close, their candidates tell them apart
+/// or the header), the rest fitted; and, for a log whose header does not say how its
+/// reference column is timed, that convention: at the reference rate, and at several rows a
+/// period where the loader read the log both ways (`by_convention`). Where the drive is
+/// fitted and the two drives' nominal models come close, their candidates tell them apart
 /// ([`DriveScreen`], fitted with `opts`' candidates and threads). Returns the rig with that
 /// car in its model and the record as the diagnosis must read it. Other rigs are returned as
 /// they are, with `None`.
 pub fn choose(
     rig: &Rig,
     rec: &Record,
+    by_convention: Option<&[Record; 2]>,
     drive: Option<(CarDrive, Source)>,
     controller: Option<(Controller, Source)>,
     says: LogSays,
@@ -788,12 +790,25 @@ pub fn choose(
     let at_reference_rate = row_dt > 0.75 * rec.dt && row_dt < 1.5 * rec.dt;
     // A convention the header states is taken; a row holding the reference that starts there
     // is the next period's, one row later than ours.
+    // Faster, rows on the periods' boundaries leave the convention to the car too: the log
+    // read each way (`by_convention`, the loader's), a row apart.
+    let placed = by_convention.filter(|_| says.reference.is_none() && !at_reference_rate);
     let shifts: Vec<usize> = match (says.reference, at_reference_rate) {
         (None, true) => vec![0, 1],
         (Some(ReferenceConvention::PeriodStarting), true) => vec![1],
+        _ if placed.is_some() => vec![0, 1],
         _ => vec![0],
     };
-    let records: Vec<Record> = shifts.iter().map(|&k| shifted_reference(rec, k)).collect();
+    let records: Vec<Record> = match placed {
+        Some(both) => both
+            .iter()
+            .map(|r| Record {
+                current_chatter: rec.current_chatter,
+                ..r.clone()
+            })
+            .collect(),
+        None => shifts.iter().map(|&k| shifted_reference(rec, k)).collect(),
+    };
     let shorts: Vec<Record> = records.iter().map(|r| head(r, SYNC_SEARCH_S)).collect();
     type Job = (CarDrive, Controller, f64, usize);
     let mut jobs: Vec<Job> = Vec::new();
@@ -1390,9 +1405,8 @@ fn with_readout(rig: &Rig, sync: f64, readout: Epos4Readout) -> Rig {
 /// header does not state, is fitted ([`choose`]).
 pub fn choose_for_log(
     rig: &Rig,
-    rec: &Record,
+    loaded: &super::rig::LoadedLog,
     header: &LogHeader,
-    timing: super::LogTiming,
     drive: Option<CarDrive>,
     controller: Option<Controller>,
     opts: &super::Options,
@@ -1405,22 +1419,27 @@ pub fn choose_for_log(
         Some(c) => Some((c, Source::Option)),
         None => header.controller.map(|c| (c, Source::Header)),
     };
+    let (rec, by_convention) = (&loaded.record, loaded.by_convention.as_ref());
     let says = LogSays {
         reference: header.reference,
         current: header.current,
-        timing,
+        timing: loaded.timing,
         sync_drift: header.sync_drift,
         column_sampled_s: header.column_sampled_s,
     };
     // A column the logger wrote with the other sign: read as the car has it, before the car
     // is fitted on it.
     let Some(signs) = super::columns::read(rig, rec) else {
-        return choose(rig, rec, drive, controller, says, opts);
+        return choose(rig, rec, by_convention, drive, controller, says, opts);
     };
     let read = signs.any().then(|| signs.apply(rec));
+    let placed = by_convention
+        .filter(|_| signs.any())
+        .map(|both| both.each_ref().map(|r| signs.apply(r)));
     match choose(
         rig,
         read.as_ref().unwrap_or(rec),
+        placed.as_ref().or(by_convention),
         drive,
         controller,
         says,

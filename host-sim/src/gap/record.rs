@@ -853,7 +853,7 @@ impl LogTiming {
 
 /// Rows closer than this share of a step are several a step; from it up to one a step,
 /// fewer than two ([`Record::from_samples`] reads them by the reference's periods).
-const FEWER_ROWS_A_STEP: f64 = 0.65;
+pub(super) const FEWER_ROWS_A_STEP: f64 = 0.65;
 
 /// How near the rows' spacing must be to a grid step for each row to be its step: 1 %, an
 /// ECU on its internal RC oscillator (the largest SYNC drift the EPOS4 model takes).

@@ -3,7 +3,7 @@
 //! (`host-sim/rigs/`): the paper's actuator (the default, built in), EMPS and the BAM XL330
 //! servo pendulum.
 
-use super::{CurrentSamples, Record};
+use super::{CurrentSamples, Record, ReferenceConvention};
 use crate::logfmt::{LogError, Reads, Table, TimeOrder, fill_missing, hold_missing};
 use crate::plant::PlantParams;
 use std::path::Path;
@@ -80,6 +80,11 @@ pub struct PaperModel {
 #[derive(Debug, Clone)]
 pub struct LoadedLog {
     pub record: Record,
+    /// The log read with each reference convention (period-ending, period-starting), where
+    /// it has several rows a period on the periods' boundaries, no header states which period
+    /// a boundary's row holds, and the two readings differ: a row apart, which the car's fit
+    /// chooses (`drive::choose`).
+    pub by_convention: Option<[Record; 2]>,
     /// What the reader had to fill in (missing samples), for the caller to show.
     pub notes: Vec<String>,
     /// The comment lines before the header, without their `#`: what the log says of the car
@@ -722,7 +727,7 @@ impl Rig {
             .iter()
             .filter_map(|c| c.split_once(':'))
             .filter(|(k, _)| k.trim() == "reference")
-            .find_map(|(_, v)| super::ReferenceConvention::from_name(v));
+            .find_map(|(_, v)| ReferenceConvention::from_name(v));
         let motor = match &self.columns.motor {
             Some(c) => col(c, false)?,
             None => None,
@@ -867,7 +872,7 @@ impl Rig {
         // The rows' timing; on the paper rig, the rows as read (held frames at their
         // arrivals).
         let mut timing = stamped.unwrap_or_else(|| super::LogTiming::of(&t));
-        let record = match &self.model {
+        let (record, by_convention) = match &self.model {
             RigModel::Paper(m) => {
                 let per = m.plant.motor_per_pinion();
                 let powered_from = powered_from(&table, &self.columns, &t, 0.01);
@@ -935,45 +940,70 @@ impl Rig {
                     }
                     None => reference,
                 };
-                let motor_deg = motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
-                let record = Record {
+                let motor_deg: Option<Vec<f64>> =
+                    motor.map(|mr| mr.iter().map(|v| (v / per).to_degrees()).collect());
+                let read = |stated: Option<ReferenceConvention>| Record {
                     powered_from,
                     ..Record::from_samples(
-                        &t, &reference, &output, &effort, motor_deg, 0.01, current, stated,
+                        &t,
+                        &reference,
+                        &output,
+                        &effort,
+                        motor_deg.clone(),
+                        0.01,
+                        current,
+                        stated,
                     )
                 };
+                let record = read(stated);
+                // Several rows a period on the periods' boundaries and no header to say which
+                // period a boundary's row holds: the log read both ways, for the car's fit to
+                // choose (`drive::choose`), where the two differ.
+                let several_rows = held.is_none()
+                    && timing.is_regular()
+                    && timing.row_dt_s < super::record::FEWER_ROWS_A_STEP * 0.01;
+                let by_convention = (stated.is_none() && several_rows)
+                    .then(|| ReferenceConvention::ALL.map(|c| read(Some(c))))
+                    .filter(|[ending, starting]| ending != starting);
                 if held.is_some() {
                     timing = super::LogTiming::of(&t);
                 }
-                record
+                (record, by_convention)
             }
-            RigModel::Emps(_) => Record {
-                dt: self.grid_s(),
-                reference,
-                output,
-                effort,
-                motor: None,
-                disturbance,
-                supply_v: None,
-                powered_from: 0,
-                current_chatter: false,
-            },
-            RigModel::Bam(m) => bam_record(
-                m,
-                &name,
-                &BamColumns {
-                    t: &t,
-                    goal: &reference,
-                    position: &output,
-                    pwm: &effort,
-                    supply: &supply.unwrap_or_default(),
-                    torque_enable: &torque_enable.unwrap_or_default(),
-                    lines: &table.lines,
+            RigModel::Emps(_) => (
+                Record {
+                    dt: self.grid_s(),
+                    reference,
+                    output,
+                    effort,
+                    motor: None,
+                    disturbance,
+                    supply_v: None,
+                    powered_from: 0,
+                    current_chatter: false,
                 },
-            )?,
+                None,
+            ),
+            RigModel::Bam(m) => (
+                bam_record(
+                    m,
+                    &name,
+                    &BamColumns {
+                        t: &t,
+                        goal: &reference,
+                        position: &output,
+                        pwm: &effort,
+                        supply: &supply.unwrap_or_default(),
+                        torque_enable: &torque_enable.unwrap_or_default(),
+                        lines: &table.lines,
+                    },
+                )?,
+                None,
+            ),
         };
         Ok(LoadedLog {
             record,
+            by_convention,
             notes,
             comments: table.comments.clone(),
             timing,

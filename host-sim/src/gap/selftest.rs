@@ -596,15 +596,8 @@ pub fn run_loggers(
             let _ = std::fs::remove_file(&path);
         }
         let (loaded, header) = loaded?;
-        let (car_rig, rec, car) = super::drive::choose_for_log(
-            &rig,
-            &loaded.record,
-            &header,
-            loaded.timing,
-            car.0,
-            car.1,
-            &per_case,
-        );
+        let (car_rig, rec, car) =
+            super::drive::choose_for_log(&rig, &loaded, &header, car.0, car.1, &per_case);
         let info = CaseInfo {
             index: case.index,
             scenario: case.scenario.clone(),

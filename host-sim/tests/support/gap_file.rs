@@ -23,15 +23,8 @@ pub fn diagnose_file(
         threads: 2,
         ..Options::default()
     };
-    let (rig, rec, choice) = drive::choose_for_log(
-        &rig,
-        &loaded.record,
-        &header,
-        loaded.timing,
-        drive,
-        controller,
-        &opts,
-    );
+    let (rig, rec, choice) =
+        drive::choose_for_log(&rig, &loaded, &header, drive, controller, &opts);
     let d = diagnose(&rig, &rec, None, &opts);
     let choice = choice.unwrap().on_the_clock_of(&d);
     println!("{}\n{}", choice.describe(), d.summary());
