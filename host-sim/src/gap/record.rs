@@ -967,9 +967,9 @@ impl Record {
         // takes the new sample at once the step that starts there (equals the one after).
         // Only on a regular grid (the rows at their places): a log whose stamps jitter by
         // as much as its spacing has no row that sits on a boundary.
-        let votes = |origin: f64| {
+        let (mut ending, mut starting) = (0usize, 0usize);
+        if several_rows {
             let n = (((last - origin + near) / step + 1e-6).floor() as usize).max(1);
-            let (mut ending, mut starting) = (0usize, 0usize);
             for k in 0..n {
                 if let Some(j) = row_at(origin + (k + 1) as f64 * step)
                     && j > 0
@@ -983,9 +983,7 @@ impl Record {
                     }
                 }
             }
-            (ending, starting)
-        };
-        let (ending, starting) = if several_rows { votes(origin) } else { (0, 0) };
+        }
         // Rows on the periods' boundaries leave each period's start at either end of the two
         // rows across which the reference changes: the row on it holds the period that ends
         // there or the one that starts there. The rows alone cannot tell which, and the steps
