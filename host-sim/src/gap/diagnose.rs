@@ -518,13 +518,16 @@ impl FitWindow {
 /// candidate alone with its GoF on the whole log. The candidates are those the log's torque
 /// balance leaves, each fitted as the diagnosis first fits them but on a window of 10 s (not
 /// 30) with 4 LM iterations (not 8 and a polish); the best is the one that leaves the least
-/// on that window. Two cars whose nominal models the log leaves close
-/// are told apart by it ([`super::drive`]): a car with an effect can look, to the nominal
-/// models, more like the other drive than like itself.
+/// on that window. Where asked (`late`), that best beside a late reference too (the best
+/// other effect where the best is the delay), kept where it fits the whole log better. Two
+/// cars whose nominal models the log leaves close are told apart by it ([`super::drive`]): a
+/// car with an effect can look, to the nominal models, more like the other drive than like
+/// itself.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Screen {
     pub nominal_gof: f64,
-    /// The best single candidate on the fits' window, and its GoF on the whole log.
+    /// The best candidate on the fits' window (or it beside a late reference), and its GoF on
+    /// the whole log.
     pub best: Option<(String, f64)>,
 }
 
@@ -550,8 +553,8 @@ const SCREEN_ITERATIONS: usize = 4;
 /// spec's start (600 N/mm), a soft tyre's (the independent world draws 200-1000 N/mm).
 const SOFT_TYRE_N_PER_MM: f64 = 150.0;
 
-/// [`Screen`] of `rec` on `rig`.
-pub fn screen(rig: &Rig, rec: &Record, opts: &Options) -> Screen {
+/// [`Screen`] of `rec` on `rig`, with a late reference beside the best where `late`.
+pub fn screen(rig: &Rig, rec: &Record, opts: &Options, late: bool) -> Screen {
     let sim0 = simulate(rig, rec, &Effects::nominal());
     let scorer = Scorer::new(rig, rec).with_noise(rec, &sim0);
     let nominal_gof = scorer.fit(rec, &sim0).gof;
@@ -571,14 +574,46 @@ pub fn screen(rig: &Rig, rec: &Record, opts: &Options) -> Screen {
     // Each candidate fitted on the window; the one that leaves the least there, scored on the
     // whole log (a run of the whole log for each would cost more than the fits).
     let fits = parallel_map(&effects, opts.threads.max(1), |&k| (k, st.fit_single(k)));
-    let best = fits
-        .into_iter()
-        .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
-        .map(|(k, fitted)| {
-            let c = st.candidate(&[k], fitted);
-            (c.effect, c.gof)
-        });
-    Screen { nominal_gof, best }
+    let least = |late: bool| {
+        fits.iter()
+            .filter(|(k, _)| late || *k != EffectKind::Delay)
+            .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
+    };
+    let Some((k, fitted)) = least(true) else {
+        return Screen {
+            nominal_gof,
+            best: None,
+        };
+    };
+    let single = st.candidate(&[*k], fitted.clone());
+    // A late reference beside the best effect (or the best other effect beside a late
+    // reference), fitted as the diagnosis fits a pair: the one fitted alone from its values,
+    // the other from its spec's start. Kept where it fits the whole log better.
+    let paired = late
+        .then(|| least(false))
+        .flatten()
+        .filter(|_| effects.contains(&EffectKind::Delay))
+        .map(|(other, other_fit)| {
+            let (seed, seed_values, second) = if *k == EffectKind::Delay {
+                (EffectKind::Delay, &fitted.values, *other)
+            } else {
+                (*other, &other_fit.values, EffectKind::Delay)
+            };
+            let kinds = [second, seed];
+            let start: Vec<f64> = second
+                .specs(rig)
+                .iter()
+                .map(|sp| sp.start)
+                .chain(seed_values.iter().copied())
+                .collect();
+            st.candidate(&kinds, st.fit(&kinds, Some(&start)))
+        })
+        .filter(|pair| pair.gof > single.gof);
+    let best = paired.unwrap_or(single);
+    Screen {
+        nominal_gof,
+        best: Some((best.effect, best.gof)),
+    }
 }
 
 /// Each candidate of `effects` fitted on its own, in parallel, best first.

@@ -8,7 +8,7 @@
 //! team's own logger) is run through every car the header leaves open, and the one whose
 //! nominal model leaves the least of the log (eq. 11) is taken, with the margin printed;
 //! where the other drive's nominal model comes close, the two drives are told apart by their
-//! best single candidates ([`DriveScreen`]). The SYNC's phase is not in any header: the ECU's
+//! best candidates, alone or beside a late reference ([`DriveScreen`]). The SYNC's phase is not in any header: the ECU's
 //! SYNC grid runs on its own clock, so it is searched on every EPOS4 log.
 
 use super::drive_clock::{self, ClockRefit};
@@ -182,8 +182,9 @@ pub struct LateComparison {
 }
 
 /// Two drives' cars whose nominal models the log left close, told apart by the candidates
-/// alone ([`super::screen`]): the other drive is taken where its best single effect fits the
-/// log better than the chosen car's by more than [`SCREEN_MARGIN_GOF`]. The other car is
+/// ([`super::screen`]): the other drive is taken where its best effect, alone or beside a
+/// late reference, fits the log better than the chosen car's by more than
+/// [`SCREEN_MARGIN_GOF`]. Two reference conventions are told apart by single effects. The other car is
 /// screened first; where its best does not beat the chosen car's nominal model by the
 /// margin, it cannot beat the chosen car's best, which is then not fitted.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -204,7 +205,7 @@ pub struct ScreenedCar {
     pub controller: Controller,
     /// Its reference convention where fitted (see [`Tried::reference_shift_rows`]).
     pub reference_shift_rows: Option<usize>,
-    /// Its nominal GoF on the whole log, and its best single candidate's: `None` for the
+    /// Its nominal GoF on the whole log, and its best candidate's: `None` for the
     /// chosen car where the other car's best did not beat its nominal GoF by the margin (so
     /// could not beat its best).
     pub nominal_gof: f64,
@@ -467,13 +468,18 @@ impl CarChoice {
             };
             line.push_str(&format!(
                 "; the {}' nominal models within {:.0} points, so told apart by their best \
-                 single candidates ({}; {}): {}",
+                 {} ({}; {}): {}",
                 if sc.by_convention {
                     "reference conventions"
                 } else {
                     "drives"
                 },
                 100.0 * DRIVE_SCREEN_GOF,
+                if sc.by_convention {
+                    "single candidates"
+                } else {
+                    "candidates, alone or beside a late reference"
+                },
                 car(&sc.cars[0]),
                 car(&sc.cars[1]),
                 if sc.by_convention {
@@ -615,13 +621,13 @@ const LATE_MARGIN_GOF: f64 = 0.03;
 
 /// Where the drive is fitted, no late reference ranked the cars, and the other drive's best
 /// car's nominal GoF on the whole log comes this close to the chosen one's, both are
-/// screened by the candidates alone ([`super::screen`]): a car with an effect can look, to
+/// screened by the candidates ([`super::screen`]): a car with an effect can look, to
 /// the nominal models, more like the other drive than like its own (friction at the rack,
 /// or play and a late reference, on the direct drive look like the EPOS4's latch and
 /// interpolation), and an effect's fit lifts a log's GoF by more than a few points.
 pub const DRIVE_SCREEN_GOF: f64 = 0.15;
 
-/// The other drive is taken where its best single candidate fits the log better than the
+/// The other drive is taken where its best candidate fits the log better than the
 /// chosen car's by more than this (GoF on the whole log): more than the spread of two
 /// candidates' fits of one effect on one car.
 pub const SCREEN_MARGIN_GOF: f64 = 0.02;
@@ -1168,10 +1174,15 @@ pub fn choose(
     let second = finish(&other_order);
     // The other car first: where its best candidate does not beat the chosen car's nominal
     // model by the margin, it cannot beat the chosen car's best, which is not fitted.
-    let other = super::screen(&second.0, &second.1, opts);
+    // Two drives' cars are screened with a late reference beside their best effect too: the
+    // EPOS4's latch at a late SYNC, its column read old, stands in for a direct car's late
+    // reference beside any one effect, which the direct car's single candidates cannot match.
+    // Two conventions a row apart are told apart without it: it would stand in for the row.
+    let late = !by_convention;
+    let other = super::screen(&second.0, &second.1, opts, late);
     let nominal = nominal_fit(&first.0, &first.1).gof;
     let own = (other.gof() > nominal + SCREEN_MARGIN_GOF)
-        .then(|| super::screen(&first.0, &first.1, opts));
+        .then(|| super::screen(&first.0, &first.1, opts, late));
     let switched = own
         .as_ref()
         .is_some_and(|s| other.gof() > s.gof() + SCREEN_MARGIN_GOF);
