@@ -55,6 +55,15 @@ fn belt_play_shows_in_the_column_angle() {
 /// decide there. On the cars below the balance rules the play out and the verdicts stay right
 /// with it as well.
 fn selftest_case_with(index: usize, torque_balance: bool) -> host_sim::gap::selftest::CaseResult {
+    selftest_case_of_seed(1, index, torque_balance)
+}
+
+/// [`selftest_case_with`] on the world's seed `seed`.
+fn selftest_case_of_seed(
+    seed: u64,
+    index: usize,
+    torque_balance: bool,
+) -> host_sim::gap::selftest::CaseResult {
     use host_sim::gap::selftest;
     let mut opts = selftest::default_options();
     opts.threads = 2;
@@ -62,7 +71,7 @@ fn selftest_case_with(index: usize, torque_balance: bool) -> host_sim::gap::self
     let mut report = selftest::run(
         selftest::World::Independent,
         &[index],
-        1,
+        seed,
         12.0,
         &opts,
         &|_| {},
@@ -192,6 +201,24 @@ fn a_lighter_wheel_is_found_from_a_far_start() {
     let case = named_right(60, &["parameters"]);
     assert!(
         case.reason.contains("far off the table") && case.reason.contains("j_w x0."),
+        "{}",
+        case.reason
+    );
+}
+
+/// A car of the independent world (seed 5, the index below): a belt 0.43 times as stiff as
+/// Table 4's under a 10 deg sweep logged at 200 Hz. From the table's own values, and from the
+/// wheel's far starts, the refit stayed within x1.5 at 6-7 times the noise floor, and the log
+/// was called `unexplained` (its current read x0.64 the model's throughout, as a torque
+/// constant off Table 1 would make it); from a start with the belt's stiffness at x0.4 the
+/// refit reaches the noise floor: `parameters`.
+#[test]
+fn a_softer_belt_is_found_from_a_far_start() {
+    let case = selftest_case_of_seed(5, 19, true);
+    assert_eq!(case.case.hidden, ["parameters"]);
+    assert_eq!(case.named, case.case.hidden, "{}", case.reason);
+    assert!(
+        case.reason.contains("far off the table") && case.reason.contains("k_b x0."),
         "{}",
         case.reason
     );
