@@ -600,12 +600,7 @@ pub fn screen(rig: &Rig, rec: &Record, opts: &Options, late: bool) -> Screen {
                 (*other, &other_fit.values, EffectKind::Delay)
             };
             let kinds = [second, seed];
-            let start: Vec<f64> = second
-                .specs(rig)
-                .iter()
-                .map(|sp| sp.start)
-                .chain(seed_values.iter().copied())
-                .collect();
+            let start = pairs::pair_start(rig, second, seed_values);
             st.candidate(&kinds, st.fit(&kinds, Some(&start)))
         })
         .filter(|pair| pair.gof > single.gof);

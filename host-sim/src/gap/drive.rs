@@ -8,8 +8,9 @@
 //! team's own logger) is run through every car the header leaves open, and the one whose
 //! nominal model leaves the least of the log (eq. 11) is taken, with the margin printed;
 //! where the other drive's nominal model comes close, the two drives are told apart by their
-//! best candidates, alone or beside a late reference ([`DriveScreen`]). The SYNC's phase is not in any header: the ECU's
-//! SYNC grid runs on its own clock, so it is searched on every EPOS4 log.
+//! best candidates, alone or beside a late reference ([`DriveScreen`]). The SYNC's phase is
+//! not in any header: the ECU's SYNC grid runs on its own clock, so it is searched on every
+//! EPOS4 log.
 
 use super::drive_clock::{self, ClockRefit};
 use super::model::{Effects, MAX_SYNC_DRIFT};
@@ -184,9 +185,9 @@ pub struct LateComparison {
 /// Two drives' cars whose nominal models the log left close, told apart by the candidates
 /// ([`super::screen`]): the other drive is taken where its best effect, alone or beside a
 /// late reference, fits the log better than the chosen car's by more than
-/// [`SCREEN_MARGIN_GOF`]. Two reference conventions are told apart by single effects. The other car is
-/// screened first; where its best does not beat the chosen car's nominal model by the
-/// margin, it cannot beat the chosen car's best, which is then not fitted.
+/// [`SCREEN_MARGIN_GOF`]. Two reference conventions are told apart by single effects. The
+/// other car is screened first; where its best does not beat the chosen car's nominal model
+/// by the margin, it cannot beat the chosen car's best, which is then not fitted.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DriveScreen {
     /// The two cars differ in their reference convention, not their drive: on a current of

@@ -489,8 +489,7 @@ impl fmt::Display for Finding {
                 f,
                 "Table 4 with the log's stamps late (fitted), from starts far off the table \
                  (j_w x0.4 and x2.5, beta_sw x2.5, k_b x0.4 and x2.5), moves {} with the stamps \
-                 {lag_ms:.1} ms late \
-                 and leaves {left:.0}; held within x{tolerance:.1} it leaves {within:.0}{}",
+                 {lag_ms:.1} ms late and leaves {left:.0}; held within x{tolerance:.1} it leaves {within:.0}{}",
                 moved.join(", "),
                 if *wins { "" } else { ": not named" }
             ),

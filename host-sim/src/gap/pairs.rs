@@ -101,12 +101,7 @@ fn fit_pairs(st: &Stage, jobs: &[(&Candidate, &Candidate)], best: &Candidate) ->
             .map(|&(seed, other)| {
                 s.spawn(move || {
                     let kinds = [other.kinds[0], seed.kinds[0]];
-                    let start: Vec<f64> = other.kinds[0]
-                        .specs(rig)
-                        .iter()
-                        .map(|sp| sp.start)
-                        .chain(seed.values.iter().copied())
-                        .collect();
+                    let start = pair_start(rig, other.kinds[0], &seed.values);
                     let mut fitted = st.fit(&kinds, Some(&start));
                     let (values, c) = (&fitted.values, fitted.cost);
                     let n_other = other.values.len();
@@ -145,6 +140,17 @@ fn fit_pairs(st: &Stage, jobs: &[(&Candidate, &Candidate)], best: &Candidate) ->
             .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
             .collect()
     })
+}
+
+/// Where a pair's fit starts: `second` at its specs' starts, then the effect it joins at
+/// `seed_values`, its values fitted alone.
+pub(super) fn pair_start(rig: &Rig, second: EffectKind, seed_values: &[f64]) -> Vec<f64> {
+    second
+        .specs(rig)
+        .iter()
+        .map(|sp| sp.start)
+        .chain(seed_values.iter().copied())
+        .collect()
 }
 
 /// The pairs beside `best` fitted and judged; the findings say which pair was named, or why
